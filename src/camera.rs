@@ -1,0 +1,183 @@
+//! Pinhole camera with a world-to-camera pose.
+//!
+//! Conventions (see `docs/numerics.md`):
+//! - World-to-camera pose `p_view = R · p_world + t` with OpenCV/COLMAP camera axes:
+//!   x right, y down, z forward (the camera looks along +z).
+//! - Intrinsics in pixels: a view-space point (X, Y, Z) projects to pixel coordinates
+//!   `(fx·X/Z + cx, fy·Y/Z + cy)`. Pixel `(i, j)` (column i, row j) covers
+//!   `[i, i+1) × [j, j+1)` and is evaluated at its centre `(i + 0.5, j + 0.5)`.
+//! - The principal point is honoured (the reference implementation forces `(W/2, H/2)`).
+
+use glam::{Mat3, Vec3};
+
+/// A pinhole camera: world-to-camera rotation and translation, intrinsics and image size.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    /// Rotation part `R` of the world-to-camera transform (rows are the camera axes in world
+    /// coordinates).
+    pub rotation: Mat3,
+    /// Translation part `t` of the world-to-camera transform.
+    pub translation: Vec3,
+    /// Focal length along x, in pixels.
+    pub fx: f32,
+    /// Focal length along y, in pixels.
+    pub fy: f32,
+    /// Principal point x, in pixels (from the left image edge).
+    pub cx: f32,
+    /// Principal point y, in pixels (from the top image edge).
+    pub cy: f32,
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+}
+
+impl Camera {
+    /// A camera at `eye` looking at `target`, with `up` pointing roughly to the top of the
+    /// image, principal point at the image centre.
+    ///
+    /// ```
+    /// use bbsplat::camera::Camera;
+    /// use glam::Vec3;
+    /// let cam = Camera::look_at(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, Vec3::Y, 100.0, 100.0, 64, 48);
+    /// let v = cam.world_to_view(Vec3::ZERO);
+    /// assert!((v - Vec3::new(0.0, 0.0, 4.0)).length() < 1e-6);
+    /// let (x, y) = cam.project(Vec3::ZERO).unwrap();
+    /// assert!((x - 32.0).abs() < 1e-4 && (y - 24.0).abs() < 1e-4);
+    /// ```
+    pub fn look_at(eye: Vec3, target: Vec3, up: Vec3, fx: f32, fy: f32, width: u32, height: u32) -> Self {
+        let z = (target - eye).normalize();
+        // OpenCV: y points down in the image, so the camera y axis is -up projected.
+        let x = z.cross(up).normalize();
+        let y = z.cross(x);
+        // Rows of R are the camera axes expressed in world coordinates.
+        let rotation = Mat3::from_cols(x, y, z).transpose();
+        let translation = -(rotation * eye);
+        Self {
+            rotation,
+            translation,
+            fx,
+            fy,
+            cx: width as f32 * 0.5,
+            cy: height as f32 * 0.5,
+            width,
+            height,
+        }
+    }
+
+    /// Builds a camera from a camera-to-world matrix in OpenGL/Blender axes (x right, y up,
+    /// camera looking along -z), as stored in NeRF `transforms.json` files. The y and z axes are
+    /// flipped to OpenCV axes and the matrix is inverted.
+    ///
+    /// `c2w` is given as rows of the 4×4 matrix (only the upper 3×4 block is read).
+    #[allow(clippy::too_many_arguments)]
+    pub fn from_c2w_opengl(
+        c2w_rows: [[f32; 4]; 4],
+        fx: f32,
+        fy: f32,
+        cx: f32,
+        cy: f32,
+        width: u32,
+        height: u32,
+    ) -> Self {
+        let col = |j: usize| Vec3::new(c2w_rows[0][j], c2w_rows[1][j], c2w_rows[2][j]);
+        // OpenGL -> OpenCV: negate the camera y and z axes (columns 1 and 2 of c2w).
+        let r_c2w = Mat3::from_cols(col(0), -col(1), -col(2));
+        let centre = col(3);
+        let rotation = r_c2w.transpose();
+        let translation = -(rotation * centre);
+        Self {
+            rotation,
+            translation,
+            fx,
+            fy,
+            cx,
+            cy,
+            width,
+            height,
+        }
+    }
+
+    /// World point to view (camera) space.
+    #[inline]
+    pub fn world_to_view(&self, p: Vec3) -> Vec3 {
+        self.rotation * p + self.translation
+    }
+
+    /// Camera centre in world coordinates, `-Rᵀ t`.
+    #[inline]
+    pub fn centre(&self) -> Vec3 {
+        -(self.rotation.transpose() * self.translation)
+    }
+
+    /// Projects a world point to continuous pixel coordinates; `None` when the point is not in
+    /// front of the camera (view z ≤ 0).
+    pub fn project(&self, p: Vec3) -> Option<(f32, f32)> {
+        let v = self.world_to_view(p);
+        if v.z <= 0.0 {
+            return None;
+        }
+        Some((self.fx * v.x / v.z + self.cx, self.fy * v.y / v.z + self.cy))
+    }
+
+    /// Number of pixels, `width · height`.
+    #[inline]
+    pub fn pixel_count(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+
+    /// The same camera for an image scaled by `factor` (e.g. 0.5 for half resolution):
+    /// focal lengths and principal point scale exactly, sizes are `round(size · factor)`.
+    pub fn scaled(&self, factor: f32) -> Self {
+        let w = ((self.width as f32) * factor).round().max(1.0) as u32;
+        let h = ((self.height as f32) * factor).round().max(1.0) as u32;
+        // Scale by the actual size ratio so that the image edges stay where they were.
+        let sx = w as f32 / self.width as f32;
+        let sy = h as f32 / self.height as f32;
+        Self {
+            fx: self.fx * sx,
+            fy: self.fy * sy,
+            cx: self.cx * sx,
+            cy: self.cy * sy,
+            width: w,
+            height: h,
+            ..*self
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn look_at_axes_are_opencv() {
+        let cam = Camera::look_at(Vec3::new(0.0, 0.0, -5.0), Vec3::ZERO, Vec3::Y, 50.0, 50.0, 100, 100);
+        // A point above the target (world +y) appears in the upper half of the image (smaller y).
+        let (_, y) = cam.project(Vec3::new(0.0, 1.0, 0.0)).unwrap();
+        assert!(y < 50.0);
+        // A point to the camera's right appears at larger x.
+        let right = cam.rotation.row(0);
+        let (x, _) = cam.project(right).unwrap();
+        assert!(x > 50.0);
+        assert!((cam.centre() - Vec3::new(0.0, 0.0, -5.0)).length() < 1e-6);
+    }
+
+    #[test]
+    fn opengl_c2w_round_trip() {
+        // Camera at (0, 0, 4) looking at the origin along -z in OpenGL axes: identity rotation.
+        let c2w = [
+            [1.0, 0.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 4.0],
+            [0.0, 0.0, 0.0, 1.0],
+        ];
+        let cam = Camera::from_c2w_opengl(c2w, 100.0, 100.0, 50.0, 50.0, 100, 100);
+        assert!((cam.centre() - Vec3::new(0.0, 0.0, 4.0)).length() < 1e-6);
+        let v = cam.world_to_view(Vec3::ZERO);
+        assert!((v - Vec3::new(0.0, 0.0, 4.0)).length() < 1e-6);
+        // World +y (up) maps to image up (smaller pixel y).
+        let (_, y) = cam.project(Vec3::new(0.0, 0.5, 0.0)).unwrap();
+        assert!(y < 50.0);
+    }
+}

@@ -1,0 +1,18 @@
+//! # bbsplat
+//!
+//! Billboard splatting (BBSplat) on the CPU: planar primitives carrying a small learned RGB
+//! texture, an alpha texture and spherical-harmonics colour, rendered by ray-plane intersection
+//! and front-to-back alpha compositing, and trained by gradient descent.
+//!
+//! The crate is built from small pure stages, each with a forward pass and an analytic backward
+//! pass (a vector-Jacobian product) that is checked against central finite differences by the
+//! public [`gradcheck`] module. Conventions (frames, units, ranges, thresholds) are collected in
+//! `docs/numerics.md`; every module states the ones it relies on.
+
+#![warn(missing_docs)]
+
+pub mod camera;
+pub mod gradcheck;
+pub mod rng;
+pub mod stages;
+pub mod strategies;

@@ -1,0 +1,5 @@
+//! The differentiable stages of the renderer, one file per operation.
+//!
+//! Each stage has a plain scalar forward function and a `*_vjp` backward function that takes the
+//! upstream gradient of a scalar loss with respect to the stage's outputs and returns the
+//! gradients with respect to its inputs.
