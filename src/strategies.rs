@@ -19,6 +19,26 @@ use crate::camera::Camera;
 use glam::{Vec2, Vec3};
 use proptest::prelude::*;
 
+/// The seed every property test of the crate starts from unless `PROPTEST_RNG_SEED` is set.
+pub const DEFAULT_PROPTEST_SEED: u64 = 0x00bb_5a1a7;
+
+/// A proptest configuration with `cases` cases and a fixed seed, so that a run is reproducible:
+/// the seed is [`DEFAULT_PROPTEST_SEED`], or the value of the environment variable
+/// `PROPTEST_RNG_SEED` when set (to explore further seeds). Failure persistence files are not
+/// written; a failing case is printed with its inputs and is reproduced by the same seed.
+pub fn seeded_config(cases: u32) -> ProptestConfig {
+    let seed = std::env::var("PROPTEST_RNG_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(DEFAULT_PROPTEST_SEED);
+    ProptestConfig {
+        cases,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(seed),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    }
+}
+
 /// Position, log-scales and raw quaternion (w, x, y, z) of one billboard.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BillboardPose {
