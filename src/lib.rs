@@ -12,6 +12,7 @@
 #![warn(missing_docs)]
 
 pub mod camera;
+pub mod demo;
 pub mod gradcheck;
 pub mod rng;
 pub mod stages;

@@ -1,0 +1,407 @@
+//! The embedded demo scene: a small analytic world rendered by an independent ray tracer.
+//!
+//! The scene needs no data folder, so the crate's main job can run on a fresh machine. It is
+//! deliberately *not* rendered with billboards: the images come from exact ray-object
+//! intersections (a checkered floor disc, textured spheres and a box, Lambert shading with one
+//! directional light plus ambient), so a trained billboard model is judged against an
+//! independent ground truth.
+//!
+//! Conventions: world y is up; the objects sit on the floor `y = 0` around the origin; cameras
+//! are on a ring of radius ≈ 4 at height ≈ 1.2-2.2 looking at `(0, 0.5, 0)`, in the crate's
+//! OpenCV camera frame (see [`crate::camera`]). Colours are linear RGB in `[0, 1]`.
+
+use crate::camera::Camera;
+use crate::rng::Rng;
+use glam::Vec3;
+
+/// One rendered view of the demo scene.
+#[derive(Clone, Debug)]
+pub struct DemoView {
+    /// The pinhole camera (no distortion).
+    pub camera: Camera,
+    /// Interleaved RGB, row-major, `width · height · 3` values in `[0, 1]`.
+    pub rgb: Vec<f32>,
+}
+
+/// The demo data set: train and test views, a surface point cloud with colours (standing in for
+/// structure-from-motion points), and the background colour seen by rays that hit nothing.
+#[derive(Clone, Debug)]
+pub struct DemoScene {
+    /// Views to train on.
+    pub train: Vec<DemoView>,
+    /// Held-out views (interleaved on the same ring, never trained on).
+    pub test: Vec<DemoView>,
+    /// Points sampled on the visible surfaces.
+    pub points: Vec<Vec3>,
+    /// Shaded colour of each point as seen from above (linear RGB, `[0, 1]`).
+    pub colours: Vec<[f32; 3]>,
+    /// Colour of rays that miss every object.
+    pub background: [f32; 3],
+}
+
+/// Settings of the demo generator.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DemoConfig {
+    /// Image width and height in pixels (square images).
+    pub resolution: u32,
+    /// Number of training views.
+    pub train_views: usize,
+    /// Number of test views.
+    pub test_views: usize,
+    /// Number of surface points in the point cloud.
+    pub points: usize,
+    /// Seed for the camera jitter and the point sampling.
+    pub seed: u64,
+}
+
+impl Default for DemoConfig {
+    fn default() -> Self {
+        Self {
+            resolution: 96,
+            train_views: 32,
+            test_views: 8,
+            points: 3000,
+            seed: 0,
+        }
+    }
+}
+
+/// Background colour of the demo world (a pale sky grey).
+pub const DEMO_BACKGROUND: [f32; 3] = [0.85, 0.88, 0.92];
+
+const FLOOR_RADIUS: f32 = 2.6;
+const LOOK_AT: Vec3 = Vec3::new(0.0, 0.5, 0.0);
+
+#[derive(Clone, Copy, Debug)]
+enum Object {
+    Floor,
+    Sphere {
+        centre: Vec3,
+        radius: f32,
+        base: Vec3,
+        stripe: Vec3,
+        bands: f32,
+    },
+    Box {
+        min: Vec3,
+        max: Vec3,
+    },
+}
+
+const OBJECTS: [Object; 4] = [
+    Object::Floor,
+    Object::Sphere {
+        centre: Vec3::new(-0.7, 0.55, 0.2),
+        radius: 0.55,
+        base: Vec3::new(0.85, 0.25, 0.2),
+        stripe: Vec3::new(0.95, 0.85, 0.3),
+        bands: 6.0,
+    },
+    Object::Sphere {
+        centre: Vec3::new(0.75, 0.35, -0.45),
+        radius: 0.35,
+        base: Vec3::new(0.2, 0.45, 0.85),
+        stripe: Vec3::new(0.9, 0.9, 0.95),
+        bands: 4.0,
+    },
+    Object::Box {
+        min: Vec3::new(0.15, 0.0, 0.35),
+        max: Vec3::new(0.85, 0.8, 1.05),
+    },
+];
+
+struct Hit {
+    t: f32,
+    point: Vec3,
+    normal: Vec3,
+    object: usize,
+}
+
+fn intersect_object(object: &Object, origin: Vec3, dir: Vec3) -> Option<(f32, Vec3)> {
+    const T_MIN: f32 = 1e-4;
+    match *object {
+        Object::Floor => {
+            if dir.y.abs() < 1e-8 {
+                return None;
+            }
+            let t = -origin.y / dir.y;
+            let p = origin + t * dir;
+            (t > T_MIN && p.x * p.x + p.z * p.z <= FLOOR_RADIUS * FLOOR_RADIUS).then_some((t, Vec3::Y))
+        }
+        Object::Sphere { centre, radius, .. } => {
+            let oc = origin - centre;
+            let b = oc.dot(dir);
+            let c = oc.length_squared() - radius * radius;
+            let disc = b * b - c;
+            if disc < 0.0 {
+                return None;
+            }
+            let s = disc.sqrt();
+            let t = if -b - s > T_MIN { -b - s } else { -b + s };
+            (t > T_MIN).then(|| (t, (origin + t * dir - centre) / radius))
+        }
+        Object::Box { min, max } => {
+            let inv = dir.recip();
+            let t0 = (min - origin) * inv;
+            let t1 = (max - origin) * inv;
+            let tmin = t0.min(t1);
+            let tmax = t0.max(t1);
+            let near = tmin.max_element();
+            let far = tmax.min_element();
+            if near > far || far < T_MIN {
+                return None;
+            }
+            let t = if near > T_MIN { near } else { far };
+            let p = origin + t * dir;
+            // The face whose slab bound equals t gives the normal.
+            let centre = (min + max) * 0.5;
+            let half = (max - min) * 0.5;
+            let local = (p - centre) / half;
+            let a = local.abs();
+            let normal = if a.x >= a.y && a.x >= a.z {
+                Vec3::new(local.x.signum(), 0.0, 0.0)
+            } else if a.y >= a.z {
+                Vec3::new(0.0, local.y.signum(), 0.0)
+            } else {
+                Vec3::new(0.0, 0.0, local.z.signum())
+            };
+            Some((t, normal))
+        }
+    }
+}
+
+fn trace(origin: Vec3, dir: Vec3) -> Option<Hit> {
+    let mut best: Option<Hit> = None;
+    for (i, object) in OBJECTS.iter().enumerate() {
+        if let Some((t, normal)) = intersect_object(object, origin, dir)
+            && best.as_ref().is_none_or(|b| t < b.t)
+        {
+            best = Some(Hit {
+                t,
+                point: origin + t * dir,
+                normal,
+                object: i,
+            });
+        }
+    }
+    best
+}
+
+fn albedo(hit: &Hit) -> Vec3 {
+    let p = hit.point;
+    match OBJECTS[hit.object] {
+        Object::Floor => {
+            let check = ((p.x * 2.5).floor() + (p.z * 2.5).floor()) as i64 & 1;
+            let ring = ((p.x * p.x + p.z * p.z).sqrt() * 1.5).fract() < 0.08;
+            if ring {
+                Vec3::new(0.3, 0.3, 0.3)
+            } else if check == 0 {
+                Vec3::new(0.82, 0.78, 0.7)
+            } else {
+                Vec3::new(0.35, 0.5, 0.35)
+            }
+        }
+        Object::Sphere {
+            centre,
+            base,
+            stripe,
+            bands,
+            ..
+        } => {
+            let d = (p - centre).normalize();
+            let lon = d.z.atan2(d.x);
+            let s = (lon * bands).sin() * (d.y * bands).cos();
+            if s > 0.2 { stripe } else { base }
+        }
+        Object::Box { min, max } => {
+            let local = (p - min) / (max - min);
+            let n = hit.normal;
+            // Each face gets its own colour and a grid of lines.
+            let face = if n.x.abs() > 0.5 {
+                Vec3::new(0.9, 0.6, 0.2)
+            } else if n.y.abs() > 0.5 {
+                Vec3::new(0.95, 0.95, 0.9)
+            } else {
+                Vec3::new(0.55, 0.3, 0.65)
+            };
+            let grid = |c: f32| ((c * 4.0).fract() - 0.5).abs() > 0.44;
+            let (a, b) = if n.x.abs() > 0.5 {
+                (local.y, local.z)
+            } else if n.y.abs() > 0.5 {
+                (local.x, local.z)
+            } else {
+                (local.x, local.y)
+            };
+            if grid(a) || grid(b) { face * 0.35 } else { face }
+        }
+    }
+}
+
+fn light_direction() -> Vec3 {
+    Vec3::new(0.5, 1.0, 0.3).normalize()
+}
+
+fn shade(hit: &Hit) -> Vec3 {
+    let l = light_direction();
+    let lambert = hit.normal.dot(l).max(0.0);
+    // Hard shadow towards the light.
+    let shadowed = trace(hit.point + hit.normal * 1e-3, l).is_some();
+    let direct = if shadowed { 0.0 } else { lambert };
+    (albedo(hit) * (0.35 + 0.65 * direct)).clamp(Vec3::ZERO, Vec3::ONE)
+}
+
+/// Renders one view with one ray through every pixel centre (no anti-aliasing).
+pub fn render_view(camera: &Camera) -> Vec<f32> {
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let r_c2w = camera.rotation.transpose();
+    let origin = camera.centre();
+    let mut rgb = vec![0.0f32; w * h * 3];
+    for j in 0..h {
+        for i in 0..w {
+            let x = (i as f32 + 0.5 - camera.cx) / camera.fx;
+            let y = (j as f32 + 0.5 - camera.cy) / camera.fy;
+            let dir = (r_c2w * Vec3::new(x, y, 1.0)).normalize();
+            let c = trace(origin, dir).map_or(Vec3::from_array(DEMO_BACKGROUND), |hit| shade(&hit));
+            rgb[(j * w + i) * 3..(j * w + i) * 3 + 3].copy_from_slice(&c.to_array());
+        }
+    }
+    rgb
+}
+
+fn ring_camera(index: usize, count: usize, offset: f32, rng: &mut Rng, resolution: u32) -> Camera {
+    let angle = std::f32::consts::TAU * (index as f32 + offset) / count as f32 + rng.range(-0.05, 0.05);
+    let radius = 4.0 + rng.range(-0.3, 0.3);
+    let height = 1.2 + rng.range(0.0, 1.0);
+    let eye = Vec3::new(radius * angle.cos(), height, radius * angle.sin());
+    let focal = resolution as f32 * 1.1;
+    Camera::look_at(eye, LOOK_AT, Vec3::Y, focal, focal, resolution, resolution)
+}
+
+/// Samples `n` points on the surfaces, uniformly per object area (approximately), with the
+/// shaded colour seen from straight above the point's normal.
+fn surface_points(n: usize, rng: &mut Rng) -> (Vec<Vec3>, Vec<[f32; 3]>) {
+    let mut points = Vec::with_capacity(n);
+    let mut colours = Vec::with_capacity(n);
+    while points.len() < n {
+        // Shoot random rays from a random point on a sphere of radius 5 towards the scene: the
+        // first hit is a visible surface point, as a structure-from-motion point would be.
+        let theta = rng.range(0.0, std::f32::consts::TAU);
+        let y = rng.range(0.15, 1.0);
+        let r = (1.0 - y * y).sqrt();
+        let eye = Vec3::new(r * theta.cos(), y, r * theta.sin()) * 5.0;
+        let target = Vec3::new(rng.range(-2.0, 2.0), rng.range(0.0, 1.0), rng.range(-2.0, 2.0));
+        if let Some(hit) = trace(eye, (target - eye).normalize()) {
+            colours.push(shade(&hit).to_array());
+            points.push(hit.point);
+        }
+    }
+    (points, colours)
+}
+
+/// Generates the demo data set. Deterministic for a given config.
+///
+/// ```
+/// use bbsplat::demo::{generate, DemoConfig};
+/// let scene = generate(&DemoConfig { resolution: 16, train_views: 3, test_views: 1, points: 10, seed: 1 });
+/// assert_eq!(scene.train.len(), 3);
+/// assert_eq!(scene.train[0].rgb.len(), 16 * 16 * 3);
+/// assert_eq!(scene.points.len(), 10);
+/// ```
+pub fn generate(config: &DemoConfig) -> DemoScene {
+    let mut rng = Rng::new(config.seed);
+    let total = config.train_views + config.test_views;
+    // Interleave test views on the ring: every k-th slot is a test view.
+    let mut train = Vec::with_capacity(config.train_views);
+    let mut test = Vec::with_capacity(config.test_views);
+    let stride = if config.test_views == 0 {
+        usize::MAX
+    } else {
+        total.div_ceil(config.test_views)
+    };
+    for i in 0..total {
+        let camera = ring_camera(i, total, 0.0, &mut rng, config.resolution);
+        let view = DemoView {
+            camera,
+            rgb: Vec::new(),
+        };
+        if i % stride == stride / 2 && test.len() < config.test_views {
+            test.push(view);
+        } else if train.len() < config.train_views {
+            train.push(view);
+        } else {
+            test.push(view);
+        }
+    }
+    use rayon::prelude::*;
+    train
+        .par_iter_mut()
+        .chain(test.par_iter_mut())
+        .for_each(|v| v.rgb = render_view(&v.camera));
+    let (points, colours) = surface_points(config.points, &mut rng);
+    DemoScene {
+        train,
+        test,
+        points,
+        colours,
+        background: DEMO_BACKGROUND,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn generation_is_deterministic() {
+        let cfg = DemoConfig {
+            resolution: 24,
+            train_views: 4,
+            test_views: 2,
+            points: 50,
+            seed: 3,
+        };
+        let a = generate(&cfg);
+        let b = generate(&cfg);
+        assert_eq!(a.train[2].rgb, b.train[2].rgb);
+        assert_eq!(a.points, b.points);
+        assert_eq!(a.test.len(), 2);
+    }
+
+    #[test]
+    fn images_show_objects_and_background() {
+        let cfg = DemoConfig {
+            resolution: 48,
+            train_views: 2,
+            test_views: 0,
+            points: 10,
+            seed: 0,
+        };
+        let s = generate(&cfg);
+        let rgb = &s.train[0].rgb;
+        let bg = rgb.chunks(3).filter(|p| p == &DEMO_BACKGROUND.as_slice()).count();
+        let n = rgb.len() / 3;
+        // Both background and objects are visible.
+        assert!(bg > n / 20 && bg < n * 9 / 10, "background pixels {bg} of {n}");
+        assert!(rgb.iter().all(|c| (0.0..=1.0).contains(c)));
+    }
+
+    #[test]
+    fn points_lie_on_surfaces() {
+        let mut rng = Rng::new(5);
+        let (pts, _) = surface_points(200, &mut rng);
+        for p in pts {
+            let on_floor = p.y.abs() < 1e-3;
+            let on_sphere = OBJECTS.iter().any(|o| match *o {
+                Object::Sphere { centre, radius, .. } => ((p - centre).length() - radius).abs() < 1e-3,
+                _ => false,
+            });
+            let on_box = {
+                let (min, max) = (Vec3::new(0.15, 0.0, 0.35), Vec3::new(0.85, 0.8, 1.05));
+                let inside = p.cmpge(min - 1e-3).all() && p.cmple(max + 1e-3).all();
+                let on_face = (p - min).abs().min_element() < 1e-3 || (p - max).abs().min_element() < 1e-3;
+                inside && on_face
+            };
+            assert!(on_floor || on_sphere || on_box, "{p}");
+        }
+    }
+}
