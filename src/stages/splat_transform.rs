@@ -208,8 +208,7 @@ pub fn project_splat(
     camera: &Camera,
 ) -> Option<ProjectedSplat> {
     let g = geometry(position, log_scales, quaternion, camera);
-    // `!(z > NEAR)` also culls NaN depths.
-    if !(g.c.z > NEAR_PLANE) {
+    if g.c.z.is_nan() || g.c.z <= NEAR_PLANE {
         return None;
     }
     let transform = transform_of(g.a, g.b, g.c, camera);
