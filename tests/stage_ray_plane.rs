@@ -351,33 +351,34 @@ fn grazing_rays_away_from_the_guard_match_finite_differences() {
 
 #[test]
 fn ray_along_a_billboard_axis() {
-    // t_u = +z (90° about y), the pixel at the principal point looks straight along t_u: the ray
-    // lies in the plane x = 0 … shifted to x = 0.3 it is parallel to it. k.x = l.x = 0 exactly, so
-    // p.z = 0 exactly: rejected.
+    // q = (1, −1, −1, −1)/2 is exact in f32: t_u = +z, t_v = +x, n = +y. The billboard lies in
+    // the plane y = 0.3, parallel to the principal ray, which runs along t_u: k.x = l.x = 0
+    // exactly, so p.z = 0 exactly and the hit is rejected.
     let cam = identity_camera(64, 48);
-    let h = std::f32::consts::FRAC_1_SQRT_2;
-    let ps = project_splat(Vec3::new(0.3, 0.0, 4.0), Vec2::ZERO, [h, 0.0, -h, 0.0], &cam).unwrap();
+    let q = [1.0, -1.0, -1.0, -1.0];
+    let ps = project_splat(Vec3::new(0.0, 0.3, 4.0), Vec2::ZERO, q, &cam).unwrap();
     let t = ps.transform;
-    assert_eq!(t.tw.y, 0.0);
+    let (k, l) = (cam.cx * t.tw - t.tu, cam.cy * t.tw - t.tv);
+    assert_eq!((k.x, l.x), (0.0, 0.0));
     assert!(intersect(&t, cam.cx, cam.cy).is_none());
     assert_eq!(
         intersect_vjp(&t, cam.cx, cam.cy, 1.0, 1.0, 1.0),
         SplatTransform::default()
     );
-    // Nearby rays: p.z → 0 while the determinant is computed without cancellation (ρ ≈ 1), so
-    // only UV_LIMIT stops u → ∞.
+    // Rays tilted by δ towards the plane: they hit it at depth 0.3·fy/δ, u → ∞, while the
+    // determinant p.z has no cancellation at all (ρ = 1): only UV_LIMIT stops u from growing.
     let mut limited = 0;
-    for e in 1..40 {
-        let px = cam.cx - 10f32.powf(-e as f32 * 0.2);
-        let rho = guard_ratio(&t, px, cam.cy);
-        match intersect(&t, px, cam.cy) {
-            Some(hit) => assert!(hit.u.abs() < UV_LIMIT && hit.u.is_finite()),
-            None => {
-                if rho > 0.5 {
-                    limited += 1;
-                }
-            }
+    // Down to δ = 1e-5 px (the f32 spacing at 24 is 1.9e-6).
+    for e in 0..=30 {
+        let py = cam.cy + 10f32.powf(1.0 - e as f32 * 0.2);
+        let rho = guard_ratio(&t, cam.cx, py);
+        assert!(rho > 0.99, "{rho}");
+        match intersect(&t, cam.cx, py) {
+            Some(hit) => assert!(hit.u.abs() < UV_LIMIT && hit.u.is_finite() && hit.depth.is_finite()),
+            None => limited += 1,
         }
+        let g = intersect_vjp(&t, cam.cx, py, 1.0, 1.0, 1.0);
+        assert!(g.to_array().iter().all(|v| v.is_finite()));
     }
     assert!(limited > 0, "UV_LIMIT is what rejects these rays");
 }

@@ -97,7 +97,9 @@ pub fn intersect(t: &SplatTransform, px: f32, py: f32) -> Option<PlaneHit> {
     let (u, v) = (p.x * inv, p.y * inv);
     let depth = u * t.tw.x + v * t.tw.y + t.tw.z;
     // Written so that NaN and +inf depths are rejected too.
-    (NEAR_PLANE..f32::INFINITY).contains(&depth).then_some(PlaneHit { u, v, depth })
+    (NEAR_PLANE..f32::INFINITY)
+        .contains(&depth)
+        .then_some(PlaneHit { u, v, depth })
 }
 
 /// Backward pass of [`intersect`]: given `∂L/∂u`, `∂L/∂v`, `∂L/∂depth` at the hit of pixel
