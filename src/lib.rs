@@ -13,6 +13,7 @@
 
 pub mod camera;
 pub mod gradcheck;
+pub mod init;
 pub mod rng;
 pub mod stages;
 pub mod strategies;
