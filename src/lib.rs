@@ -14,6 +14,7 @@
 pub mod camera;
 pub mod gradcheck;
 pub mod init;
+pub mod loss;
 pub mod rng;
 pub mod stages;
 pub mod strategies;
