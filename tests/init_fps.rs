@@ -1,7 +1,9 @@
 //! Farthest point sampling: the greedy rule against brute force, the edge cases (k ≥ N, k = 0,
 //! N = 0, duplicates, non-finite points) and determinism across thread counts.
 
-use bbsplat::init::fps::{CHUNK, FpsError, farthest_point_sampling};
+use bbsplat::init::fps::{
+    DENSE_CHUNK, FpsError, PARALLEL_MIN_POINTS, farthest_point_sampling, farthest_point_sampling_dense,
+};
 use bbsplat::rng::Rng;
 use bbsplat::strategies::{point_cloud, seeded_config};
 use glam::Vec3;
@@ -131,17 +133,24 @@ fn lattice(side: usize) -> Vec<Vec3> {
 
 #[test]
 fn identical_for_any_thread_count() {
-    for (cloud, k) in [(random_cloud(5 * CHUNK + 123, 1), 300), (lattice(30), 150)] {
-        assert!(cloud.len() > CHUNK, "several chunks");
+    for (cloud, k) in [(random_cloud(5 * DENSE_CHUNK + 123, 1), 300), (lattice(34), 150)] {
+        // Several dense chunks, and early steps large enough for the parallel bucket update.
+        assert!(cloud.len() > 2 * DENSE_CHUNK && cloud.len() > 2 * PARALLEL_MIN_POINTS);
         let run = |threads: usize| {
             rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
                 .build()
                 .unwrap()
-                .install(|| farthest_point_sampling(&cloud, k).unwrap())
+                .install(|| {
+                    (
+                        farthest_point_sampling(&cloud, k).unwrap(),
+                        farthest_point_sampling_dense(&cloud, k).unwrap(),
+                    )
+                })
         };
         let one = run(1);
-        assert_eq!(one.len(), k);
+        assert_eq!(one.0.len(), k);
+        assert_eq!(one.0, one.1, "pruned and dense agree");
         assert_eq!(run(2), one);
         assert_eq!(run(4), one);
     }
@@ -198,6 +207,15 @@ proptest! {
     }
 
     #[test]
+    fn greedy_rule_holds_on_random_clouds_dense(points in point_cloud(0..60, 10.0), k in 0usize..70) {
+        let chosen = farthest_point_sampling_dense(&points, k).unwrap();
+        prop_assert_eq!(chosen.len(), k.min(points.len()));
+        if k < points.len() {
+            assert_greedy(&points, &chosen);
+        }
+    }
+
+    #[test]
     fn greedy_rule_holds_with_duplicates(
         distinct in point_cloud(1..8, 3.0),
         picks in proptest::collection::vec(0usize..8, 1..40),
@@ -218,5 +236,20 @@ proptest! {
                 seen.push(points[i]);
             }
         }
+    }
+}
+
+proptest! {
+    #![proptest_config(seeded_config(64))]
+
+    /// Larger clouds (many buckets, some with duplicates): the bucket-pruned sampler returns
+    /// exactly what the dense one does.
+    #[test]
+    fn pruned_equals_dense(mut points in point_cloud(256..3000, 10.0), dup_every in 2usize..50, k in 1usize..400) {
+        let n = points.len();
+        for i in (dup_every..n).step_by(dup_every) {
+            points[i] = points[i / dup_every];
+        }
+        prop_assert_eq!(farthest_point_sampling(&points, k).unwrap(), farthest_point_sampling_dense(&points, k).unwrap());
     }
 }

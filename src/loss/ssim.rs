@@ -129,14 +129,12 @@ pub fn ssim(
 ) -> Result<f64, LossError> {
     let geo = Geometry::new(width, height, channels, padding)?;
     geo.check(a, b)?;
-    let hbuf = horizontal_moments(a, b, &geo);
     let row_sums: Vec<f64> = (0..geo.oh)
         .into_par_iter()
         .map_init(
-            || vec![0.0f64; MOMENTS * geo.out_row()],
+            || Scratch::new(&geo),
             |scratch, oy| {
-                vertical_moments(&geo, &hbuf, oy, scratch);
-                let [ma, mb, saa, sbb, sab] = split5(scratch, geo.out_row());
+                let [ma, mb, saa, sbb, sab] = scratch.row_moments(a, b, &geo, oy);
                 (0..geo.out_row())
                     .map(|j| ssim_value(ma[j], mb[j], saa[j], sbb[j], sab[j]))
                     .sum::<f64>()
@@ -162,13 +160,11 @@ pub fn ssim_map(
 ) -> Result<Vec<f32>, LossError> {
     let geo = Geometry::new(width, height, channels, padding)?;
     geo.check(a, b)?;
-    let hbuf = horizontal_moments(a, b, &geo);
     let mut map = vec![0.0f32; geo.map_len()];
     map.par_chunks_mut(geo.out_row()).enumerate().for_each_init(
-        || vec![0.0f64; MOMENTS * geo.out_row()],
+        || Scratch::new(&geo),
         |scratch, (oy, row)| {
-            vertical_moments(&geo, &hbuf, oy, scratch);
-            let [ma, mb, saa, sbb, sab] = split5(scratch, geo.out_row());
+            let [ma, mb, saa, sbb, sab] = scratch.row_moments(a, b, &geo, oy);
             for (j, s) in row.iter_mut().enumerate() {
                 *s = ssim_value(ma[j], mb[j], saa[j], sbb[j], sab[j]) as f32;
             }
@@ -348,37 +344,52 @@ fn correlate_row(input: &[f64], out: &mut [f64], n_in: usize, stride: usize, off
     }
 }
 
-/// The horizontal pass of the five moments: `h` rows, each `[μa | μb | Saa | Sbb | Sab]` of
-/// `out_row()` values.
-fn horizontal_moments(a: &[f32], b: &[f32], geo: &Geometry) -> Vec<f64> {
-    let (lin, lout) = (geo.in_row(), geo.out_row());
-    let mut hbuf = vec![0.0f64; geo.h * MOMENTS * lout];
-    hbuf.par_chunks_mut(MOMENTS * lout).enumerate().for_each_init(
-        || vec![0.0f64; MOMENTS * lin],
-        |products, (y, out)| {
-            let (ra, rb) = (&a[y * lin..(y + 1) * lin], &b[y * lin..(y + 1) * lin]);
-            // a, b, a², b², a·b in f64 (the products of f32 values are exact in f64).
-            let [pa, pb, paa, pbb, pab] = split5_mut(products, lin);
-            for j in 0..lin {
-                let (va, vb) = (ra[j] as f64, rb[j] as f64);
-                pa[j] = va;
-                pb[j] = vb;
-                paa[j] = va * va;
-                pbb[j] = vb * vb;
-                pab[j] = va * vb;
-            }
-            for (src, dst) in products.chunks(lin).zip(out.chunks_mut(lout)) {
-                correlate_row(src, dst, geo.w, geo.c, geo.off, &geo.g);
-            }
-        },
-    );
-    hbuf
+/// Per-thread buffers for one map row of moments.
+struct Scratch {
+    /// The vertical pass of a, b, a², b², a·b: five image-width rows.
+    vertical: Vec<f64>,
+    /// The five moment rows of the map: μa, μb, Saa, Sbb, Sab.
+    moments: Vec<f64>,
 }
 
-/// The vertical pass for map row `oy`: fills `out` with `[μa | μb | Saa | Sbb | Sab]`.
-fn vertical_moments(geo: &Geometry, hbuf: &[f64], oy: usize, out: &mut [f64]) {
-    let lout = geo.out_row();
-    vertical_pass(hbuf, MOMENTS, lout, geo.h, oy, geo.off, &geo.g, out);
+impl Scratch {
+    fn new(geo: &Geometry) -> Self {
+        Self {
+            vertical: vec![0.0; MOMENTS * geo.in_row()],
+            moments: vec![0.0; MOMENTS * geo.out_row()],
+        }
+    }
+
+    /// The five moments of map row `oy`: the vertical pass over the products (formed on the
+    /// fly, in f64, where the products of f32 values are exact), then the horizontal pass.
+    fn row_moments(&mut self, a: &[f32], b: &[f32], geo: &Geometry, oy: usize) -> [&[f64]; MOMENTS] {
+        let lin = geo.in_row();
+        self.vertical.fill(0.0);
+        {
+            let [v0, v1, v2, v3, v4] = split5_mut(&mut self.vertical, lin);
+            for (k, &gk) in geo.g.iter().enumerate() {
+                let y = oy as isize + k as isize - RADIUS as isize + geo.off;
+                if y < 0 || y >= geo.h as isize {
+                    continue;
+                }
+                let y = y as usize;
+                let (ra, rb) = (&a[y * lin..(y + 1) * lin], &b[y * lin..(y + 1) * lin]);
+                for j in 0..lin {
+                    let (x, z) = (ra[j] as f64, rb[j] as f64);
+                    v0[j] += gk * x;
+                    v1[j] += gk * z;
+                    v2[j] += gk * (x * x);
+                    v3[j] += gk * (z * z);
+                    v4[j] += gk * (x * z);
+                }
+            }
+        }
+        let lout = geo.out_row();
+        for (src, dst) in self.vertical.chunks(lin).zip(self.moments.chunks_mut(lout)) {
+            correlate_row(src, dst, geo.w, geo.c, geo.off, &geo.g);
+        }
+        split5(&self.moments, lout)
+    }
 }
 
 /// `out[m] = Σ_k g[k]·rows[oy + k − 5 + off][m]` for each of the `maps` interleaved maps of a
@@ -465,7 +476,6 @@ where
 {
     let lout = geo.out_row();
     let lin = geo.in_row();
-    let hbuf = horizontal_moments(a, b, geo);
 
     // Per map row: the sum of S, and the three weighted partial maps.
     let mut dbuf = vec![0.0f64; geo.oh * PARTIALS * lout];
@@ -474,10 +484,9 @@ where
         .zip(row_sums.par_iter_mut())
         .enumerate()
         .for_each_init(
-            || vec![0.0f64; MOMENTS * lout],
+            || Scratch::new(geo),
             |scratch, (oy, (drow, sum))| {
-                vertical_moments(geo, &hbuf, oy, scratch);
-                let [ma, mb, saa, sbb, sab] = split5(scratch, lout);
+                let [ma, mb, saa, sbb, sab] = scratch.row_moments(a, b, geo, oy);
                 let (d_mu, rest) = drow.split_at_mut(lout);
                 let (d_saa, d_sab) = rest.split_at_mut(lout);
                 let mut acc = 0.0f64;
@@ -495,25 +504,18 @@ where
                 *sum = acc;
             },
         );
-    drop(hbuf);
 
-    // Adjoint of the vertical pass: image rows from map rows (shift −off).
-    let mut vbuf = vec![0.0f64; geo.h * PARTIALS * lout];
-    vbuf.par_chunks_mut(PARTIALS * lout)
-        .enumerate()
-        .for_each(|(y, out)| vertical_pass(&dbuf, PARTIALS, lout, geo.oh, y, -geo.off, &geo.g, out));
-    drop(dbuf);
-
-    // Adjoint of the horizontal pass, then the chain rule through a, a², a·b.
+    // Per image row: the adjoint of the vertical pass (map rows to image rows, shift −off),
+    // the adjoint of the horizontal pass, then the chain rule through a, a², a·b.
     let mut grad = vec![0.0f32; geo.h * lin];
     grad.par_chunks_mut(lin).enumerate().for_each_init(
-        || vec![0.0f64; PARTIALS * lin],
-        |scratch, (y, out)| {
-            let src = &vbuf[y * PARTIALS * lout..(y + 1) * PARTIALS * lout];
-            for (m, dst) in scratch.chunks_mut(lin).enumerate() {
-                correlate_row(&src[m * lout..(m + 1) * lout], dst, geo.ow, geo.c, -geo.off, &geo.g);
+        || (vec![0.0f64; PARTIALS * lout], vec![0.0f64; PARTIALS * lin]),
+        |(vertical, horizontal), (y, out)| {
+            vertical_pass(&dbuf, PARTIALS, lout, geo.oh, y, -geo.off, &geo.g, vertical);
+            for (src, dst) in vertical.chunks(lout).zip(horizontal.chunks_mut(lin)) {
+                correlate_row(src, dst, geo.ow, geo.c, -geo.off, &geo.g);
             }
-            let (t_mu, rest) = scratch.split_at(lin);
+            let (t_mu, rest) = horizontal.split_at(lin);
             let (t_saa, t_sab) = rest.split_at(lin);
             let (ra, rb) = (&a[y * lin..(y + 1) * lin], &b[y * lin..(y + 1) * lin]);
             for j in 0..lin {
