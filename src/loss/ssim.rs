@@ -321,25 +321,37 @@ impl Geometry {
 }
 
 /// `out[i] = Σ_k g[k]·input[i + k − 5 + off]` over pixels (each `stride` values), zero outside
-/// `0..n_in`; `out` holds `n_out` pixels. Taps are added in increasing `k`.
+/// `0..n_in`; `out` holds `n_out` pixels. Taps are added to 0 in increasing `k`, skipping those
+/// outside, so an output whose window is inside the image gets the same bits whatever the
+/// padding.
 fn correlate_row(input: &[f64], out: &mut [f64], n_in: usize, stride: usize, off: isize, g: &[f64; WINDOW_SIZE]) {
     let n_out = out.len() / stride;
-    out.fill(0.0);
-    for (k, &gk) in g.iter().enumerate() {
-        let s = k as isize - RADIUS as isize + off;
-        let i0 = (-s).max(0) as usize;
-        let i1 = (n_out as isize).min(n_in as isize - s);
-        if i1 <= i0 as isize {
-            continue;
+    let r = RADIUS as isize;
+    // Output pixels lo..hi have all 11 taps inside 0..n_in.
+    let lo = (r - off).clamp(0, n_out as isize) as usize;
+    let hi = (n_in as isize - r - off).clamp(lo as isize, n_out as isize) as usize;
+    for i in (0..lo).chain(hi..n_out) {
+        for ch in 0..stride {
+            let mut acc = 0.0;
+            for (k, &gk) in g.iter().enumerate() {
+                let x = i as isize + k as isize - r + off;
+                if x >= 0 && x < n_in as isize {
+                    acc += gk * input[x as usize * stride + ch];
+                }
+            }
+            out[i * stride + ch] = acc;
         }
-        let i1 = i1 as usize;
-        let src0 = (i0 as isize + s) as usize * stride;
-        let len = (i1 - i0) * stride;
-        for (o, &x) in out[i0 * stride..i0 * stride + len]
-            .iter_mut()
-            .zip(&input[src0..src0 + len])
-        {
-            *o += gk * x;
+    }
+    if hi > lo {
+        let len = (hi - lo) * stride;
+        let start = (lo as isize + off - r) as usize * stride;
+        let taps: [&[f64]; WINDOW_SIZE] = std::array::from_fn(|k| &input[start + k * stride..][..len]);
+        for (j, o) in out[lo * stride..hi * stride].iter_mut().enumerate() {
+            let mut acc = 0.0;
+            for (tap, &gk) in taps.iter().zip(g) {
+                acc += gk * tap[j];
+            }
+            *o = acc;
         }
     }
 }
@@ -452,9 +464,10 @@ fn ssim_partials(ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64) -> [f64; 4] {
     let d = b1 * b2;
     // S exactly as `ssim_value` computes it, so forward-only and forward+backward agree.
     let s = (a1 * a2) / d;
+    // One more division: 1/B1 = B2/D and 1/B2 = B1/D.
     let inv_d = 1.0 / d;
-    let d_mu = 2.0 * mb * (a2 - a1) * inv_d - 2.0 * ma * s * (1.0 / b1 - 1.0 / b2);
-    let d_saa = -s / b2;
+    let d_mu = 2.0 * (mb * (a2 - a1) - ma * s * (b2 - b1)) * inv_d;
+    let d_saa = -s * b1 * inv_d;
     let d_sab = 2.0 * a1 * inv_d;
     [s, d_mu, d_saa, d_sab]
 }
