@@ -14,6 +14,8 @@
 pub mod camera;
 pub mod demo;
 pub mod gradcheck;
+pub mod init;
+pub mod loss;
 pub mod rng;
 pub mod stages;
 pub mod strategies;
