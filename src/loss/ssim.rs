@@ -47,14 +47,19 @@
 //! in **f64**. The variance `G*(a²) − μa²` cancels catastrophically where the image is flat: in
 //! f32 the error of the difference is ~1e-7 against `σ² + C2 ≈ 1e-3`, which makes the map
 //! wrong by up to ~1e-4 relative (enough to hide or fake gradient errors in a finite-difference
-//! check), while in f64 it is ~1e-13. The f64 passes cost about twice the f32 ones.
+//! check), while in f64 it is ~1e-13 (measured: map within 3e-8 of a direct f64 reference,
+//! i.e. the f32 rounding of the output). f64 vector lanes are half as wide as f32 ones, so
+//! the passes may cost up to twice as much as f32 passes would (not measured separately).
 //!
 //! # Cost and determinism
 //!
 //! Two 11-tap 1-D passes per moment (5 moments forward, 3 backward), i.e. `O(pixels·11)` per
-//! map, row by row in parallel with rayon. Every output value is accumulated by
-//! one thread in a fixed tap order and the mean is summed in f64 per row and then over rows in
-//! order, so results are identical for any number of threads.
+//! map. The forward works one map row at a time (the vertical pass over the products formed on
+//! the fly, then the horizontal pass), in parallel over rows with rayon, and keeps only the
+//! three weighted partial maps for the backward (24 bytes per map value); the backward again
+//! works one image row at a time. Every output value is accumulated by one thread in a fixed
+//! tap order and the mean is summed in f64 per row and then over rows in order, so results are
+//! identical for any number of threads.
 //!
 //! ```
 //! use bbsplat::loss::ssim::{Padding, ssim, ssim_vjp};
