@@ -14,5 +14,6 @@
 pub mod camera;
 pub mod gradcheck;
 pub mod rng;
+pub mod scene;
 pub mod stages;
 pub mod strategies;

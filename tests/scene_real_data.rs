@@ -1,0 +1,127 @@
+//! The three real scenes of `../shared/data` (skipped with a message when absent).
+
+use bbsplat::scene::colmap::{self, Intrinsics};
+use bbsplat::scene::{Background, LoadOptions, SceneFormat, load};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+fn data(scene: &str) -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(scene);
+    if p.is_dir() {
+        Some(p)
+    } else {
+        println!("skipped: test data {} not found", p.display());
+        None
+    }
+}
+
+#[test]
+fn lego_loads_with_nerf_synthetic_conventions() {
+    let Some(dir) = data("lego") else { return };
+    let t = Instant::now();
+    let options = LoadOptions {
+        background: Background::White,
+        ..Default::default()
+    };
+    let scene = load(&dir, &options).unwrap();
+    println!(
+        "lego: loaded {} + {} views in {:?}",
+        scene.train.len(),
+        scene.test.len(),
+        t.elapsed()
+    );
+    assert_eq!(scene.format, SceneFormat::NerfSynthetic);
+    assert_eq!((scene.train.len(), scene.test.len()), (100, 200));
+    assert!(scene.points.is_none());
+    let radii: Vec<f32> = scene
+        .train
+        .iter()
+        .chain(&scene.test)
+        .map(|v| v.camera.centre().length())
+        .collect();
+    let mean = radii.iter().sum::<f32>() / radii.len() as f32;
+    let (lo, hi) = radii
+        .iter()
+        .fold((f32::MAX, f32::MIN), |(a, b), &r| (a.min(r), b.max(r)));
+    println!(
+        "lego: camera radius mean {mean:.4}, range [{lo:.4}, {hi:.4}], extent {}",
+        scene.extent
+    );
+    assert!((mean - 4.031).abs() < 0.01, "{mean}");
+    for v in scene.train.iter().chain(&scene.test) {
+        let c = &v.camera;
+        assert_eq!((c.width, c.height), (400, 400));
+        // 0.5 · 400 / tan(0.5 · 0.6911112) = 555.56 (1111.11 at the original 800 px).
+        assert!(
+            (c.fx - 555.5556).abs() < 0.01 && (c.fy - 555.5556).abs() < 0.01,
+            "{}",
+            c.fx
+        );
+        assert_eq!((c.cx, c.cy), (200.0, 200.0));
+        // The cameras look at the object near the origin.
+        let (x, y) = c.project(glam::Vec3::ZERO).unwrap();
+        assert!((x - 200.0).abs() < 40.0 && (y - 200.0).abs() < 40.0, "{x} {y}");
+    }
+    println!("lego: fx = {}", scene.train[0].camera.fx);
+    // White background: the corners are white.
+    assert_eq!(scene.train[0].image.pixel(0, 0), [255, 255, 255]);
+}
+
+#[test]
+fn beer_colmap_reprojects_under_half_a_pixel() {
+    let Some(dir) = data("beer_colmap") else { return };
+    let t = Instant::now();
+    let scene = load(&dir, &LoadOptions::default()).unwrap();
+    println!(
+        "beer: loaded {} + {} views in {:?}",
+        scene.train.len(),
+        scene.test.len(),
+        t.elapsed()
+    );
+    assert_eq!(scene.format, SceneFormat::Colmap);
+    assert_eq!(scene.train.len() + scene.test.len(), 71);
+    assert_eq!(scene.test.len(), 9);
+    let model = colmap::read_model(&dir.join("sparse/0")).unwrap();
+    let points: HashMap<u64, glam::Vec3> = model
+        .points
+        .iter()
+        .map(|p| (p.id, glam::DVec3::from_array(p.xyz).as_vec3()))
+        .collect();
+    let cams: HashMap<u32, Intrinsics> = model.cameras.iter().map(|c| (c.id, c.intrinsics())).collect();
+    let views: HashMap<&str, _> = scene
+        .train
+        .iter()
+        .chain(&scene.test)
+        .map(|v| (v.name.as_str(), v))
+        .collect();
+    let (mut sum, mut n, mut sum_distorted) = (0.0f64, 0usize, 0.0f64);
+    for im in &model.images {
+        let view = views[im.name.as_str()];
+        let k = cams[&im.camera_id];
+        for kp in im.points2d.iter().filter(|p| p.point3d_id >= 0) {
+            let x = points[&(kp.point3d_id as u64)];
+            let (u, v) = view.camera.project(x).unwrap();
+            // The keypoint, undistorted into the view's pinhole camera.
+            let d = [(kp.xy[0] - k.cx) / k.fx, (kp.xy[1] - k.cy) / k.fy];
+            let p = k.distortion.undistort(d).unwrap();
+            let c = &view.camera;
+            let (ku, kv) = (c.fx as f64 * p[0] + c.cx as f64, c.fy as f64 * p[1] + c.cy as f64);
+            sum += ((u as f64 - ku).powi(2) + (v as f64 - kv).powi(2)).sqrt();
+            // Control: ignoring the distortion.
+            let (du, dv) = (c.fx as f64 * d[0] + c.cx as f64, c.fy as f64 * d[1] + c.cy as f64);
+            sum_distorted += ((u as f64 - du).powi(2) + (v as f64 - dv).powi(2)).sqrt();
+            n += 1;
+        }
+    }
+    let mean = sum / n as f64;
+    println!(
+        "beer: mean reprojection error {mean:.4} px over {n} observations (ignoring distortion: {:.4} px); \
+         extent {}; image {}x{}",
+        sum_distorted / n as f64,
+        scene.extent,
+        scene.train[0].camera.width,
+        scene.train[0].camera.height
+    );
+    assert!(mean < 0.5, "{mean}");
+}
