@@ -22,9 +22,9 @@
 //!     params: vec![50.0, 51.0, 32.0, 24.0] }];
 //! let bytes = write_cameras(&cams);
 //! assert_eq!(parse_cameras(&bytes, Path::new("cameras.bin")).unwrap(), cams);
-//! let err = parse_cameras(&bytes[..30], Path::new("cameras.bin")).unwrap_err();
-//! assert_eq!(err.to_string(), "cameras.bin: camera 0 (camera_id 3), byte offset 32: \
-//!     file ends while reading parameter 0 (needs 8 bytes, 30 in the file)");
+//! let err = parse_cameras(&bytes[..60], Path::new("cameras.bin")).unwrap_err();
+//! assert_eq!(err.to_string(), "cameras.bin: camera 0 (camera_id 3), byte offset 56: \
+//!     file ends while reading parameter 3: 8 bytes needed, 4 left (the file is 60 bytes long)");
 //! ```
 
 use super::colmap::{CameraModel, ColmapCamera, ColmapImage, ColmapModel, ColmapPoint3D, IdSet, Point2D, TrackElement};
@@ -78,7 +78,8 @@ impl<'a> Reader<'a> {
                 Ok(out)
             }
             None => Err(self.err(format!(
-                "file ends while reading {what} (needs {N} bytes, {} in the file)",
+                "file ends while reading {what}: {N} bytes needed, {} left (the file is {} bytes long)",
+                self.remaining(),
                 self.bytes.len()
             ))),
         }

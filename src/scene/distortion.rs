@@ -15,9 +15,10 @@
 //!
 //! [`Distortion::undistort`] inverts it by Newton's method on the 2×2 system with the analytic
 //! Jacobian, started at the distorted point, with step halving when a step does not reduce the
-//! residual. It answers `None` when it does not converge to a residual below 1e-12 (normalised
-//! units) or when the solution lies where the model folds over (Jacobian determinant ≤ 0),
-//! i.e. outside the region where the distortion is invertible.
+//! residual. It answers `None` when it does not converge to a residual below
+//! `1e-12·(1 + |p_d|)` (normalised units) or when the solution lies beyond the invertible part of
+//! the model: the radial factor `1 + k1 r² + ...` or the slope of the radial profile
+//! `d(r·radial)/dr` is not positive, or the Jacobian determinant is not positive.
 //!
 //! ```
 //! use bbsplat::scene::distortion::Distortion;
@@ -42,7 +43,7 @@ pub struct Distortion {
     pub p2: f64,
 }
 
-/// Residual (normalised units) below which Newton's iteration stops.
+/// Residual (normalised units, relative to `1 + |p_d|`) below which Newton's iteration stops.
 const TOLERANCE: f64 = 1e-12;
 
 impl Distortion {
@@ -106,10 +107,11 @@ impl Distortion {
             [d[0] - pd[0], d[1] - pd[1]]
         };
         let norm = |r: [f64; 2]| r[0].hypot(r[1]);
+        let tolerance = TOLERANCE * (1.0 + norm(pd));
         let mut p = pd;
         let mut r = residual(p);
         for _ in 0..100 {
-            if norm(r) < TOLERANCE {
+            if norm(r) < tolerance {
                 break;
             }
             let [[a, b], [c, d]] = self.jacobian(p);
@@ -135,6 +137,11 @@ impl Distortion {
             }
         }
         let [[a, b], [c, d]] = self.jacobian(p);
-        (norm(r) < TOLERANCE && a * d - b * c > 0.0).then_some(p)
+        // On the invertible branch: the radial factor and the radial profile's slope are
+        // positive, and the map preserves orientation.
+        let r2 = p[0] * p[0] + p[1] * p[1];
+        let radial = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3));
+        let slope = radial + 2.0 * r2 * (self.k1 + r2 * (2.0 * self.k2 + 3.0 * self.k3 * r2));
+        (norm(r) < tolerance && a * d - b * c > 0.0 && radial > 0.0 && slope > 0.0).then_some(p)
     }
 }

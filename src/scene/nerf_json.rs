@@ -252,7 +252,10 @@ fn parse_intrinsics(v: &Value, prefix: &str) -> Result<IntrinsicFields, (String,
             None | Some(Value::Null) => Ok(None),
             Some(x) => match x.as_f64() {
                 Some(f) if f.is_finite() && (f as f32).is_finite() => Ok(Some(f)),
-                Some(f) => Err((format!("{prefix}{key}"), format!("value {f} is not finite"))),
+                Some(f) => Err((
+                    format!("{prefix}{key}"),
+                    format!("value {f:?} is out of range (not finite in single precision)"),
+                )),
                 None => Err((format!("{prefix}{key}"), format!("expected a number, found {x}"))),
             },
         }
@@ -302,7 +305,9 @@ fn parse_matrix(v: &Value) -> Result<[[f64; 4]; 4], String> {
                 .as_f64()
                 .ok_or_else(|| format!("entry [{r}][{c}] is not a number: {x}"))?;
             if !f.is_finite() || !(f as f32).is_finite() {
-                return Err(format!("entry [{r}][{c}] = {f} is not finite"));
+                return Err(format!(
+                    "entry [{r}][{c}] = {f:?} is out of range (not finite in single precision)"
+                ));
             }
             m[r][c] = f;
         }
