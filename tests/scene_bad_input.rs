@@ -157,12 +157,12 @@ fn counts_larger_than_the_file_are_refused_before_allocating() {
 fn unknown_camera_models_are_named() {
     let m = model(1);
     for (id, name) in [
-        (42, "unknown model id 42"),
+        (42i32, "unknown model id 42"),
         (5, "OPENCV_FISHEYE (model id 5)"),
         (-1, "unknown model id -1"),
     ] {
         let mut cams = bin::write_cameras(&m.cameras);
-        cams[12..16].copy_from_slice(&(id as i32).to_le_bytes());
+        cams[12..16].copy_from_slice(&id.to_le_bytes());
         expect(
             bin::parse_cameras(&cams, Path::new("cameras.bin")).unwrap_err(),
             &[

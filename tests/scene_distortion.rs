@@ -345,7 +345,7 @@ fn fox_model_straight_lines_are_straight_after_loading() {
                 .iter()
                 .all(|&(o, p)| (t - if photo { p } else { o }).abs() > 8.0)
         };
-        let after: Vec<(f64, f64)> = centroids(&out, ow, oh, horizontal, &pos_out)
+        let after: Vec<(f64, f64)> = centroids(&out, ow, oh, horizontal, pos_out)
             .into_iter()
             .filter(|p| away(p.0, false))
             .collect();

@@ -66,6 +66,91 @@ fn lego_loads_with_nerf_synthetic_conventions() {
     println!("lego: fx = {}", scene.train[0].camera.fx);
     // White background: the corners are white.
     assert_eq!(scene.train[0].image.pixel(0, 0), [255, 255, 255]);
+
+    // Independent check of the focal length: carve a visual hull from the alpha masks of 16
+    // training views and compare its silhouette in 4 test views with their masks. The focal
+    // from camera_angle_x must explain the masks far better than half of it.
+    let iou_loaded = silhouette_iou(&scene.train[..16], &scene.test[..4], 1.0);
+    let iou_half = silhouette_iou(&scene.train[..16], &scene.test[..4], 0.5);
+    println!(
+        "lego: visual-hull silhouette IoU on test views: {iou_loaded:.3} with fx = 555.56, {iou_half:.3} with fx = 277.78"
+    );
+    assert!(
+        iou_loaded > 0.9 && iou_loaded > iou_half + 0.2,
+        "{iou_loaded} vs {iou_half}"
+    );
+
+    // At half resolution the focal halves exactly.
+    let options = LoadOptions {
+        downscale: 2,
+        ..options
+    };
+    let half = load(&dir, &options).unwrap();
+    let c = half.test[0].camera;
+    println!("lego: downscale 2 → {}x{}, fx = {}", c.width, c.height, c.fx);
+    assert_eq!((c.width, c.height, c.cx, c.cy), (200, 200, 100.0, 100.0));
+    assert!((c.fx - 277.7778).abs() < 0.01 && (c.fy - 277.7778).abs() < 0.01);
+}
+
+/// Alpha mask (alpha > 0.5) of a NeRF-synthetic view, read from its RGBA file.
+fn mask(view: &bbsplat::scene::View) -> Vec<bool> {
+    let rgba = image::open(&view.path).unwrap().into_rgba8();
+    rgba.pixels().map(|p| p[3] > 127).collect()
+}
+
+/// Visual hull of `carve` views on a 96³ grid over [-1.5, 1.5]³, with every focal length
+/// multiplied by `focal_scale`; returns the mean IoU of its silhouettes with the masks of
+/// `eval` views (rays through every second pixel marched through the grid).
+fn silhouette_iou(carve: &[bbsplat::scene::View], eval: &[bbsplat::scene::View], focal_scale: f32) -> f64 {
+    use glam::Vec3;
+    const N: usize = 96;
+    let cell = 3.0 / N as f32;
+    let centre = |i: usize| -1.5 + (i as f32 + 0.5) * cell;
+    let scaled = |v: &bbsplat::scene::View| {
+        let mut c = v.camera;
+        c.fx *= focal_scale;
+        c.fy *= focal_scale;
+        c
+    };
+    let masks: Vec<(bbsplat::camera::Camera, Vec<bool>)> = carve.iter().map(|v| (scaled(v), mask(v))).collect();
+    let mut hull = vec![true; N * N * N];
+    for (idx, h) in hull.iter_mut().enumerate() {
+        let p = Vec3::new(centre(idx % N), centre(idx / N % N), centre(idx / (N * N)));
+        *h = masks.iter().all(|(c, m)| match c.project(p) {
+            Some((x, y)) if x >= 0.0 && y >= 0.0 && x < c.width as f32 && y < c.height as f32 => {
+                m[y as usize * c.width as usize + x as usize]
+            }
+            _ => false,
+        });
+    }
+    let occupied = |p: Vec3| {
+        let g = (p + Vec3::splat(1.5)) / cell;
+        if g.min_element() < 0.0 || g.max_element() >= N as f32 {
+            return false;
+        }
+        hull[g.x as usize + N * (g.y as usize + N * g.z as usize)]
+    };
+    let mut total = 0.0;
+    for v in eval {
+        let c = scaled(v);
+        let m = mask(v);
+        let (mut inter, mut union) = (0usize, 0usize);
+        let rt = c.rotation.transpose();
+        let origin = c.centre();
+        // Every second pixel in each direction.
+        for j in (0..c.height).step_by(2) {
+            for i in (0..c.width).step_by(2) {
+                let d = rt * Vec3::new((i as f32 + 0.5 - c.cx) / c.fx, (j as f32 + 0.5 - c.cy) / c.fy, 1.0);
+                let d = d.normalize();
+                let hit = (0..300).any(|k| occupied(origin + d * (2.0 + k as f32 * 0.0133)));
+                let inside = m[(j * c.width + i) as usize];
+                inter += (hit && inside) as usize;
+                union += (hit || inside) as usize;
+            }
+        }
+        total += inter as f64 / union.max(1) as f64;
+    }
+    total / eval.len() as f64
 }
 
 #[test]
@@ -190,10 +275,10 @@ fn fox_loads_and_is_resampled_through_its_stated_model() {
                 let xd = x * rad + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
                 let yd = y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
                 let got = v.image.pixel(i, j);
-                for ch in 0..3 {
-                    sum += (sample(fx * xd + cx, fy * yd + cy, ch) - got[ch] as f64).abs();
+                for (ch, &g) in got.iter().enumerate() {
+                    sum += (sample(fx * xd + cx, fy * yd + cy, ch) - g as f64).abs();
                     // Control: ignoring the distortion.
-                    sum_plain += (sample(fx * x + cx, fy * y + cy, ch) - got[ch] as f64).abs();
+                    sum_plain += (sample(fx * x + cx, fy * y + cy, ch) - g as f64).abs();
                     n += 1;
                 }
             }

@@ -241,7 +241,7 @@ impl ColmapImage {
             ));
         }
         let n2: f64 = self.qvec.iter().map(|v| v * v).sum();
-        if !(n2 > 1e-12) || !n2.is_finite() {
+        if n2.is_nan() || n2 <= 1e-12 || n2.is_infinite() {
             return Err(format!("quaternion {:?} cannot be normalised", self.qvec));
         }
         check_name(&self.name)

@@ -116,7 +116,7 @@ impl Distortion {
             }
             let [[a, b], [c, d]] = self.jacobian(p);
             let det = a * d - b * c;
-            if !(det.abs() > 1e-12) {
+            if det.is_nan() || det.abs() <= 1e-12 {
                 return None;
             }
             let step = [(d * r[0] - b * r[1]) / det, (a * r[1] - c * r[0]) / det];

@@ -90,8 +90,8 @@ fn sources_of(
             file: file.to_path_buf(),
             location,
             camera: CameraSpec::Json {
-                frame: f.intrinsics.clone(),
-                scene: t.intrinsics.clone(),
+                frame: Box::new(f.intrinsics.clone()),
+                scene: Box::new(t.intrinsics.clone()),
             },
             rotation,
             translation,

@@ -30,6 +30,7 @@ mod colmap_scene;
 pub mod colmap_text;
 pub mod distortion;
 mod error;
+pub mod fuzz;
 mod image_io;
 mod json_scene;
 pub mod nerf_json;

@@ -21,8 +21,8 @@ pub(crate) enum CameraSpec {
     },
     /// JSON fields resolved once the image size is known.
     Json {
-        frame: IntrinsicFields,
-        scene: IntrinsicFields,
+        frame: Box<IntrinsicFields>,
+        scene: Box<IntrinsicFields>,
     },
 }
 
