@@ -106,10 +106,7 @@ fn text_model_with_comments_and_blank_lines_loads() {
 fn the_model_with_most_images_is_chosen() {
     let d = temp_dir("several");
     colmap_dataset(&d, 3, true);
-    let big = bbsplat::scene::colmap::ColmapModel {
-        images: model(5).images,
-        ..model(5)
-    };
+    let big = model(5);
     std::fs::create_dir_all(d.join("sparse/1")).unwrap();
     colmap_binary::write_model(&big, &d.join("sparse/1")).unwrap();
     for im in &big.images {

@@ -114,7 +114,10 @@ fn load_view(s: ViewSource, options: &LoadOptions) -> Result<View, SceneError> {
         width: nw,
         height: nh,
     };
-    if ![camera.fx, camera.fy, camera.cx, camera.cy].iter().all(|v| v.is_finite()) {
+    if ![camera.fx, camera.fy, camera.cx, camera.cy]
+        .iter()
+        .all(|v| v.is_finite())
+    {
         return Err(perr(format!(
             "intrinsics (fx {}, fy {}, cx {}, cy {}) overflow single precision",
             plan.fx, plan.fy, plan.cx, plan.cy
