@@ -17,5 +17,6 @@ pub mod gradcheck;
 pub mod init;
 pub mod loss;
 pub mod rng;
+pub mod scene;
 pub mod stages;
 pub mod strategies;

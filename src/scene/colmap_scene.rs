@@ -1,0 +1,177 @@
+//! Building a [`Scene`] from a COLMAP model folder and its image folder.
+
+use super::colmap::{self, model_kind};
+use super::error::{Location, SceneError};
+use super::views::{self, CameraSpec, ViewSource};
+use super::{LoadOptions, PointCloud, Scene, SceneFormat, split};
+use glam::{Mat3, Vec3};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+/// Finds the COLMAP model under `path`: `path` itself, `path/sparse`, or the subfolder of
+/// `path/sparse` with the most registered images (ties: first in name order).
+pub(crate) fn find_model(path: &Path) -> Result<Option<PathBuf>, SceneError> {
+    if model_kind(path).is_some() {
+        return Ok(Some(path.to_path_buf()));
+    }
+    let sparse = path.join("sparse");
+    if model_kind(&sparse).is_some() {
+        return Ok(Some(sparse));
+    }
+    let Ok(entries) = std::fs::read_dir(&sparse) else {
+        return Ok(None);
+    };
+    let mut dirs: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_dir() && model_kind(p).is_some())
+        .collect();
+    dirs.sort();
+    let mut best: Option<(usize, PathBuf)> = None;
+    for d in dirs {
+        let n = colmap::read_images(&d)?.len();
+        if best.as_ref().is_none_or(|(m, _)| n > *m) {
+            best = Some((n, d));
+        }
+    }
+    Ok(best.map(|(_, d)| d))
+}
+
+/// The image folder for a model folder: `images` beside `sparse` (for `X/sparse/N` and
+/// `X/sparse`), else `images` in or beside the model folder.
+fn find_images_dir(model_dir: &Path) -> Result<PathBuf, SceneError> {
+    let mut candidates = Vec::new();
+    let name = |p: &Path| p.file_name().and_then(|n| n.to_str()).map(str::to_owned);
+    if let Some(parent) = model_dir.parent() {
+        if name(parent).as_deref() == Some("sparse") {
+            if let Some(root) = parent.parent() {
+                candidates.push(root.join("images"));
+            }
+        }
+        candidates.push(parent.join("images"));
+    }
+    candidates.push(model_dir.join("images"));
+    for c in &candidates {
+        if c.is_dir() {
+            return Ok(c.clone());
+        }
+    }
+    Err(SceneError::NotDetected {
+        path: model_dir.to_path_buf(),
+        looked_for: format!(
+            "no image folder for this COLMAP model (looked for {}); set LoadOptions::images_dir",
+            candidates
+                .iter()
+                .map(|c| c.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    })
+}
+
+/// The dataset's root folder (for the scene name): the folder holding `sparse/`.
+fn root_of(model_dir: &Path) -> PathBuf {
+    let is_sparse = |p: &Path| p.file_name().and_then(|n| n.to_str()) == Some("sparse");
+    match model_dir.parent() {
+        Some(parent) if is_sparse(model_dir) => parent.to_path_buf(),
+        Some(parent) if is_sparse(parent) => parent.parent().unwrap_or(parent).to_path_buf(),
+        _ => model_dir.to_path_buf(),
+    }
+}
+
+pub(crate) fn load(model_dir: &Path, options: &LoadOptions, _warnings: &mut Vec<String>) -> Result<Scene, SceneError> {
+    let model = colmap::read_model(model_dir)?;
+    let binary = model_kind(model_dir) == Some(true);
+    let images_file = model_dir.join(if binary { "images.bin" } else { "images.txt" });
+    if model.images.is_empty() {
+        return Err(SceneError::Empty {
+            path: images_file,
+            reason: "the model has no registered images".into(),
+        });
+    }
+    let images_dir = match &options.images_dir {
+        Some(d) => d.clone(),
+        None => find_images_dir(model_dir)?,
+    };
+    let cameras: HashMap<u32, (usize, &colmap::ColmapCamera)> =
+        model.cameras.iter().enumerate().map(|(i, c)| (c.id, (i, c))).collect();
+    let mut seen_names: HashMap<&str, usize> = HashMap::new();
+    let mut sources = Vec::with_capacity(model.images.len());
+    for (i, im) in model.images.iter().enumerate() {
+        let location = Location::Record(format!("image {i} (image_id {}, {:?})", im.id, im.name));
+        if let Some(j) = seen_names.insert(&im.name, i) {
+            return Err(SceneError::parse(
+                &images_file,
+                location,
+                format!("image name {:?} is also used by image {j}", im.name),
+            ));
+        }
+        if Path::new(&im.name).is_absolute() {
+            return Err(SceneError::parse(
+                &images_file,
+                location,
+                "image name is an absolute path; names must be relative to the image folder",
+            ));
+        }
+        // `check_references` guarantees the camera exists.
+        let Some(&(ci, cam)) = cameras.get(&im.camera_id) else {
+            return Err(SceneError::parse(&images_file, location, "camera_id not found"));
+        };
+        let r = im.rotation();
+        let rotation = Mat3::from_cols_array_2d(&r.map(|row| row.map(|v| v as f32))).transpose();
+        let translation = Vec3::new(im.tvec[0] as f32, im.tvec[1] as f32, im.tvec[2] as f32);
+        if !rotation.is_finite() || !translation.is_finite() {
+            return Err(SceneError::parse(
+                &images_file,
+                location,
+                "pose overflows single precision",
+            ));
+        }
+        let location = Location::Record(format!(
+            "image {i} (image_id {}, {:?}) with camera {ci} (camera_id {})",
+            im.id, im.name, cam.id
+        ));
+        sources.push(ViewSource {
+            name: im.name.clone(),
+            image_path: images_dir.join(&im.name),
+            file: images_file.clone(),
+            location,
+            camera: CameraSpec::Known {
+                intrinsics: cam.intrinsics(),
+                width: cam.width,
+                height: cam.height,
+            },
+            rotation,
+            translation,
+        });
+    }
+    sources.sort_by(|a, b| a.name.cmp(&b.name));
+    let views = views::load_all(sources, options)?;
+    let (train, test) = split::split_every(views, options.test_every);
+    let points = PointCloud {
+        positions: model
+            .points
+            .iter()
+            .map(|p| Vec3::new(p.xyz[0] as f32, p.xyz[1] as f32, p.xyz[2] as f32))
+            .collect(),
+        colours: model.points.iter().map(|p| p.rgb.map(|c| c as f32 / 255.0)).collect(),
+    };
+    if let Some(i) = points.positions.iter().position(|p| !p.is_finite()) {
+        return Err(SceneError::parse(
+            &model_dir.join(if binary { "points3D.bin" } else { "points3D.txt" }),
+            Location::Record(format!("point {i} (point3D_id {})", model.points[i].id)),
+            "position overflows single precision",
+        ));
+    }
+    let root = root_of(model_dir);
+    Ok(Scene {
+        name: root.file_name().and_then(|n| n.to_str()).unwrap_or("scene").to_string(),
+        format: SceneFormat::Colmap,
+        source: model_dir.to_path_buf(),
+        background: options.background,
+        train,
+        test,
+        points: Some(points),
+        extent: 0.0,
+        warnings: Vec::new(),
+    })
+}

@@ -1,0 +1,164 @@
+//! Image decoding (through the `image` crate), alpha compositing and area downscaling.
+//!
+//! Pixel values are the stored 8-bit values divided by 255: no sRGB decoding is applied, as in
+//! 3DGS/BBSplat, and resampling (undistortion, downscaling) works on these values.
+
+use super::Image;
+use super::error::{Location, SceneError};
+use std::path::Path;
+
+/// Decodes an image file into 8-bit RGB, compositing any alpha channel onto `background`
+/// (values in `[0, 1]`): `c = c_rgb·a + background·(1 − a)`, rounded to 8 bits. 16-bit
+/// images are reduced to 8 bits. The format is guessed from the file contents.
+pub(crate) fn decode(
+    image_path: &Path,
+    referenced_by: &Path,
+    location: &Location,
+    background: [f32; 3],
+) -> Result<Image, SceneError> {
+    let bytes = std::fs::read(image_path).map_err(|e| SceneError::io(image_path, e))?;
+    decode_bytes(&bytes, background).map_err(|message| SceneError::ImageDecode {
+        image: image_path.to_path_buf(),
+        file: referenced_by.to_path_buf(),
+        location: location.clone(),
+        message,
+    })
+}
+
+/// Decodes image bytes (PNG or JPEG); see [`decode`].
+pub(crate) fn decode_bytes(bytes: &[u8], background: [f32; 3]) -> Result<Image, String> {
+    let dynamic = image::load_from_memory(bytes).map_err(|e| e.to_string())?;
+    let (width, height) = (dynamic.width(), dynamic.height());
+    if width == 0 || height == 0 {
+        return Err(format!("image has zero size {width}x{height}"));
+    }
+    if !dynamic.color().has_alpha() {
+        return Ok(Image::from_raw(width, height, dynamic.into_rgb8().into_raw()));
+    }
+    let rgba = dynamic.into_rgba8();
+    let bg = background.map(|b| b.clamp(0.0, 1.0) * 255.0);
+    let mut data = Vec::with_capacity(width as usize * height as usize * 3);
+    for px in rgba.as_raw().chunks_exact(4) {
+        let a = px[3] as f32 / 255.0;
+        for c in 0..3 {
+            let v = px[c] as f32 * a + bg[c] * (1.0 - a);
+            data.push(v.round().clamp(0.0, 255.0) as u8);
+        }
+    }
+    Ok(Image::from_raw(width, height, data))
+}
+
+/// Quantises interleaved RGB values in `[0, 1]` to 8 bits (rounding).
+pub(crate) fn quantise(width: u32, height: u32, data: &[f32]) -> Image {
+    let bytes = data
+        .iter()
+        .map(|v| (v * 255.0).round().clamp(0.0, 255.0) as u8)
+        .collect();
+    Image::from_raw(width, height, bytes)
+}
+
+/// Box-filter weights of a 1D area resampling from `n` to `m` samples: output sample `i`
+/// covers the input interval `[i·n/m, (i+1)·n/m)` and averages the input samples over it,
+/// weighted by their overlap. Returns, per output sample, the first input index and weights.
+fn area_weights(n: usize, m: usize) -> Vec<(usize, Vec<f32>)> {
+    let scale = n as f64 / m as f64;
+    (0..m)
+        .map(|i| {
+            let a = i as f64 * scale;
+            let b = (i + 1) as f64 * scale;
+            let first = (a.floor() as usize).min(n - 1);
+            let last = ((b.ceil() as usize).max(first + 1)).min(n);
+            let weights = (first..last)
+                .map(|k| {
+                    let overlap = (b.min(k as f64 + 1.0) - a.max(k as f64)).max(0.0);
+                    (overlap / scale) as f32
+                })
+                .collect();
+            (first, weights)
+        })
+        .collect()
+}
+
+/// Area-resamples interleaved RGB values from `w × h` to `nw × nh` (all positive). Each output
+/// pixel is the overlap-weighted mean of the input pixels its footprint covers, so that pixel
+/// edges map exactly: the input point `x` lands at `x · nw / w` (and likewise in y).
+pub(crate) fn resize_area(src: &[f32], w: usize, h: usize, nw: usize, nh: usize) -> Vec<f32> {
+    if (w, h) == (nw, nh) {
+        return src.to_vec();
+    }
+    let wx = area_weights(w, nw);
+    let wy = area_weights(h, nh);
+    // Horizontal pass: h rows of nw pixels.
+    let mut tmp = vec![0.0f32; h * nw * 3];
+    for y in 0..h {
+        let row = &src[y * w * 3..(y + 1) * w * 3];
+        let out = &mut tmp[y * nw * 3..(y + 1) * nw * 3];
+        for (x, (first, ws)) in wx.iter().enumerate() {
+            let mut acc = [0.0f32; 3];
+            for (k, wt) in ws.iter().enumerate() {
+                let p = &row[(first + k) * 3..(first + k) * 3 + 3];
+                for c in 0..3 {
+                    acc[c] += wt * p[c];
+                }
+            }
+            out[x * 3..x * 3 + 3].copy_from_slice(&acc);
+        }
+    }
+    // Vertical pass.
+    let mut dst = vec![0.0f32; nh * nw * 3];
+    for (y, (first, ws)) in wy.iter().enumerate() {
+        let out = &mut dst[y * nw * 3..(y + 1) * nw * 3];
+        for (k, wt) in ws.iter().enumerate() {
+            let row = &tmp[(first + k) * nw * 3..(first + k + 1) * nw * 3];
+            for (o, v) in out.iter_mut().zip(row) {
+                *o += wt * v;
+            }
+        }
+    }
+    dst
+}
+
+/// The output size for downscale factor `factor` (rounded, at least 1 pixel) and an optional
+/// maximum width (the height follows the aspect ratio, rounded).
+pub(crate) fn target_size(w: u32, h: u32, factor: u32, max_width: Option<u32>) -> (u32, u32) {
+    let div = |v: u32| ((v as u64 + factor as u64 / 2) / factor as u64).max(1) as u32;
+    let (mut nw, mut nh) = (div(w), div(h));
+    if let Some(m) = max_width {
+        if nw > m {
+            nh = ((nh as f64 * m as f64 / nw as f64).round() as u32).max(1);
+            nw = m;
+        }
+    }
+    (nw, nh)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn area_resize_averages_blocks() {
+        // 4×2 → 2×1: each output pixel is the mean of a 2×2 block.
+        let src: Vec<f32> = (0..8).flat_map(|i| [i as f32, 0.0, 1.0]).collect();
+        let out = resize_area(&src, 4, 2, 2, 1);
+        assert_eq!(out.len(), 6);
+        assert!((out[0] - (0.0 + 1.0 + 4.0 + 5.0) / 4.0).abs() < 1e-6);
+        assert!((out[3] - (2.0 + 3.0 + 6.0 + 7.0) / 4.0).abs() < 1e-6);
+        assert!((out[2] - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn area_resize_preserves_constant_for_odd_ratios() {
+        let src = vec![0.25f32; 7 * 5 * 3];
+        let out = resize_area(&src, 7, 5, 3, 2);
+        assert!(out.iter().all(|v| (v - 0.25).abs() < 1e-6));
+    }
+
+    #[test]
+    fn target_sizes() {
+        assert_eq!(target_size(225, 400, 2, None), (113, 200));
+        assert_eq!(target_size(400, 400, 4, None), (100, 100));
+        assert_eq!(target_size(1600, 1200, 1, Some(800)), (800, 600));
+        assert_eq!(target_size(3, 3, 8, None), (1, 1));
+    }
+}

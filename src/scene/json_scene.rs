@@ -1,0 +1,210 @@
+//! Building a [`Scene`] from NeRF-synthetic or instant-ngp/nerfstudio transforms files.
+
+use super::error::{Location, SceneError};
+use super::nerf_json::{TransformsFile, parse_transforms};
+use super::views::{self, CameraSpec, ViewSource};
+use super::{LoadOptions, Scene, SceneFormat, View, ply, split};
+use crate::camera::Camera;
+use glam::Mat3;
+use std::path::{Path, PathBuf};
+
+/// Extensions tried, in order, when a `file_path` does not name an existing file.
+const EXTENSIONS: [&str; 5] = ["png", "jpg", "jpeg", "PNG", "JPG"];
+
+/// Resolves a frame's image path relative to `dir`: the path itself when it is a file,
+/// otherwise with each of [`EXTENSIONS`] appended. `Err` holds the path reported as missing
+/// (with `.png` appended when the path had no extension).
+fn resolve_image(dir: &Path, file_path: &str) -> Result<PathBuf, PathBuf> {
+    let base = dir.join(file_path);
+    if base.is_file() {
+        return Ok(base);
+    }
+    for ext in EXTENSIONS {
+        let mut s = base.clone().into_os_string();
+        s.push(".");
+        s.push(ext);
+        let p = PathBuf::from(s);
+        if p.is_file() {
+            return Ok(p);
+        }
+    }
+    if base.extension().is_none() {
+        let mut s = base.into_os_string();
+        s.push(".png");
+        Err(PathBuf::from(s))
+    } else {
+        Err(base)
+    }
+}
+
+fn read_transforms(file: &Path) -> Result<TransformsFile, SceneError> {
+    let bytes = std::fs::read(file).map_err(|e| SceneError::io(file, e))?;
+    let text = super::colmap_text::decode_utf8(&bytes, file)?;
+    parse_transforms(text, file)
+}
+
+/// View sources of a transforms file's frames. Missing images are errors when `skip_missing`
+/// is false, otherwise the frame is skipped with a warning.
+fn sources_of(
+    file: &Path,
+    t: &TransformsFile,
+    skip_missing: bool,
+    warnings: &mut Vec<String>,
+) -> Result<Vec<ViewSource>, SceneError> {
+    let dir = file.parent().unwrap_or(Path::new("."));
+    let mut out = Vec::with_capacity(t.frames.len());
+    for (i, f) in t.frames.iter().enumerate() {
+        let location = Location::Record(format!("frames[{i}] ({:?})", f.file_path));
+        let rows = f.transform_matrix.map(|r| r.map(|v| v as f32));
+        let cam = Camera::from_c2w_opengl(rows, 1.0, 1.0, 0.0, 0.0, 1, 1);
+        let (rotation, translation): (Mat3, _) = (cam.rotation, cam.translation);
+        if !rotation.is_finite() || !translation.is_finite() {
+            return Err(SceneError::parse(
+                file,
+                location,
+                "pose is not finite in single precision",
+            ));
+        }
+        let image_path = match resolve_image(dir, &f.file_path) {
+            Ok(p) => p,
+            Err(missing) if skip_missing => {
+                warnings.push(format!(
+                    "{}: {location}: image file {} does not exist; frame skipped",
+                    file.display(),
+                    missing.display()
+                ));
+                continue;
+            }
+            Err(missing) => {
+                return Err(SceneError::MissingImage {
+                    file: file.to_path_buf(),
+                    location,
+                    image: missing,
+                });
+            }
+        };
+        let name = f.file_path.strip_prefix("./").unwrap_or(&f.file_path).to_string();
+        out.push(ViewSource {
+            name,
+            image_path,
+            file: file.to_path_buf(),
+            location,
+            camera: CameraSpec::Json {
+                frame: Box::new(f.intrinsics.clone()),
+                scene: Box::new(t.intrinsics.clone()),
+            },
+            rotation,
+            translation,
+        });
+    }
+    Ok(out)
+}
+
+fn scene_name(file: &Path) -> String {
+    file.parent()
+        .and_then(|d| std::fs::canonicalize(d).ok())
+        .and_then(|d| d.file_name().and_then(|n| n.to_str()).map(str::to_owned))
+        .unwrap_or_else(|| "scene".into())
+}
+
+fn sort_by_name(mut views: Vec<View>) -> Vec<View> {
+    views.sort_by(|a, b| a.name.cmp(&b.name));
+    views
+}
+
+/// NeRF-synthetic: `transforms_train.json` is the training set (file order) and the sibling
+/// `transforms_test.json`, when present, the test set; without it the every-n-th rule applies.
+pub(crate) fn load_nerf_synthetic(
+    train_file: &Path,
+    options: &LoadOptions,
+    warnings: &mut Vec<String>,
+) -> Result<Scene, SceneError> {
+    let train_json = read_transforms(train_file)?;
+    if train_json.frames.is_empty() {
+        return Err(SceneError::Empty {
+            path: train_file.to_path_buf(),
+            reason: "\"frames\" is empty".into(),
+        });
+    }
+    let test_name = train_file
+        .file_name()
+        .and_then(|n| n.to_str())
+        .map(|n| n.replace("transforms_train", "transforms_test"))
+        .unwrap_or_else(|| "transforms_test.json".into());
+    let test_file = train_file.with_file_name(test_name);
+    let train_sources = sources_of(train_file, &train_json, false, warnings)?;
+    let (train, test) = if test_file.is_file() {
+        let test_json = read_transforms(&test_file)?;
+        let test_sources = sources_of(&test_file, &test_json, false, warnings)?;
+        (
+            views::load_all(train_sources, options)?,
+            views::load_all(test_sources, options)?,
+        )
+    } else {
+        let views = sort_by_name(views::load_all(train_sources, options)?);
+        split::split_every(views, options.test_every)
+    };
+    Ok(Scene {
+        name: scene_name(train_file),
+        format: SceneFormat::NerfSynthetic,
+        source: train_file.to_path_buf(),
+        background: options.background,
+        train,
+        test,
+        points: None,
+        extent: 0.0,
+        warnings: Vec::new(),
+    })
+}
+
+/// instant-ngp / nerfstudio `transforms.json`: frames whose image is missing are skipped with a
+/// warning; views are sorted by name and every n-th is held out; `ply_file_path` is read when
+/// it exists (a warning when it does not).
+pub(crate) fn load_transforms(
+    file: &Path,
+    options: &LoadOptions,
+    warnings: &mut Vec<String>,
+) -> Result<Scene, SceneError> {
+    let t = read_transforms(file)?;
+    let sources = sources_of(file, &t, true, warnings)?;
+    if sources.is_empty() {
+        return Err(SceneError::Empty {
+            path: file.to_path_buf(),
+            reason: if t.frames.is_empty() {
+                "\"frames\" is empty".into()
+            } else {
+                format!("none of the {} frames has an existing image file", t.frames.len())
+            },
+        });
+    }
+    let points = match &t.ply_file_path {
+        None => None,
+        Some(p) => {
+            let path = file.parent().unwrap_or(Path::new(".")).join(p);
+            if path.is_file() {
+                let bytes = std::fs::read(&path).map_err(|e| SceneError::io(&path, e))?;
+                Some(ply::parse_point_cloud(&bytes, &path)?)
+            } else {
+                warnings.push(format!(
+                    "{}: ply_file_path: point cloud {} does not exist; loading without points",
+                    file.display(),
+                    path.display()
+                ));
+                None
+            }
+        }
+    };
+    let views = sort_by_name(views::load_all(sources, options)?);
+    let (train, test) = split::split_every(views, options.test_every);
+    Ok(Scene {
+        name: scene_name(file),
+        format: SceneFormat::Transforms,
+        source: file.to_path_buf(),
+        background: options.background,
+        train,
+        test,
+        points,
+        extent: 0.0,
+        warnings: Vec::new(),
+    })
+}

@@ -1,0 +1,330 @@
+//! Scene input: posed photographs from COLMAP (binary and text), NeRF-synthetic and
+//! instant-ngp / nerfstudio datasets, undistorted to pinhole cameras.
+//!
+//! [`load`] detects the format of a folder (or takes it from [`LoadOptions::format`]), reads the
+//! cameras, undistorts and downscales every image once, splits the views into training and test
+//! sets and returns a [`Scene`]. Formats, conventions, the undistortion method and the error
+//! messages are described in `docs/scene.md`.
+//!
+//! Conventions of the output:
+//! - Every [`View::camera`] is an undistorted pinhole [`Camera`] (world-to-camera pose, OpenCV
+//!   axes x right / y down / z forward, intrinsics in pixels of the final image, top-left image
+//!   corner at `(0, 0)`), whatever the input format. NeRF/instant-ngp OpenGL camera-to-world
+//!   matrices are converted with [`Camera::from_c2w_opengl`].
+//! - Images are stored as 8-bit RGB ([`Image`]); RGBA inputs are composited onto
+//!   [`LoadOptions::background`] at load time (so the stored 8-bit values already include the
+//!   background). [`Image::to_f32_rgb`] gives values `byte / 255` (no sRGB decoding).
+//! - World units are those of the input (COLMAP's arbitrary scale, NeRF's metres-ish).
+//!
+//! ```no_run
+//! use bbsplat::scene::{load, Background, LoadOptions};
+//! let options = LoadOptions { background: Background::White, downscale: 2, ..Default::default() };
+//! let scene = load("../shared/data/lego".as_ref(), &options)?;
+//! println!("{} train / {} test views, extent {}", scene.train.len(), scene.test.len(), scene.extent);
+//! # Ok::<(), bbsplat::scene::SceneError>(())
+//! ```
+
+pub mod colmap;
+pub mod colmap_binary;
+mod colmap_scene;
+pub mod colmap_text;
+pub mod distortion;
+mod error;
+pub mod fuzz;
+mod image_io;
+mod json_scene;
+pub mod nerf_json;
+pub mod ply;
+pub mod split;
+pub mod undistort;
+mod views;
+
+pub use error::{Location, SceneError};
+pub use undistort::UndistortMode;
+
+use crate::camera::Camera;
+use glam::Vec3;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// An 8-bit RGB image, rows from top to bottom, pixels interleaved `R G B`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Image {
+    width: u32,
+    height: u32,
+    data: Vec<u8>,
+}
+
+impl Image {
+    /// An image from interleaved RGB bytes; `None` unless `data.len() == width·height·3` and
+    /// both sizes are positive.
+    ///
+    /// ```
+    /// use bbsplat::scene::Image;
+    /// let im = Image::new(2, 1, vec![255, 0, 0, 0, 0, 51]).unwrap();
+    /// assert_eq!(im.pixel(1, 0), [0, 0, 51]);
+    /// assert_eq!(im.pixel_f32(1, 0), [0.0, 0.0, 0.2]);
+    /// assert_eq!(im.to_f32_rgb(), vec![1.0, 0.0, 0.0, 0.0, 0.0, 0.2]);
+    /// assert!(Image::new(2, 2, vec![0; 3]).is_none());
+    /// ```
+    pub fn new(width: u32, height: u32, data: Vec<u8>) -> Option<Self> {
+        let ok = width > 0 && height > 0 && data.len() as u64 == width as u64 * height as u64 * 3;
+        ok.then_some(Image { width, height, data })
+    }
+
+    /// Crate-internal constructor for buffers known to have the right length.
+    pub(crate) fn from_raw(width: u32, height: u32, data: Vec<u8>) -> Self {
+        debug_assert_eq!(data.len(), width as usize * height as usize * 3);
+        Image { width, height, data }
+    }
+
+    /// Width in pixels.
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    /// Height in pixels.
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// The interleaved RGB bytes, row-major from the top-left pixel.
+    pub fn as_bytes(&self) -> &[u8] {
+        &self.data
+    }
+
+    /// The 8-bit RGB value of pixel `(x, y)` (column, row). Panics when out of range.
+    pub fn pixel(&self, x: u32, y: u32) -> [u8; 3] {
+        assert!(
+            x < self.width && y < self.height,
+            "pixel ({x}, {y}) outside {}x{}",
+            self.width,
+            self.height
+        );
+        let i = (y as usize * self.width as usize + x as usize) * 3;
+        [self.data[i], self.data[i + 1], self.data[i + 2]]
+    }
+
+    /// Pixel `(x, y)` as values in `[0, 1]` (`byte / 255`). Panics when out of range.
+    pub fn pixel_f32(&self, x: u32, y: u32) -> [f32; 3] {
+        self.pixel(x, y).map(|v| v as f32 / 255.0)
+    }
+
+    /// The whole image as interleaved RGB values in `[0, 1]` (`byte / 255`), row-major,
+    /// length `width·height·3`.
+    pub fn to_f32_rgb(&self) -> Vec<f32> {
+        self.data.iter().map(|&v| v as f32 / 255.0).collect()
+    }
+}
+
+/// One posed photograph.
+#[derive(Clone, Debug, PartialEq)]
+pub struct View {
+    /// Name: the COLMAP image name, or the frame's `file_path` as written in the JSON file.
+    pub name: String,
+    /// The image file it was loaded from.
+    pub path: PathBuf,
+    /// The undistorted pinhole camera at the final image resolution.
+    pub camera: Camera,
+    /// The undistorted, downscaled, background-composited image (`camera.width × camera.height`).
+    pub image: Image,
+}
+
+/// A point cloud (for initialisation), world coordinates.
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct PointCloud {
+    /// Positions in world units.
+    pub positions: Vec<Vec3>,
+    /// Colours as RGB in `[0, 1]` (8-bit values / 255).
+    pub colours: Vec<[f32; 3]>,
+}
+
+/// The dataset formats [`load`] reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SceneFormat {
+    /// A COLMAP sparse model (binary or text) with an image folder.
+    Colmap,
+    /// NeRF-synthetic (Blender): `transforms_train.json` and `transforms_test.json`.
+    NerfSynthetic,
+    /// instant-ngp / nerfstudio: `transforms.json`.
+    Transforms,
+}
+
+impl fmt::Display for SceneFormat {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            SceneFormat::Colmap => "COLMAP",
+            SceneFormat::NerfSynthetic => "NeRF-synthetic",
+            SceneFormat::Transforms => "instant-ngp/nerfstudio transforms.json",
+        })
+    }
+}
+
+/// The colour RGBA images are composited onto (and that renders should use behind the scene).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Background {
+    /// Black, `[0, 0, 0]` (the default, as in 3DGS/BBSplat without `--white_background`).
+    #[default]
+    Black,
+    /// White, `[1, 1, 1]` (used for published NeRF-synthetic numbers).
+    White,
+}
+
+impl Background {
+    /// The colour as RGB in `[0, 1]`.
+    pub fn rgb(self) -> [f32; 3] {
+        match self {
+            Background::Black => [0.0; 3],
+            Background::White => [1.0; 3],
+        }
+    }
+}
+
+/// Options of [`load`]. `LoadOptions::default()` detects the format, composites on black,
+/// keeps the full resolution, holds out every 8th view and crops undistorted images.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LoadOptions {
+    /// Force a format instead of detecting it.
+    pub format: Option<SceneFormat>,
+    /// Background for RGBA images.
+    pub background: Background,
+    /// Integer downscale factor (typically 1, 2, 4 or 8; at least 1): the size becomes
+    /// `round(size / factor)` (at least 1 pixel) and the intrinsics are scaled by the exact size
+    /// ratio. Images are area-averaged.
+    pub downscale: u32,
+    /// Maximum image width after `downscale`: wider images are area-downscaled to this width
+    /// (height rounded to keep the aspect ratio), intrinsics scaled exactly.
+    pub max_width: Option<u32>,
+    /// Hold out every `test_every`-th view (index 0, n, 2n, ... in name order) as the test set
+    /// when the dataset has no test list; 0 puts every view in the training set.
+    pub test_every: usize,
+    /// How undistorted images are bounded.
+    pub undistort: UndistortMode,
+    /// Image folder of a COLMAP dataset (default: `images` beside `sparse`).
+    pub images_dir: Option<PathBuf>,
+    /// Also print warnings (skipped frames, missing point clouds) to stderr; they are always
+    /// collected in [`Scene::warnings`].
+    pub print_warnings: bool,
+}
+
+impl Default for LoadOptions {
+    fn default() -> Self {
+        LoadOptions {
+            format: None,
+            background: Background::Black,
+            downscale: 1,
+            max_width: None,
+            test_every: 8,
+            undistort: UndistortMode::Crop,
+            images_dir: None,
+            print_warnings: true,
+        }
+    }
+}
+
+/// A loaded scene.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// Name of the dataset folder.
+    pub name: String,
+    /// The format it was read as.
+    pub format: SceneFormat,
+    /// The file or model folder the cameras came from.
+    pub source: PathBuf,
+    /// The background RGBA images were composited onto.
+    pub background: Background,
+    /// Training views (COLMAP and transforms.json: name order; NeRF-synthetic: file order).
+    pub train: Vec<View>,
+    /// Test views.
+    pub test: Vec<View>,
+    /// The point cloud, when the dataset has one (COLMAP `points3D`, nerfstudio `ply_file_path`).
+    pub points: Option<PointCloud>,
+    /// Scene extent for learning-rate scaling: 1.1 × the largest distance of a training camera
+    /// centre from the mean of the training camera centres (world units), as 3DGS. Points are
+    /// not used, so outlier points cannot inflate it. 1.1 when all centres coincide.
+    pub extent: f32,
+    /// Warnings raised while loading (e.g. frames skipped because their image is missing).
+    pub warnings: Vec<String>,
+}
+
+/// Loads the dataset at `path`: a dataset folder, a COLMAP model folder, or a transforms JSON
+/// file. See the module documentation and `docs/scene.md`.
+///
+/// Detection, in order: a `transforms_train.json` file or folder entry → NeRF-synthetic; a
+/// `transforms.json` → instant-ngp/nerfstudio; a COLMAP model (`cameras.bin`/`.txt`) in the
+/// folder itself, in `sparse/`, or in `sparse/*/` (with several models, the one with the most
+/// registered images) → COLMAP.
+pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
+    if options.downscale == 0 {
+        return Err(SceneError::InvalidOption("downscale must be at least 1".into()));
+    }
+    if options.max_width == Some(0) {
+        return Err(SceneError::InvalidOption("max_width must be at least 1".into()));
+    }
+    let (format, source) = detect(path, options.format)?;
+    let mut warnings = Vec::new();
+    let mut scene = match format {
+        SceneFormat::Colmap => colmap_scene::load(&source, options, &mut warnings)?,
+        SceneFormat::NerfSynthetic => json_scene::load_nerf_synthetic(&source, options, &mut warnings)?,
+        SceneFormat::Transforms => json_scene::load_transforms(&source, options, &mut warnings)?,
+    };
+    if scene.train.is_empty() {
+        return Err(SceneError::Empty {
+            path: source,
+            reason: format!(
+                "no training view ({} test views); lower test_every or add images",
+                scene.test.len()
+            ),
+        });
+    }
+    scene.extent = split::camera_extent(scene.train.iter().map(|v| &v.camera));
+    if options.print_warnings {
+        for w in &warnings {
+            eprintln!("warning: {w}");
+        }
+    }
+    scene.warnings = warnings;
+    Ok(scene)
+}
+
+/// Detects the format of `path` (or checks the forced one) and returns it with the file or
+/// model folder to read.
+pub fn detect(path: &Path, forced: Option<SceneFormat>) -> Result<(SceneFormat, PathBuf), SceneError> {
+    if !path.exists() {
+        return Err(SceneError::io(path, std::io::Error::from(std::io::ErrorKind::NotFound)));
+    }
+    if path.is_file() {
+        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+        let format = forced.unwrap_or(if name.ends_with("transforms_train.json") {
+            SceneFormat::NerfSynthetic
+        } else {
+            SceneFormat::Transforms
+        });
+        if format == SceneFormat::Colmap {
+            return Err(SceneError::NotDetected {
+                path: path.to_path_buf(),
+                looked_for: "COLMAP format forced, but the path is a file: give the dataset or model folder".into(),
+            });
+        }
+        return Ok((format, path.to_path_buf()));
+    }
+    let synthetic = path.join("transforms_train.json");
+    let transforms = path.join("transforms.json");
+    match forced {
+        Some(SceneFormat::NerfSynthetic) => return Ok((SceneFormat::NerfSynthetic, synthetic)),
+        Some(SceneFormat::Transforms) => return Ok((SceneFormat::Transforms, transforms)),
+        Some(SceneFormat::Colmap) => {}
+        None if synthetic.is_file() => return Ok((SceneFormat::NerfSynthetic, synthetic)),
+        None if transforms.is_file() => return Ok((SceneFormat::Transforms, transforms)),
+        None => {}
+    }
+    match colmap_scene::find_model(path)? {
+        Some(dir) => Ok((SceneFormat::Colmap, dir)),
+        None => Err(SceneError::NotDetected {
+            path: path.to_path_buf(),
+            looked_for: "looked for transforms_train.json, transforms.json, and a COLMAP model \
+                         (cameras.bin or cameras.txt) in the folder, in sparse/ and in sparse/*/"
+                .into(),
+        }),
+    }
+}

@@ -1,0 +1,132 @@
+//! Turning a posed image reference into a [`View`]: decode, check the size, undistort,
+//! downscale, build the pinhole camera.
+
+use super::colmap::Intrinsics;
+use super::error::{Location, SceneError};
+use super::nerf_json::IntrinsicFields;
+use super::undistort;
+use super::{LoadOptions, View, image_io};
+use crate::camera::Camera;
+use glam::{Mat3, Vec3};
+use rayon::prelude::*;
+use std::path::PathBuf;
+
+/// How the camera of a view is known.
+pub(crate) enum CameraSpec {
+    /// Fully given (COLMAP): intrinsics and the size the camera states.
+    Known {
+        intrinsics: Intrinsics,
+        width: u64,
+        height: u64,
+    },
+    /// JSON fields resolved once the image size is known.
+    Json {
+        frame: Box<IntrinsicFields>,
+        scene: Box<IntrinsicFields>,
+    },
+}
+
+/// Everything needed to load one view.
+pub(crate) struct ViewSource {
+    pub name: String,
+    pub image_path: PathBuf,
+    /// The file holding the record (for messages).
+    pub file: PathBuf,
+    /// The record (for messages).
+    pub location: Location,
+    pub camera: CameraSpec,
+    /// World-to-camera rotation and translation (OpenCV axes).
+    pub rotation: Mat3,
+    pub translation: Vec3,
+}
+
+impl ViewSource {
+    /// The error for a missing image file.
+    pub(crate) fn missing(&self) -> SceneError {
+        SceneError::MissingImage {
+            file: self.file.clone(),
+            location: self.location.clone(),
+            image: self.image_path.clone(),
+        }
+    }
+}
+
+/// Loads every view in parallel; the first error in list order is returned.
+pub(crate) fn load_all(sources: Vec<ViewSource>, options: &LoadOptions) -> Result<Vec<View>, SceneError> {
+    for s in &sources {
+        if !s.image_path.is_file() {
+            return Err(s.missing());
+        }
+    }
+    let results: Vec<Result<View, SceneError>> = sources.into_par_iter().map(|s| load_view(s, options)).collect();
+    results.into_iter().collect()
+}
+
+fn load_view(s: ViewSource, options: &LoadOptions) -> Result<View, SceneError> {
+    let background = options.background.rgb();
+    let image = image_io::decode(&s.image_path, &s.file, &s.location, background)?;
+    let (iw, ih) = (image.width(), image.height());
+    let perr = |m: String| SceneError::parse(&s.file, s.location.clone(), m);
+    let (intrinsics, cw, ch) = match &s.camera {
+        CameraSpec::Known {
+            intrinsics,
+            width,
+            height,
+        } => (*intrinsics, *width, *height),
+        CameraSpec::Json { frame, scene } => {
+            let (k, w, h) = frame.resolve(scene, iw, ih).map_err(perr)?;
+            (k, w as u64, h as u64)
+        }
+    };
+    if (cw, ch) != (iw as u64, ih as u64) {
+        return Err(SceneError::ImageSize {
+            image: s.image_path.clone(),
+            actual: (iw as u64, ih as u64),
+            expected: (cw, ch),
+            file: s.file.clone(),
+            location: s.location.clone(),
+        });
+    }
+    let plan = undistort::plan(&intrinsics, iw, ih, options.undistort).map_err(perr)?;
+    let (nw, nh) = image_io::target_size(plan.width, plan.height, options.downscale, options.max_width);
+    let image = if !undistort::needs_undistortion(&intrinsics.distortion) {
+        if (nw, nh) == (iw, ih) {
+            image
+        } else {
+            let f = image.to_f32_rgb();
+            let small = image_io::resize_area(&f, iw as usize, ih as usize, nw as usize, nh as usize);
+            image_io::quantise(nw, nh, &small)
+        }
+    } else {
+        let f = undistort::resample(&plan, &image, background);
+        let small = image_io::resize_area(&f, plan.width as usize, plan.height as usize, nw as usize, nh as usize);
+        image_io::quantise(nw, nh, &small)
+    };
+    let sx = nw as f64 / plan.width as f64;
+    let sy = nh as f64 / plan.height as f64;
+    let camera = Camera {
+        rotation: s.rotation,
+        translation: s.translation,
+        fx: (plan.fx * sx) as f32,
+        fy: (plan.fy * sy) as f32,
+        cx: (plan.cx * sx) as f32,
+        cy: (plan.cy * sy) as f32,
+        width: nw,
+        height: nh,
+    };
+    if ![camera.fx, camera.fy, camera.cx, camera.cy]
+        .iter()
+        .all(|v| v.is_finite())
+    {
+        return Err(perr(format!(
+            "intrinsics (fx {}, fy {}, cx {}, cy {}) overflow single precision",
+            plan.fx, plan.fy, plan.cx, plan.cy
+        )));
+    }
+    Ok(View {
+        name: s.name,
+        path: s.image_path,
+        camera,
+        image,
+    })
+}
