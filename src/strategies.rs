@@ -176,6 +176,28 @@ pub fn alpha() -> impl Strategy<Value = f32> {
     0.02f32..0.95
 }
 
+/// Texture-space coordinates `(u, v)` anywhere in the zero-padded support of a bilinear texture
+/// of size `ts`: texel coordinates in `(−1, ts)`, i.e. the billboard square plus the one-texel
+/// fade band around it, at least `margin` (in texel units) away from every texel border.
+pub fn uv_in_support_off_texel_borders(ts: usize, margin: f32) -> impl Strategy<Value = Vec2> {
+    // Cells [−1, 0), [0, 1), …, [ts − 1, ts).
+    let cells = ts as u32 + 1;
+    (0..cells, 0..cells, margin..1.0 - margin, margin..1.0 - margin).prop_map(move |(cx, cy, fx, fy)| {
+        let to_uv = |c: u32, f: f32| 2.0 * (c as f32 - 1.0 + f) / (ts - 1) as f32 - 1.0;
+        Vec2::new(to_uv(cx, fx), to_uv(cy, fy))
+    })
+}
+
+/// SH coefficients for all 16 basis functions (`[coeff][rgb]`, 48 values): degree-0 values
+/// that put the colour in about `[0.2, 0.8]`, higher bands in `[-0.3, 0.3]`.
+pub fn sh_coefficients() -> impl Strategy<Value = Vec<f32>> {
+    (
+        proptest::collection::vec(-1.0f32..1.0, 3),
+        proptest::collection::vec(-0.3f32..0.3, 45),
+    )
+        .prop_map(|(dc, rest)| dc.into_iter().chain(rest).collect())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -4,6 +4,9 @@
 //! upstream gradient of a scalar loss with respect to the stage's outputs and returns the
 //! gradients with respect to its inputs.
 
+pub mod bilinear;
+pub mod composite;
 pub mod ray_plane;
 pub mod rotation;
+pub mod sh;
 pub mod splat_transform;

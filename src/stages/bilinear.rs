@@ -1,0 +1,323 @@
+//! Bilinear texture sampling with zero padding, and its vector-Jacobian product.
+//!
+//! Conventions (see `docs/numerics-appearance.md`):
+//! - A texture is `ts × ts` texels per channel (`ts ≥ 2`), stored `[channel][row][column]`
+//!   (channel-major, then row-major). The row index comes from `v`, the column index from `u`.
+//! - Align-corners mapping from billboard coordinates `(u, v) ∈ [−1, 1]²` to continuous texel
+//!   coordinates: `X = (u + 1)/2 · (ts − 1)` (column), `Y = (v + 1)/2 · (ts − 1)` (row), so that
+//!   texel 0 is centred at `u = −1` and texel `ts − 1` at `u = +1`.
+//! - Zero padding: of the four taps `(⌊X⌋ + {0,1}, ⌊Y⌋ + {0,1})` only those inside
+//!   `[0, ts − 1]²` contribute. The sampled value therefore fades linearly to 0 over one texel
+//!   spacing outside the square and is exactly 0 for `|u|` or `|v| ≥ 1 + 2/(ts − 1)`.
+//! - Exact texel borders (`X` or `Y` an integer) are where the interpolant's derivative jumps.
+//!   The derivative returned there is that of the cell `[⌊X⌋, ⌊X⌋ + 1)`, i.e. the **right
+//!   derivative** (one-sided, from increasing `u` or `v`). This holds at the zero-padded edges
+//!   too: at `X = −1` the value is 0 but the derivative is that of the fade-in ramp.
+//! - `X`, `Y` are computed in f64 (exactly, for `|u| ≥ 1` and `ts` up to 2²⁰) before the cell
+//!   is chosen, so the support test is exact and no float-to-integer cast can see an
+//!   out-of-range value: non-finite or huge `(u, v)` simply give no taps.
+//!
+//! The hot loop of the rasterizer computes [`BilinearTaps`] once per (billboard, pixel) and reuses
+//! them for the alpha texture (1 channel) and the colour texture (3 channels).
+//!
+//! ```
+//! use bbsplat::stages::bilinear;
+//! // A 2×2 single-channel texture: [row 0: 0, 1; row 1: 2, 3].
+//! let tex = [0.0, 1.0, 2.0, 3.0];
+//! let mut out = [0.0];
+//! bilinear::sample(&tex, 2, 1, 0.0, 0.0, &mut out); // the centre: mean of the four texels
+//! assert!((out[0] - 1.5).abs() < 1e-6);
+//! bilinear::sample(&tex, 2, 1, 1.0, -1.0, &mut out); // column 1, row 0
+//! assert_eq!(out[0], 1.0);
+//! // At the centre ∂/∂u = (ts − 1)/2 · mean column difference = 0.5 · 1 and ∂/∂v = 0.5 · 2.
+//! let mut d_tex = [0.0; 4];
+//! let (du, dv) = bilinear::sample_vjp(&tex, 2, 1, 0.0, 0.0, &[1.0], &mut d_tex);
+//! assert!((du - 0.5).abs() < 1e-6 && (dv - 1.0).abs() < 1e-6);
+//! assert_eq!(d_tex, [0.25; 4]);
+//! ```
+
+/// The (at most four) texels that contribute to a bilinear sample at one `(u, v)`, with their
+/// weights and the derivatives of the weights with respect to `u` and `v`.
+///
+/// Only taps inside the texture are stored (zero padding), so [`BilinearTaps::len`] is 1, 2 or 4.
+/// The indices are offsets inside one channel plane (`row · ts + column`); the same taps serve
+/// every channel and every texture of the same size sampled at the same `(u, v)`.
+/// `Σ weights = 1` whenever `|u|, |v| ≤ 1` (partition of unity, up to f32 rounding).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BilinearTaps {
+    ts: u32,
+    len: u32,
+    index: [u32; 4],
+    weight: [f32; 4],
+    d_weight_du: [f32; 4],
+    d_weight_dv: [f32; 4],
+}
+
+/// Continuous texel coordinate of a billboard coordinate: `(c + 1)/2 · (ts − 1)`, in f64.
+///
+/// In f64 the sum `c + 1` and the product are exact for `|c| ≥ 1` and `ts ≤ 2²⁰`, so the zero
+/// support `|c| ≥ 1 + 2/(ts − 1)` maps to `X ≥ ts` or `X ≤ −1` exactly.
+#[inline]
+pub fn texel_coordinate(c: f32, ts: usize) -> f64 {
+    (c as f64 + 1.0) * (0.5 * (ts - 1) as f64)
+}
+
+/// The bilinear taps at `(u, v)` for a `ts × ts` texture, or `None` when no tap lies inside the
+/// texture (`X ∉ [−1, ts)` or `Y ∉ [−1, ts)`, which includes NaN and infinite coordinates).
+///
+/// The half-open support matches the right-derivative convention: at `X = −1` the column-0 tap
+/// is present with weight 0 (value 0, derivative of the fade-in ramp); at `X = ts` there is none.
+///
+/// # Panics
+/// If `ts < 2` or `ts > 65536`.
+///
+/// ```
+/// use bbsplat::stages::bilinear::taps;
+/// let t = taps(0.3, -0.2, 16).unwrap();
+/// assert_eq!(t.len(), 4);
+/// assert!((t.weights().iter().sum::<f32>() - 1.0).abs() < 1e-6);
+/// assert!(taps(f32::NAN, 0.0, 16).is_none());
+/// assert!(taps(1.14, 0.0, 16).is_none()); // beyond 1 + 2/15: no support
+/// // The f32 nearest to 1 + 2/15 lies just below it: still taps, with weights ~1e-7.
+/// let edge = taps(1.0 + 2.0 / 15.0, 0.0, 16).unwrap();
+/// assert!(edge.weights().iter().all(|&w| w < 1e-6));
+/// assert!(taps(1e30, f32::NEG_INFINITY, 16).is_none());
+/// ```
+#[inline]
+pub fn taps(u: f32, v: f32, ts: usize) -> Option<BilinearTaps> {
+    assert!((2..=65536).contains(&ts), "texture size must be in 2..=65536, got {ts}");
+    let x = texel_coordinate(u, ts);
+    let y = texel_coordinate(v, ts);
+    let limit = ts as f64;
+    // Written positively so that NaN fails the test. After it, x and y are in [−1, ts).
+    if !(x >= -1.0 && x < limit && y >= -1.0 && y < limit) {
+        return None;
+    }
+    let x0 = x.floor();
+    let y0 = y.floor();
+    let fx = (x - x0) as f32;
+    let fy = (y - y0) as f32;
+    // In [−1, ts − 1]: the casts are exact.
+    let ix = x0 as i64;
+    let iy = y0 as i64;
+    let s = (0.5 * (ts - 1) as f64) as f32; // dX/du = dY/dv
+    let gx = [1.0 - fx, fx];
+    let gy = [1.0 - fy, fy];
+    let dg = [-s, s];
+    let n = ts as i64;
+    if ix >= 0 && iy >= 0 && ix + 1 < n && iy + 1 < n {
+        // Interior cell (the common case): all four taps, same order and arithmetic as below.
+        let base = (iy * n + ix) as u32;
+        let row = ts as u32;
+        return Some(BilinearTaps {
+            ts: ts as u32,
+            len: 4,
+            index: [base, base + 1, base + row, base + row + 1],
+            weight: [gx[0] * gy[0], gx[1] * gy[0], gx[0] * gy[1], gx[1] * gy[1]],
+            d_weight_du: [dg[0] * gy[0], dg[1] * gy[0], dg[0] * gy[1], dg[1] * gy[1]],
+            d_weight_dv: [gx[0] * dg[0], gx[1] * dg[0], gx[0] * dg[1], gx[1] * dg[1]],
+        });
+    }
+    let mut t = BilinearTaps {
+        ts: ts as u32,
+        len: 0,
+        index: [0; 4],
+        weight: [0.0; 4],
+        d_weight_du: [0.0; 4],
+        d_weight_dv: [0.0; 4],
+    };
+    for dy in 0..2 {
+        let row = iy + dy as i64;
+        if row < 0 || row >= n {
+            continue;
+        }
+        for dx in 0..2 {
+            let col = ix + dx as i64;
+            if col < 0 || col >= n {
+                continue;
+            }
+            let k = t.len as usize;
+            t.index[k] = (row * n + col) as u32;
+            t.weight[k] = gx[dx] * gy[dy];
+            t.d_weight_du[k] = dg[dx] * gy[dy];
+            t.d_weight_dv[k] = gx[dx] * dg[dy];
+            t.len += 1;
+        }
+    }
+    // x ∈ [−1, ts) guarantees at least one column (and one row) inside.
+    debug_assert!(t.len > 0);
+    Some(t)
+}
+
+impl BilinearTaps {
+    /// Number of taps inside the texture (1, 2 or 4).
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.len as usize
+    }
+
+    /// Always false: a `BilinearTaps` is only built when at least one tap is inside.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The texture size `ts` the taps were computed for.
+    #[inline]
+    pub fn texture_size(&self) -> usize {
+        self.ts as usize
+    }
+
+    /// Texel offsets inside one channel plane (`row · ts + column`).
+    #[inline]
+    pub fn indices(&self) -> &[u32] {
+        &self.index[..self.len as usize]
+    }
+
+    /// Bilinear weights of the taps, in the order of [`BilinearTaps::indices`].
+    #[inline]
+    pub fn weights(&self) -> &[f32] {
+        &self.weight[..self.len as usize]
+    }
+
+    /// `∂weight/∂u` of each tap (includes the factor `dX/du = (ts − 1)/2`; right derivative at
+    /// texel borders).
+    #[inline]
+    pub fn weight_derivatives_u(&self) -> &[f32] {
+        &self.d_weight_du[..self.len as usize]
+    }
+
+    /// `∂weight/∂v` of each tap (includes the factor `dY/dv = (ts − 1)/2`; right derivative at
+    /// texel borders).
+    #[inline]
+    pub fn weight_derivatives_v(&self) -> &[f32] {
+        &self.d_weight_dv[..self.len as usize]
+    }
+
+    #[inline]
+    fn check_lengths(&self, texels: &[f32], channels: usize) -> usize {
+        let plane = self.ts as usize * self.ts as usize;
+        assert_eq!(
+            texels.len(),
+            plane * channels,
+            "texels must hold channels × ts × ts values"
+        );
+        plane
+    }
+
+    /// Samples `channels` channels of `texels` (layout `[channel][row][column]`, `ts × ts` per
+    /// channel) into `out[..channels]`.
+    ///
+    /// # Panics
+    /// If `texels.len() != channels · ts²` or `out.len() < channels`.
+    #[inline]
+    pub fn sample(&self, texels: &[f32], channels: usize, out: &mut [f32]) {
+        let plane = self.check_lengths(texels, channels);
+        let out = &mut out[..channels];
+        let n = self.len as usize;
+        if n == 4 {
+            // Interior fast path: fixed trip count, same summation order as the general loop.
+            let [i0, i1, i2, i3] = self.index.map(|i| i as usize);
+            let w = self.weight;
+            for (tex, o) in texels.chunks_exact(plane).zip(out.iter_mut()) {
+                *o = 0.0 + w[0] * tex[i0] + w[1] * tex[i1] + w[2] * tex[i2] + w[3] * tex[i3];
+            }
+            return;
+        }
+        for (c, o) in out.iter_mut().enumerate() {
+            let tex = &texels[c * plane..(c + 1) * plane];
+            let mut acc = 0.0;
+            for k in 0..n {
+                acc += self.weight[k] * tex[self.index[k] as usize];
+            }
+            *o = acc;
+        }
+    }
+
+    /// Samples a single-channel texture (`ts × ts` values): the alpha texture's fast path.
+    ///
+    /// # Panics
+    /// If `texels.len() != ts²`.
+    #[inline]
+    pub fn sample_one(&self, texels: &[f32]) -> f32 {
+        self.check_lengths(texels, 1);
+        let n = self.len as usize;
+        let mut acc = 0.0;
+        for k in 0..n {
+            acc += self.weight[k] * texels[self.index[k] as usize];
+        }
+        acc
+    }
+
+    /// Backward of [`BilinearTaps::sample`]: given `d_out = ∂L/∂out[..channels]`, **adds**
+    /// `∂L/∂texels` into `d_texels` (same layout as `texels`) and returns `(∂L/∂u, ∂L/∂v)`
+    /// (right derivatives at texel borders).
+    ///
+    /// # Panics
+    /// If `texels` or `d_texels` do not hold `channels · ts²` values or `d_out.len() < channels`.
+    #[inline]
+    pub fn accumulate_vjp(&self, texels: &[f32], channels: usize, d_out: &[f32], d_texels: &mut [f32]) -> (f32, f32) {
+        let plane = self.check_lengths(texels, channels);
+        assert_eq!(d_texels.len(), texels.len(), "d_texels must have the layout of texels");
+        let n = self.len as usize;
+        let (mut du, mut dv) = (0.0f32, 0.0f32);
+        for (c, &g) in d_out[..channels].iter().enumerate() {
+            let tex = &texels[c * plane..(c + 1) * plane];
+            let d_tex = &mut d_texels[c * plane..(c + 1) * plane];
+            let (mut su, mut sv) = (0.0f32, 0.0f32);
+            for k in 0..n {
+                let i = self.index[k] as usize;
+                let t = tex[i];
+                su += self.d_weight_du[k] * t;
+                sv += self.d_weight_dv[k] * t;
+                d_tex[i] += self.weight[k] * g;
+            }
+            du += su * g;
+            dv += sv * g;
+        }
+        (du, dv)
+    }
+
+    /// Backward of [`BilinearTaps::sample_one`]: adds `g · weights` into `d_texels` and returns
+    /// `(∂L/∂u, ∂L/∂v)` for the upstream gradient `g`.
+    ///
+    /// # Panics
+    /// If `texels` or `d_texels` do not hold `ts²` values.
+    #[inline]
+    pub fn accumulate_vjp_one(&self, texels: &[f32], g: f32, d_texels: &mut [f32]) -> (f32, f32) {
+        self.accumulate_vjp(texels, 1, &[g], d_texels)
+    }
+}
+
+/// Bilinear sample of `channels` channels of a `ts × ts` texture at `(u, v)` into
+/// `out[..channels]`; zeros when no tap is inside the texture (including non-finite `(u, v)`).
+///
+/// # Panics
+/// If `ts` is out of `2..=65536`, `texels.len() != channels · ts²` or `out.len() < channels`.
+pub fn sample(texels: &[f32], ts: usize, channels: usize, u: f32, v: f32, out: &mut [f32]) {
+    match taps(u, v, ts) {
+        Some(t) => t.sample(texels, channels, out),
+        None => out[..channels].fill(0.0),
+    }
+}
+
+/// Vector-Jacobian product of [`sample`]: **adds** `∂L/∂texels` into `d_texels` and returns
+/// `(∂L/∂u, ∂L/∂v)`, given `d_out = ∂L/∂out[..channels]`. Both are zero when no tap is inside.
+/// At exact texel borders the `(u, v)` derivative is the right derivative (see the module docs).
+///
+/// # Panics
+/// As [`sample`], and if `d_texels.len() != texels.len()`.
+pub fn sample_vjp(
+    texels: &[f32],
+    ts: usize,
+    channels: usize,
+    u: f32,
+    v: f32,
+    d_out: &[f32],
+    d_texels: &mut [f32],
+) -> (f32, f32) {
+    match taps(u, v, ts) {
+        Some(t) => t.accumulate_vjp(texels, channels, d_out, d_texels),
+        None => (0.0, 0.0),
+    }
+}

@@ -1,0 +1,323 @@
+//! View-dependent colour from real spherical harmonics (degrees 0-3), and its backward pass.
+//!
+//! Conventions (see `docs/numerics-appearance.md`; identical to 3DGS, gsplat and Brush):
+//! - Real SH with the Sloan (JCGT 2013) constants, index `k` over `(l, m)` in the order
+//!   `l = 0`; `l = 1, m = −1, 0, 1`; … so degree `d` uses the first `(d + 1)²` of 16 functions.
+//!   For a unit direction `(x, y, z)`: `Y₀ = 0.28209…`, `Y₁ = −0.48860·y`, `Y₂ = 0.48860·z`,
+//!   `Y₃ = −0.48860·x`, then the degree-2 and degree-3 polynomials of [`sh_basis`].
+//! - Coefficients are stored `[coeff k][rgb]` interleaved: 16 × 3 = 48 floats per primitive,
+//!   `coeffs[3k + c]`. Only the first `3·(degree + 1)²` are read.
+//! - The view direction is `normalize(position − camera_centre)` (from the camera to the point).
+//! - Colour per channel is `max(Σₖ Yₖ(dir)·coeffs[3k + c] + 0.5, 0)` (clamped at 0, no upper
+//!   clamp). A channel is *clamped* when the sum plus 0.5 is **strictly** negative; its gradient
+//!   is then 0 (at exactly 0 the gradient passes).
+//! - Degenerate direction: when `|position − camera_centre| ≤` [`SH_MIN_DISTANCE`] or the
+//!   squared distance is not finite (NaN or overflowing coordinates), only degree 0 is evaluated
+//!   (the direction-averaged colour: higher bands integrate to 0 over the sphere), and the
+//!   position gradient is exactly 0.
+//!
+//! ```
+//! use bbsplat::stages::sh::{rgb_to_sh, sh_colour, SH_FLOATS};
+//! use glam::Vec3;
+//! let mut coeffs = [0.0f32; SH_FLOATS];
+//! coeffs[..3].copy_from_slice(&[rgb_to_sh(0.2), rgb_to_sh(0.5), rgb_to_sh(0.9)]);
+//! let c = sh_colour(3, &coeffs, Vec3::new(1.0, 2.0, 3.0), Vec3::ZERO);
+//! assert!((c.rgb - Vec3::new(0.2, 0.5, 0.9)).abs().max_element() < 1e-6);
+//! assert_eq!(c.clamped, [false; 3]);
+//! ```
+
+use glam::Vec3;
+
+// The constants are written as f64 literals (the closed forms' values) and rounded to f32 once.
+
+/// `Y₀₀ = 1/(2√π)`.
+pub const SH_C0: f32 = 0.28209479177387814_f64 as f32;
+/// Degree-1 constant `√3/(2√π)`: `Y₁ = −C1·y`, `Y₂ = C1·z`, `Y₃ = −C1·x`.
+pub const SH_C1: f32 = 0.4886025119029199_f64 as f32;
+/// Degree-2 constants: `k4 = C2[0]·xy`, `k5 = C2[1]·yz`, `k6 = C2[2]·z² + C2[3]`,
+/// `k7 = C2[1]·xz`, `k8 = C2[4]·(x² − y²)`.
+pub const SH_C2: [f32; 5] = [
+    1.0925484305920792_f64 as f32,   // √15/(2√π)
+    -1.0925484305920792_f64 as f32,  // −√15/(2√π)
+    0.9461746957575602_f64 as f32,   // 3√5/(4√π)
+    -0.31539156525252005_f64 as f32, // −√5/(4√π)
+    0.5462742152960396_f64 as f32,   // √15/(4√π)
+];
+/// Degree-3 constants: with `c1 = x² − y²`, `s1 = 2xy`, `c2 = x·c1 − y·s1`, `s2 = x·s1 + y·c1`:
+/// `k9 = C3[0]·s2`, `k10 = C3[1]·z·s1`, `k11 = (C3[2]·z² + C3[3])·y`,
+/// `k12 = z·(C3[4]·z² + C3[5])`, `k13 = (C3[2]·z² + C3[3])·x`, `k14 = C3[1]·z·c1`,
+/// `k15 = C3[0]·c2`.
+pub const SH_C3: [f32; 6] = [
+    -0.5900435899266435_f64 as f32, // −√70/(8√π)
+    1.4453057213202771_f64 as f32,  // √105/(4√π)
+    -2.2852289973223288_f64 as f32, // −5√42/(8√π)
+    0.4570457994644658_f64 as f32,  // √42/(8√π)
+    1.865881662950577_f64 as f32,   // 5√7/(4√π)
+    -1.1195289977703464_f64 as f32, // −3√7/(4√π)
+];
+
+/// Highest supported degree.
+pub const SH_MAX_DEGREE: u32 = 3;
+/// Number of basis functions at the highest degree, `(3 + 1)²`.
+pub const SH_COEFFS: usize = 16;
+/// Floats of one primitive's coefficients, `16 × 3`.
+pub const SH_FLOATS: usize = SH_COEFFS * 3;
+/// Below this camera-to-point distance (world units) the view direction is treated as undefined
+/// and only degree 0 is evaluated. Rendered primitives are at least the near plane (0.2) away,
+/// so this only guards culled or degenerate cases; 1e-6 keeps `1/|d|` (the scale of the position
+/// gradient) finite and far from overflow.
+pub const SH_MIN_DISTANCE: f32 = 1e-6;
+
+/// Number of basis functions used by `degree`, `(degree + 1)²`.
+#[inline]
+pub const fn sh_coeff_count(degree: u32) -> usize {
+    ((degree + 1) * (degree + 1)) as usize
+}
+
+/// Colour to degree-0 coefficient: `(c − 0.5)/SH_C0`.
+#[inline]
+pub fn rgb_to_sh(c: f32) -> f32 {
+    (c - 0.5) / SH_C0
+}
+
+/// Degree-0 coefficient to colour (before the clamp): `s·SH_C0 + 0.5`.
+#[inline]
+pub fn sh_to_rgb(s: f32) -> f32 {
+    s * SH_C0 + 0.5
+}
+
+#[inline]
+fn check_degree(degree: u32) {
+    assert!(degree <= SH_MAX_DEGREE, "SH degree must be 0..=3, got {degree}");
+}
+
+/// Evaluates the real SH basis up to `degree` at the unit direction `dir` into
+/// `out[..(degree + 1)²]`; the remaining entries are set to 0.
+///
+/// `dir` is not normalised here (the polynomials are evaluated as given).
+///
+/// # Panics
+/// If `degree > 3`.
+///
+/// ```
+/// use bbsplat::stages::sh::{sh_basis, SH_C0, SH_C1};
+/// use glam::Vec3;
+/// let mut b = [0.0; 16];
+/// sh_basis(1, Vec3::Z, &mut b);
+/// assert_eq!(&b[..4], &[SH_C0, 0.0, SH_C1, 0.0]);
+/// assert!(b[4..].iter().all(|&x| x == 0.0));
+/// ```
+#[inline]
+pub fn sh_basis(degree: u32, dir: Vec3, out: &mut [f32; 16]) {
+    check_degree(degree);
+    *out = [0.0; 16];
+    out[0] = SH_C0;
+    if degree == 0 {
+        return;
+    }
+    let (x, y, z) = (dir.x, dir.y, dir.z);
+    out[1] = -SH_C1 * y;
+    out[2] = SH_C1 * z;
+    out[3] = -SH_C1 * x;
+    if degree == 1 {
+        return;
+    }
+    let (xx, yy, zz) = (x * x, y * y, z * z);
+    out[4] = SH_C2[0] * x * y;
+    out[5] = SH_C2[1] * y * z;
+    out[6] = SH_C2[2] * zz + SH_C2[3];
+    out[7] = SH_C2[1] * x * z;
+    out[8] = SH_C2[4] * (xx - yy);
+    if degree == 2 {
+        return;
+    }
+    let c1 = xx - yy;
+    let s1 = 2.0 * x * y;
+    let c2 = x * c1 - y * s1;
+    let s2 = x * s1 + y * c1;
+    let p = SH_C3[2] * zz + SH_C3[3];
+    out[9] = SH_C3[0] * s2;
+    out[10] = SH_C3[1] * z * s1;
+    out[11] = p * y;
+    out[12] = z * (SH_C3[4] * zz + SH_C3[5]);
+    out[13] = p * x;
+    out[14] = SH_C3[1] * z * c1;
+    out[15] = SH_C3[0] * c2;
+}
+
+/// Vector-Jacobian product of [`sh_basis`] with respect to the direction components, treating
+/// `x, y, z` as independent variables: returns `Σₖ d_basis[k]·∇Yₖ(dir)` over the first
+/// `(degree + 1)²` entries. (Project onto the tangent plane for a unit-vector constraint.)
+///
+/// # Panics
+/// If `degree > 3`.
+#[inline]
+pub fn sh_basis_vjp(degree: u32, dir: Vec3, d_basis: &[f32; 16]) -> Vec3 {
+    check_degree(degree);
+    if degree == 0 {
+        return Vec3::ZERO;
+    }
+    let (x, y, z) = (dir.x, dir.y, dir.z);
+    let b = d_basis;
+    let mut gx = -SH_C1 * b[3];
+    let mut gy = -SH_C1 * b[1];
+    let mut gz = SH_C1 * b[2];
+    if degree >= 2 {
+        let a = SH_C2[0];
+        // k4 = a·xy, k5 = −a·yz, k6 = C·z² + D, k7 = −a·xz, k8 = (a/2)(x² − y²).
+        gx += a * (y * b[4] - z * b[7] + x * b[8]);
+        gy += a * (x * b[4] - z * b[5] - y * b[8]);
+        gz += -a * (y * b[5] + x * b[7]) + 2.0 * SH_C2[2] * z * b[6];
+    }
+    if degree >= 3 {
+        let (xx, yy, zz) = (x * x, y * y, z * z);
+        let c0 = SH_C3[0];
+        let c1 = SH_C3[1];
+        let p = SH_C3[2] * zz + SH_C3[3];
+        let dp = 2.0 * SH_C3[2] * z;
+        // k9 = c0·(3x²y − y³)
+        gx += c0 * 6.0 * x * y * b[9];
+        gy += c0 * 3.0 * (xx - yy) * b[9];
+        // k10 = 2·c1·xyz
+        gx += 2.0 * c1 * y * z * b[10];
+        gy += 2.0 * c1 * x * z * b[10];
+        gz += 2.0 * c1 * x * y * b[10];
+        // k11 = p(z)·y
+        gy += p * b[11];
+        gz += dp * y * b[11];
+        // k12 = C3[4]·z³ + C3[5]·z
+        gz += (3.0 * SH_C3[4] * zz + SH_C3[5]) * b[12];
+        // k13 = p(z)·x
+        gx += p * b[13];
+        gz += dp * x * b[13];
+        // k14 = c1·z·(x² − y²)
+        gx += 2.0 * c1 * z * x * b[14];
+        gy -= 2.0 * c1 * z * y * b[14];
+        gz += c1 * (xx - yy) * b[14];
+        // k15 = c0·(x³ − 3xy²)
+        gx += c0 * 3.0 * (xx - yy) * b[15];
+        gy -= c0 * 6.0 * x * y * b[15];
+    }
+    Vec3::new(gx, gy, gz)
+}
+
+/// SH colour of one primitive.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShColour {
+    /// `max(Σ Yₖ coeffsₖ + 0.5, 0)` per channel.
+    pub rgb: Vec3,
+    /// Per channel: the sum plus 0.5 was strictly negative and the channel was clamped to 0
+    /// (its gradient is 0).
+    pub clamped: [bool; 3],
+}
+
+/// The view direction and its length, or `None` when degenerate (see the module docs).
+#[inline]
+fn view_direction(position: Vec3, camera_centre: Vec3) -> Option<(Vec3, f32)> {
+    let d = position - camera_centre;
+    let len2 = d.length_squared();
+    // Written positively: NaN and +inf are degenerate.
+    if len2 > SH_MIN_DISTANCE * SH_MIN_DISTANCE && len2 < f32::INFINITY {
+        let len = len2.sqrt();
+        Some((d / len, len))
+    } else {
+        None
+    }
+}
+
+/// Basis values and the effective degree at the view direction.
+#[inline]
+fn basis_for(degree: u32, position: Vec3, camera_centre: Vec3, basis: &mut [f32; 16]) -> Option<(Vec3, f32)> {
+    check_degree(degree);
+    let view = view_direction(position, camera_centre);
+    match view {
+        Some((dir, _)) => sh_basis(degree, dir, basis),
+        None => sh_basis(0, Vec3::ZERO, basis),
+    }
+    view
+}
+
+#[inline]
+fn raw_colour(n: usize, coeffs: &[f32], basis: &[f32; 16]) -> [f32; 3] {
+    assert!(coeffs.len() >= 3 * n, "need 3·(degree + 1)² coefficients");
+    let mut raw = [0.5f32; 3];
+    for (k, &b) in basis[..n].iter().enumerate() {
+        let c = &coeffs[3 * k..3 * k + 3];
+        raw[0] += b * c[0];
+        raw[1] += b * c[1];
+        raw[2] += b * c[2];
+    }
+    raw
+}
+
+/// Colour of a primitive at `position` seen from `camera_centre`, from SH coefficients of
+/// `degree` (layout `[coeff][rgb]`, at least `3·(degree + 1)²` values).
+///
+/// # Panics
+/// If `degree > 3` or `coeffs` is too short.
+pub fn sh_colour(degree: u32, coeffs: &[f32], position: Vec3, camera_centre: Vec3) -> ShColour {
+    let mut basis = [0.0; 16];
+    let view = basis_for(degree, position, camera_centre, &mut basis);
+    let n = if view.is_some() { sh_coeff_count(degree) } else { 1 };
+    let raw = raw_colour(n, coeffs, &basis);
+    let clamped = raw.map(|r| r < 0.0);
+    ShColour {
+        rgb: Vec3::from_array(raw.map(|r| if r < 0.0 { 0.0 } else { r })),
+        clamped,
+    }
+}
+
+/// Vector-Jacobian product of [`sh_colour`] for `d_rgb = ∂L/∂rgb`: **adds** `∂L/∂coeffs` into
+/// `d_coeffs` (same layout, at least `3·(degree + 1)²` values) and returns `∂L/∂position`
+/// through the normalised view direction. (`∂L/∂camera_centre` is its negative.) Clamped
+/// channels contribute nothing; a degenerate direction gives a zero position gradient and
+/// gradients for the degree-0 coefficients only.
+///
+/// # Panics
+/// If `degree > 3` or `coeffs`/`d_coeffs` are too short.
+///
+/// ```
+/// use bbsplat::stages::sh::{sh_colour_vjp, SH_C0, SH_FLOATS};
+/// use glam::Vec3;
+/// let coeffs = [0.1f32; SH_FLOATS];
+/// let mut d = [0.0f32; SH_FLOATS];
+/// let dp = sh_colour_vjp(0, &coeffs, Vec3::X, Vec3::ZERO, Vec3::new(1.0, 0.0, 2.0), &mut d);
+/// assert_eq!(dp, Vec3::ZERO); // degree 0 is view-independent
+/// assert_eq!(&d[..3], &[SH_C0, 0.0, 2.0 * SH_C0]);
+/// ```
+pub fn sh_colour_vjp(
+    degree: u32,
+    coeffs: &[f32],
+    position: Vec3,
+    camera_centre: Vec3,
+    d_rgb: Vec3,
+    d_coeffs: &mut [f32],
+) -> Vec3 {
+    let mut basis = [0.0; 16];
+    let view = basis_for(degree, position, camera_centre, &mut basis);
+    let n = if view.is_some() { sh_coeff_count(degree) } else { 1 };
+    let raw = raw_colour(n, coeffs, &basis);
+    assert!(d_coeffs.len() >= 3 * n, "need 3·(degree + 1)² coefficient gradients");
+    let g = [0, 1, 2].map(|c| if raw[c] < 0.0 { 0.0 } else { d_rgb[c] });
+    for (k, &b) in basis[..n].iter().enumerate() {
+        let d = &mut d_coeffs[3 * k..3 * k + 3];
+        d[0] += b * g[0];
+        d[1] += b * g[1];
+        d[2] += b * g[2];
+    }
+    let Some((dir, len)) = view else {
+        return Vec3::ZERO;
+    };
+    if degree == 0 {
+        return Vec3::ZERO;
+    }
+    // ∂L/∂Yₖ = Σ_c g_c·coeffs[3k + c].
+    let mut d_basis = [0.0f32; 16];
+    for (k, db) in d_basis[1..n].iter_mut().enumerate() {
+        let c = &coeffs[3 * (k + 1)..3 * (k + 1) + 3];
+        *db = g[0] * c[0] + g[1] * c[1] + g[2] * c[2];
+    }
+    let d_dir = sh_basis_vjp(degree, dir, &d_basis);
+    // dir = d/|d|: ∂dir/∂d = (I − dir dirᵀ)/|d|.
+    (d_dir - dir * dir.dot(d_dir)) / len
+}
