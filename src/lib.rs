@@ -11,9 +11,11 @@
 
 #![warn(missing_docs)]
 
+pub mod billboards;
 pub mod camera;
 pub mod demo;
 pub mod gradcheck;
+pub mod raster;
 pub mod rng;
 pub mod stages;
 pub mod strategies;
