@@ -3,3 +3,7 @@
 //! Each stage has a plain scalar forward function and a `*_vjp` backward function that takes the
 //! upstream gradient of a scalar loss with respect to the stage's outputs and returns the
 //! gradients with respect to its inputs.
+
+pub mod ray_plane;
+pub mod rotation;
+pub mod splat_transform;

@@ -1,0 +1,453 @@
+//! The 2DGS ray-splat transform `T` of one billboard, its screen bounds, and the backward pass to
+//! position, log-scales and quaternion.
+//!
+//! Conventions (see `docs/numerics-geometry.md`):
+//! - World-to-camera `p_view = R_cw·p + t` with OpenCV axes (x right, y down, z forward); pixel
+//!   coordinates are continuous, pixel `(i, j)` is evaluated at its centre `(i + 0.5, j + 0.5)`.
+//! - The billboard is the square `(u, v) ∈ [−1, 1]²` of the plane through `position` spanned by
+//!   `s_u·t_u` and `s_v·t_v`, with `s = exp(log_scales)` (half side lengths) and `t_u`, `t_v`, `n`
+//!   the columns of the rotation of the quaternion `[w, x, y, z]`. World point of `(u, v)`:
+//!   `position + u·s_u·t_u + v·s_v·t_v`.
+//! - `T = K·[s_u·R_cw·t_u | s_v·R_cw·t_v | p_view]` with `K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`
+//!   (the principal point is honoured; the reference forces it to the image centre). `T` maps
+//!   `(u, v, 1)` to homogeneous pixel coordinates: pixel `x = Tu·X / Tw·X`, `y = Tv·X / Tw·X`
+//!   with `X = (u, v, 1)`, and `Tw·X` is the view depth of the plane point. [`SplatTransform`]
+//!   stores the three rows `Tu`, `Tv`, `Tw`.
+
+use crate::camera::Camera;
+use crate::stages::rotation::{quat_to_rotation, quat_to_rotation_vjp};
+use glam::{DVec2, DVec3, Mat3, Vec2, Vec3};
+
+/// Near plane in view depth (world units): a billboard whose *centre* has view depth
+/// `p_view.z ≤ NEAR_PLANE` is culled by [`project_splat`], and a ray-plane hit with
+/// `depth < NEAR_PLANE` is rejected by [`crate::stages::ray_plane::intersect`].
+///
+/// The value `0.2` is the reference rasterizer's `NEAR_PLANE`, kept so that renders compare. It
+/// also bounds the perspective division: every accepted depth is at least 0.2, so pixel positions
+/// are at most `5·|T|` and never divide by a depth close to zero.
+pub const NEAR_PLANE: f32 = 0.2;
+
+/// The reference rasterizer's minimum splat "radius" factor (`FilterSize = 1/√2` pixels), used only
+/// by [`ProjectedSplat::reference_radius`].
+pub const REFERENCE_FILTER_SIZE: f32 = std::f32::consts::FRAC_1_SQRT_2;
+
+/// The ray-splat transform `T` as its three rows (see the module docs).
+///
+/// For a plane point `X = (u, v, 1)`: `tu·X = depth·x_pixel`, `tv·X = depth·y_pixel`,
+/// `tw·X = depth`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SplatTransform {
+    /// First row of `T`: `fx·(a.x, b.x, c.x) + cx·tw`.
+    pub tu: Vec3,
+    /// Second row of `T`: `fy·(a.y, b.y, c.y) + cy·tw`.
+    pub tv: Vec3,
+    /// Third row of `T`: `(a.z, b.z, c.z)`, the view-depth row.
+    pub tw: Vec3,
+}
+
+impl SplatTransform {
+    /// The nine entries row by row: `[tu.x, tu.y, tu.z, tv.x, …, tw.z]`.
+    #[inline]
+    pub fn to_array(&self) -> [f32; 9] {
+        [
+            self.tu.x, self.tu.y, self.tu.z, self.tv.x, self.tv.y, self.tv.z, self.tw.x, self.tw.y, self.tw.z,
+        ]
+    }
+
+    /// Inverse of [`SplatTransform::to_array`].
+    #[inline]
+    pub fn from_array(a: [f32; 9]) -> Self {
+        Self {
+            tu: Vec3::new(a[0], a[1], a[2]),
+            tv: Vec3::new(a[3], a[4], a[5]),
+            tw: Vec3::new(a[6], a[7], a[8]),
+        }
+    }
+
+    /// Pixel coordinates and view depth of the plane point `(u, v)`: `(Tu·X/Tw·X, Tv·X/Tw·X)` and
+    /// `Tw·X` with `X = (u, v, 1)`. The pixel is meaningless when the depth is not positive.
+    #[inline]
+    pub fn project_uv(&self, u: f32, v: f32) -> (Vec2, f32) {
+        let x = Vec3::new(u, v, 1.0);
+        let depth = self.tw.dot(x);
+        (Vec2::new(self.tu.dot(x), self.tv.dot(x)) / depth, depth)
+    }
+}
+
+/// Forward result of [`project_splat`] for one billboard.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProjectedSplat {
+    /// The ray-splat transform `T`.
+    pub transform: SplatTransform,
+    /// Plane normal in view space, `R_cw·n`, flipped to face the camera
+    /// (`normal_view · p_view ≤ 0`).
+    pub normal_view: Vec3,
+    /// The flip applied to `R_cw·n`: `+1` or `−1` (the sign of `cos θ = −(R_cw·n)·p_view`). The
+    /// backward pass treats it as a constant.
+    pub normal_sign: f32,
+    /// View depth of the billboard centre, `p_view.z` (the reference's per-tile sort key).
+    pub view_depth: f32,
+    /// Screen centre of the projected unit disk `u² + v² ≤ 1` (2DGS closed form), in pixels.
+    /// Not the projection of the 3D centre. Only meaningful when the unit disk lies in front of
+    /// the camera plane (`tw.x² + tw.y² < tw.z²`); otherwise the conic is a hyperbola and this is
+    /// the reference's formula applied anyway.
+    pub centre: Vec2,
+    /// Half extent of the axis-aligned bounding box of the projected unit disk (same caveat as
+    /// [`ProjectedSplat::centre`]; negative squared extents are clamped to 0 as in the reference).
+    /// Equal to the reference's closed form in exact arithmetic but evaluated without its
+    /// cancellation (see `docs/numerics-geometry.md`).
+    pub half_extent: Vec2,
+    /// `exp(log_scales)`: the half side lengths `(s_u, s_v)` in world units.
+    pub scales: Vec2,
+}
+
+impl ProjectedSplat {
+    /// The reference rasterizer's tiling radius in pixels, `ceil(3·max(h_x, h_y, 1/√2))` (at
+    /// least 3). Provided for faithful comparisons; [`square_screen_bounds`] is the tight box.
+    #[inline]
+    pub fn reference_radius(&self) -> f32 {
+        (3.0 * self.half_extent.x.max(self.half_extent.y).max(REFERENCE_FILTER_SIZE)).ceil()
+    }
+}
+
+/// Gradients of a scalar loss with respect to one billboard's parameters.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SplatGrads {
+    /// `∂L/∂position` (world units).
+    pub d_position: Vec3,
+    /// `∂L/∂log_scales` (through `s = exp(log_scale)`).
+    pub d_log_scales: Vec2,
+    /// `∂L/∂q` for the raw quaternion `[w, x, y, z]` (through the normalisation).
+    pub d_quaternion: [f32; 4],
+}
+
+/// Everything the forward and backward passes share.
+struct Geometry {
+    rotation: Mat3,
+    scales: Vec2,
+    /// `a = s_u·R_cw·t_u`, `b = s_v·R_cw·t_v`, `c = p_view`.
+    a: Vec3,
+    b: Vec3,
+    c: Vec3,
+    normal_view: Vec3,
+}
+
+#[inline]
+fn geometry(position: Vec3, log_scales: Vec2, quaternion: [f32; 4], camera: &Camera) -> Geometry {
+    let rotation = quat_to_rotation(quaternion);
+    let scales = Vec2::new(log_scales.x.exp(), log_scales.y.exp());
+    let w = camera.rotation;
+    Geometry {
+        rotation,
+        scales,
+        a: w * rotation.x_axis * scales.x,
+        b: w * rotation.y_axis * scales.y,
+        c: view_point(camera, position),
+        normal_view: w * rotation.z_axis,
+    }
+}
+
+/// `p_view = R_cw·position + t`, accumulated in f64 and rounded once to f32.
+///
+/// In large scenes both terms can be ~1e4 while their sum (a view depth) is a few units; in f32
+/// the four roundings at magnitude 1e4 cost up to ~2e-3 units of absolute error in `p_view`
+/// (measured: 2.2e-3 of max|T| and 0.033 in (u, v) at 1e4 units, see
+/// `docs/numerics-geometry.md`). In f64 the only error left is the final rounding of `p_view`. It
+/// runs once per billboard and view, so the cost is negligible.
+#[inline]
+fn view_point(camera: &Camera, position: Vec3) -> Vec3 {
+    (camera.rotation.as_dmat3() * position.as_dvec3() + camera.translation.as_dvec3()).as_vec3()
+}
+
+/// `K·[a | b | c]` as rows.
+#[inline]
+fn transform_of(a: Vec3, b: Vec3, c: Vec3, camera: &Camera) -> SplatTransform {
+    let tw = Vec3::new(a.z, b.z, c.z);
+    SplatTransform {
+        tu: camera.fx * Vec3::new(a.x, b.x, c.x) + camera.cx * tw,
+        tv: camera.fy * Vec3::new(a.y, b.y, c.y) + camera.cy * tw,
+        tw,
+    }
+}
+
+/// Projects one billboard: the ray-splat transform `T`, the camera-facing normal, the centre depth
+/// and the reference's unit-disk screen box.
+///
+/// All arithmetic is f32 except `p_view = R_cw·position + t`, which is accumulated in f64 and
+/// rounded once (it cancels large terms when world coordinates are large).
+///
+/// `position` in world units, `log_scales` the natural logs of the half sides, `quaternion` raw
+/// `[w, x, y, z]` (normalised here; a degenerate one gives the identity rotation, see
+/// [`crate::stages::rotation::QUAT_NORM_SQ_MIN`]).
+///
+/// Returns `None` (culled) when
+/// - the centre's view depth is `≤` [`NEAR_PLANE`] (or NaN),
+/// - `cos θ = −(R_cw·n)·p_view` is exactly 0 (camera exactly in the billboard's plane: `T` is
+///   singular),
+/// - `d = tw.x² + tw.y² − tw.z²` is exactly 0 (the unit-disk box formula divides by it),
+/// - any entry of `T`, the normal or the box is not finite (NaN or overflowing inputs).
+///
+/// ```
+/// use bbsplat::camera::Camera;
+/// use bbsplat::stages::splat_transform::project_splat;
+/// use glam::{Vec2, Vec3};
+/// let cam = Camera::look_at(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, Vec3::Y, 100.0, 100.0, 64, 48);
+/// let s = project_splat(Vec3::ZERO, Vec2::splat(0.5f32.ln()), [1.0, 0.0, 0.0, 0.0], &cam).unwrap();
+/// assert!((s.view_depth - 4.0).abs() < 1e-5);
+/// // The centre (u, v) = (0, 0) projects to the principal point.
+/// let (px, depth) = s.transform.project_uv(0.0, 0.0);
+/// assert!((px - Vec2::new(32.0, 24.0)).length() < 1e-4 && (depth - 4.0).abs() < 1e-5);
+/// // A face-on square of half side 0.5 at depth 4 spans ±100·0.5/4 = ±12.5 px.
+/// assert!((s.half_extent - Vec2::splat(12.5)).length() < 1e-3);
+/// ```
+#[inline]
+pub fn project_splat(
+    position: Vec3,
+    log_scales: Vec2,
+    quaternion: [f32; 4],
+    camera: &Camera,
+) -> Option<ProjectedSplat> {
+    let g = geometry(position, log_scales, quaternion, camera);
+    // `!(z > NEAR)` also culls NaN depths.
+    if !(g.c.z > NEAR_PLANE) {
+        return None;
+    }
+    let transform = transform_of(g.a, g.b, g.c, camera);
+    let cos_theta = -g.normal_view.dot(g.c);
+    if cos_theta == 0.0 {
+        return None;
+    }
+    let normal_sign = if cos_theta > 0.0 { 1.0 } else { -1.0 };
+    let SplatTransform { tu, tv, tw } = transform;
+    let d = tw.x * tw.x + tw.y * tw.y - tw.z * tw.z;
+    if d == 0.0 {
+        return None;
+    }
+    let f = Vec3::new(1.0, 1.0, -1.0) / d;
+    let centre = Vec2::new((f * tu).dot(tw), (f * tv).dot(tw));
+    // The reference evaluates h² = centre² − Σ f_k·Tu_k², which cancels catastrophically for small
+    // splats (absolute error ~√ε·|centre| ≈ 3.5e-4·|centre| px). By Cauchy-Binet the same quantity
+    // is (m.x² + m.y² − m.z²)/d² with m = Tu × Tw, whose terms do not cancel.
+    let extent = |m: Vec3| (m.x * m.x + m.y * m.y - m.z * m.z).max(0.0).sqrt() / d.abs();
+    let half_extent = Vec2::new(extent(tu.cross(tw)), extent(tv.cross(tw)));
+    let finite = tu.is_finite()
+        && tv.is_finite()
+        && tw.is_finite()
+        && g.normal_view.is_finite()
+        && centre.is_finite()
+        && half_extent.is_finite();
+    if !finite {
+        return None;
+    }
+    Some(ProjectedSplat {
+        transform,
+        normal_view: g.normal_view * normal_sign,
+        normal_sign,
+        view_depth: g.c.z,
+        centre,
+        half_extent,
+        scales: g.scales,
+    })
+}
+
+/// Backward pass of [`project_splat`]: gradients of a loss with respect to position, log-scales and
+/// raw quaternion, given `∂L/∂T` (as rows, same layout as [`SplatTransform`]) and
+/// `∂L/∂normal_view` (the flipped normal; the flip sign is treated as a constant).
+///
+/// The outputs `view_depth`, `centre` and `half_extent` are not differentiated (they only drive
+/// sorting and tiling). A culled billboard (forward `None`) gets zero gradients.
+///
+/// Chain: `∂L/∂[a|b|c] = Kᵀ·∂L/∂T`; `∂L/∂position = R_cwᵀ·∂L/∂c`;
+/// `∂L/∂t_u = s_u·R_cwᵀ·∂L/∂a`, `∂L/∂s_u = t_u·R_cwᵀ·∂L/∂a` and `∂L/∂log s_u = s_u·∂L/∂s_u` (same
+/// for v); `∂L/∂n = sign·R_cwᵀ·∂L/∂normal_view`; then the quaternion VJP of
+/// [`crate::stages::rotation::quat_to_rotation_vjp`].
+///
+/// ```
+/// use bbsplat::camera::Camera;
+/// use bbsplat::stages::splat_transform::{project_splat_vjp, SplatTransform};
+/// use glam::{Vec2, Vec3};
+/// let cam = Camera::look_at(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, Vec3::Y, 100.0, 100.0, 64, 48);
+/// // L = Tw.z = view depth of the centre: ∂L/∂position is the camera's viewing axis.
+/// let d_t = SplatTransform { tw: Vec3::Z, ..Default::default() };
+/// let g = project_splat_vjp(Vec3::ZERO, Vec2::ZERO, [1.0, 0.0, 0.0, 0.0], &cam, &d_t, Vec3::ZERO);
+/// assert!((g.d_position - Vec3::Z).length() < 1e-6);
+/// assert_eq!(g.d_log_scales, Vec2::ZERO);
+/// ```
+#[inline]
+pub fn project_splat_vjp(
+    position: Vec3,
+    log_scales: Vec2,
+    quaternion: [f32; 4],
+    camera: &Camera,
+    d_transform: &SplatTransform,
+    d_normal_view: Vec3,
+) -> SplatGrads {
+    let Some(projected) = project_splat(position, log_scales, quaternion, camera) else {
+        return SplatGrads::default();
+    };
+    let g = geometry(position, log_scales, quaternion, camera);
+    let SplatTransform { tu: du, tv: dv, tw: dw } = *d_transform;
+    // T = K·M with M = [a | b | c]: ∂L/∂M = Kᵀ·∂L/∂T. Row 0 of ∂L/∂M is fx·du, row 1 fy·dv,
+    // row 2 cx·du + cy·dv + dw; column j of M is a, b, c.
+    let row2 = camera.cx * du + camera.cy * dv + dw;
+    let da = Vec3::new(camera.fx * du.x, camera.fy * dv.x, row2.x);
+    let db = Vec3::new(camera.fx * du.y, camera.fy * dv.y, row2.y);
+    let dc = Vec3::new(camera.fx * du.z, camera.fy * dv.z, row2.z);
+    let wt = camera.rotation.transpose();
+    let (da_world, db_world) = (wt * da, wt * db);
+    let d_rotation = Mat3::from_cols(
+        da_world * g.scales.x,
+        db_world * g.scales.y,
+        wt * d_normal_view * projected.normal_sign,
+    );
+    let d_scales = Vec2::new(da_world.dot(g.rotation.x_axis), db_world.dot(g.rotation.y_axis));
+    SplatGrads {
+        d_position: wt * dc,
+        d_log_scales: d_scales * g.scales,
+        d_quaternion: quat_to_rotation_vjp(quaternion, d_rotation),
+    }
+}
+
+/// Half side of the texture support square for a `texture_size × texture_size` texture:
+/// `1 + 2/(TS − 1)` (1.1333 for TS = 16). With align-corners texel centres at `u = −1 … 1` and zero
+/// padding, bilinear samples fade to exactly 0 one texel spacing outside `[−1, 1]²`.
+///
+/// ```
+/// assert!((bbsplat::stages::splat_transform::support_half_side(16) - 1.0 - 2.0 / 15.0).abs() < 1e-7);
+/// ```
+#[inline]
+pub fn support_half_side(texture_size: usize) -> f32 {
+    1.0 + 2.0 / (texture_size.max(2) - 1) as f32
+}
+
+/// An axis-aligned box in continuous pixel coordinates (pixel `(i, j)` has its centre at
+/// `(i + 0.5, j + 0.5)`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ScreenBounds {
+    /// Smallest x and y covered.
+    pub min: Vec2,
+    /// Largest x and y covered.
+    pub max: Vec2,
+}
+
+/// A rectangle of pixel indices: columns `x_min..x_max`, rows `y_min..y_max` (exclusive ends).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PixelRect {
+    /// First column.
+    pub x_min: u32,
+    /// First row.
+    pub y_min: u32,
+    /// One past the last column.
+    pub x_max: u32,
+    /// One past the last row.
+    pub y_max: u32,
+}
+
+impl ScreenBounds {
+    /// True when the point lies in the closed box.
+    #[inline]
+    pub fn contains(&self, p: Vec2) -> bool {
+        p.cmpge(self.min).all() && p.cmple(self.max).all()
+    }
+
+    /// The pixels of a `width × height` image whose centres lie in the box, or `None` if there are
+    /// none.
+    ///
+    /// ```
+    /// use bbsplat::stages::splat_transform::{PixelRect, ScreenBounds};
+    /// use glam::Vec2;
+    /// let b = ScreenBounds { min: Vec2::new(-3.0, 2.5), max: Vec2::new(4.49, 2.5) };
+    /// assert_eq!(b.pixel_rect(10, 10), Some(PixelRect { x_min: 0, y_min: 2, x_max: 4, y_max: 3 }));
+    /// assert_eq!(b.pixel_rect(10, 2), None);
+    /// ```
+    #[inline]
+    pub fn pixel_rect(&self, width: u32, height: u32) -> Option<PixelRect> {
+        // Centre i + 0.5 ∈ [min, max]  ⇔  i ∈ [ceil(min − 0.5), floor(max − 0.5)]. Clamp in f32
+        // before casting so that huge or infinite bounds are safe.
+        let lo = |m: f32, n: u32| (m - 0.5).ceil().clamp(0.0, n as f32) as u32;
+        let hi = |m: f32, n: u32| ((m - 0.5).floor() + 1.0).clamp(0.0, n as f32) as u32;
+        let rect = PixelRect {
+            x_min: lo(self.min.x, width),
+            y_min: lo(self.min.y, height),
+            x_max: hi(self.max.x, width),
+            y_max: hi(self.max.y, height),
+        };
+        (rect.x_min < rect.x_max && rect.y_min < rect.y_max).then_some(rect)
+    }
+}
+
+/// Tight screen-space bounding box of the texture support square `|u|, |v| ≤ half_side` (use
+/// [`support_half_side`]) of a billboard with transform `t`, restricted to the part the rasterizer
+/// can see: plane points with view depth `≥` [`NEAR_PLANE`], the same acceptance rule as
+/// [`crate::stages::ray_plane::intersect`].
+///
+/// View depth is affine in `(u, v)` (`depth = tw·(u, v, 1)`), so the visible part of the square is
+/// the square clipped by the half-plane `depth ≥ NEAR_PLANE`: a convex polygon of at most 5
+/// vertices, all in front of the camera. A convex planar polygon in front of the camera projects
+/// to the convex hull of its projected vertices, so the box of those vertices is exact. When all
+/// 4 corners are in front this is just the box of the 4 projected corners. No conservative
+/// fallback is needed.
+///
+/// Computed in f64 from the f32 entries of `t` (once per billboard and view): for a huge billboard
+/// crossing the near plane the corner depths can be ~1e9 while the clip vertices must land at
+/// depth 0.2, which f32 cannot resolve (a clip vertex could come out behind the camera and
+/// project to the wrong side).
+///
+/// Returns `None` when the whole square is behind the near plane or an input is not finite. The
+/// box is not clipped to the image; see [`ScreenBounds::pixel_rect`].
+///
+/// ```
+/// use bbsplat::stages::splat_transform::{square_screen_bounds, SplatTransform};
+/// use glam::{Vec2, Vec3};
+/// // Face-on square at depth 2, fx = fy = 10, principal point (5, 5), half sides 1.
+/// let t = SplatTransform { tu: Vec3::new(10.0, 0.0, 10.0), tv: Vec3::new(0.0, 10.0, 10.0), tw: Vec3::new(0.0, 0.0, 2.0) };
+/// let b = square_screen_bounds(&t, 1.0).unwrap();
+/// assert!((b.min - Vec2::splat(0.0)).length() < 1e-6 && (b.max - Vec2::splat(10.0)).length() < 1e-6);
+/// ```
+#[inline]
+pub fn square_screen_bounds(t: &SplatTransform, half_side: f32) -> Option<ScreenBounds> {
+    if !(t.tu.is_finite() && t.tv.is_finite() && t.tw.is_finite() && half_side.is_finite()) {
+        return None;
+    }
+    let (tu, tv, tw) = (t.tu.as_dvec3(), t.tv.as_dvec3(), t.tw.as_dvec3());
+    let h = half_side.abs() as f64;
+    let near = NEAR_PLANE as f64;
+    let corners = [
+        DVec2::new(-h, -h),
+        DVec2::new(h, -h),
+        DVec2::new(h, h),
+        DVec2::new(-h, h),
+    ];
+    let depths = corners.map(|p| tw.x * p.x + tw.y * p.y + tw.z);
+    // Clip the square by depth ≥ NEAR_PLANE (one Sutherland-Hodgman pass, at most 5 vertices).
+    let mut poly = [DVec2::ZERO; 5];
+    let mut n = 0;
+    for i in 0..4 {
+        let j = (i + 1) % 4;
+        let (p, q, dp, dq) = (corners[i], corners[j], depths[i], depths[j]);
+        let p_in = dp >= near;
+        if p_in {
+            poly[n] = p;
+            n += 1;
+        }
+        if p_in != (dq >= near) {
+            // The edge crosses the near plane (so dp ≠ dq).
+            poly[n] = p + (q - p) * ((near - dp) / (dq - dp));
+            n += 1;
+        }
+    }
+    if n == 0 {
+        return None;
+    }
+    let mut min = DVec2::splat(f64::INFINITY);
+    let mut max = DVec2::splat(f64::NEG_INFINITY);
+    for &p in &poly[..n] {
+        // Every vertex has depth ≥ NEAR_PLANE up to f64 rounding: the division is safe.
+        let x = DVec3::new(p.x, p.y, 1.0);
+        let pixel = DVec2::new(tu.dot(x), tv.dot(x)) / tw.dot(x);
+        min = min.min(pixel);
+        max = max.max(pixel);
+    }
+    let (min, max) = (min.as_vec2(), max.as_vec2());
+    (min.is_finite() && max.is_finite()).then_some(ScreenBounds { min, max })
+}
