@@ -10,7 +10,10 @@ use std::time::Duration;
 
 fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("raster");
-    group.sample_size(10).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(4));
+    group
+        .sample_size(10)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(4));
     for size in [256u32, 400] {
         for n in [10_000usize, 50_000, 100_000] {
             let scene = random_scene(&RandomSceneConfig::benchmark(n, size, size));
@@ -23,7 +26,11 @@ fn bench(c: &mut Criterion) {
             group.bench_function(format!("fwd_bwd/{size}/{n}"), |b| {
                 b.iter(|| {
                     let out = render(&set, &cam, &settings);
-                    let ig = ImageGradients { rgb: &d_rgb, alpha: None, depth: None };
+                    let ig = ImageGradients {
+                        rgb: &d_rgb,
+                        alpha: None,
+                        depth: None,
+                    };
                     render_backward(&set, &out, &ig, &mut grads)
                 })
             });

@@ -135,9 +135,13 @@ pub fn random_scene(config: &RandomSceneConfig) -> Billboards {
     let t = ts * ts;
     let mut b = Billboards::empty(ts);
     for _ in 0..config.billboards {
-        let (x, y) = (rng.range(0.0, config.width as f32), rng.range(0.0, config.height as f32));
+        let (x, y) = (
+            rng.range(0.0, config.width as f32),
+            rng.range(0.0, config.height as f32),
+        );
         let z = rng.range(2.0, 8.0);
-        b.positions.push(Vec3::new((x - cam.cx) / cam.fx * z, (y - cam.cy) / cam.fy * z, z));
+        b.positions
+            .push(Vec3::new((x - cam.cx) / cam.fx * z, (y - cam.cy) / cam.fy * z, z));
         // Uniform rotation: normalised Gaussian 4-vector.
         let q = [rng.normal(), rng.normal(), rng.normal(), rng.normal()];
         b.quaternions.push(q);
@@ -146,7 +150,11 @@ pub fn random_scene(config: &RandomSceneConfig) -> Billboards {
         let jitter = Vec2::new(rng.range(-0.2, 0.2), rng.range(-0.2, 0.2));
         b.log_scales.push(Vec2::splat(s.ln()) + jitter);
         for k in 0..SH_FLOATS {
-            let v = if k < 3 { rng.range(-0.5, 0.5) } else { rng.range(-0.1, 0.1) };
+            let v = if k < 3 {
+                rng.range(-0.5, 0.5)
+            } else {
+                rng.range(-0.1, 0.1)
+            };
             b.sh.push(v);
         }
         let (lo, hi) = config.alpha_range;

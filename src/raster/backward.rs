@@ -91,7 +91,11 @@ struct EntryGrad {
     rgb: Vec3,
 }
 
-const ZERO_TRANSFORM: SplatTransform = SplatTransform { tu: Vec3::ZERO, tv: Vec3::ZERO, tw: Vec3::ZERO };
+const ZERO_TRANSFORM: SplatTransform = SplatTransform {
+    tu: Vec3::ZERO,
+    tv: Vec3::ZERO,
+    tw: Vec3::ZERO,
+};
 
 fn add_transform(acc: &mut SplatTransform, d: &SplatTransform) {
     acc.tu += d.tu;
@@ -171,7 +175,13 @@ fn backward_tile(
     let texels = ts * ts;
     let width = out.width;
     let (i0, j0, i1, j1) = tile_pixels(bins, tile, width, out.height);
-    let mut geometry = vec![EntryGrad { transform: ZERO_TRANSFORM, rgb: Vec3::ZERO }; list.len()];
+    let mut geometry = vec![
+        EntryGrad {
+            transform: ZERO_TRANSFORM,
+            rgb: Vec3::ZERO
+        };
+        list.len()
+    ];
     let mut background = Vec3::ZERO;
     scratch.begin_tile(list.len(), texels);
     let bg = settings.background;
@@ -193,12 +203,18 @@ fn backward_tile(
             let mut t = 1.0f32;
             let mut colour = [0.0f32; 3];
             for (k, &b) in list[..walked].iter().enumerate() {
-                let Some(pr) = prepared[b as usize].as_ref() else { continue };
+                let Some(pr) = prepared[b as usize].as_ref() else {
+                    continue;
+                };
                 if !pr.covers(i, j) {
                     continue;
                 }
-                let Some(hit) = intersect(&pr.transform, px, py) else { continue };
-                let Some(taps) = bilinear::taps(hit.u, hit.v, ts) else { continue };
+                let Some(hit) = intersect(&pr.transform, px, py) else {
+                    continue;
+                };
+                let Some(taps) = bilinear::taps(hit.u, hit.v, ts) else {
+                    continue;
+                };
                 let a = taps.sample_one(set.alpha_of(b as usize));
                 let alpha = a.min(params.max_alpha);
                 if alpha < params.min_alpha {
@@ -243,8 +259,9 @@ fn backward_tile(
                 let base = bl.slot as usize * texels * 4;
                 let (alpha_grad, colour_grad) = scratch.dense[base..base + 4 * texels].split_at_mut(texels);
                 let (du_a, dv_a) = bl.taps.accumulate_vjp_one(set.alpha_of(b), d_tex_alpha, alpha_grad);
-                let (du_c, dv_c) =
-                    bl.taps.accumulate_vjp(set.colour_of(b), 3, &d_colour.to_array(), colour_grad);
+                let (du_c, dv_c) = bl
+                    .taps
+                    .accumulate_vjp(set.colour_of(b), 3, &d_colour.to_array(), colour_grad);
                 let pr = prepared[b].as_ref().expect("blended entries are prepared");
                 let d_t = intersect_vjp(&pr.transform, px, py, du_a + du_c, dv_a + dv_c, w * g_depth);
                 let eg = &mut geometry[bl.slot as usize];
@@ -274,7 +291,12 @@ fn backward_tile(
         texels_out[cursor[slot as usize] as usize] = (idx, v);
         cursor[slot as usize] += 1;
     }
-    TileGrads { geometry, tex_offsets: counts, texels: texels_out, background }
+    TileGrads {
+        geometry,
+        tex_offsets: counts,
+        texels: texels_out,
+        background,
+    }
 }
 
 /// Back-propagates image gradients to every billboard parameter and the background, adding
@@ -293,15 +315,27 @@ pub fn render_backward(
 ) -> Vec<u32> {
     let n_pix = (out.width * out.height) as usize;
     assert_eq!(image_grads.rgb.len(), 3 * n_pix, "one RGB gradient per pixel");
-    assert!(image_grads.alpha.is_none_or(|a| a.len() == n_pix), "one alpha gradient per pixel");
-    assert!(image_grads.depth.is_none_or(|d| d.len() == n_pix), "one depth gradient per pixel");
-    assert_eq!(grads.positions.len(), set.len(), "gradient buffers must match the billboard set");
+    assert!(
+        image_grads.alpha.is_none_or(|a| a.len() == n_pix),
+        "one alpha gradient per pixel"
+    );
+    assert!(
+        image_grads.depth.is_none_or(|d| d.len() == n_pix),
+        "one depth gradient per pixel"
+    );
+    assert_eq!(
+        grads.positions.len(),
+        set.len(),
+        "gradient buffers must match the billboard set"
+    );
     let state = &out.state;
     let bins = &state.bins;
     let n_tiles = bins.tile_count();
     let tiles: Vec<TileGrads> = (0..n_tiles)
         .into_par_iter()
-        .map_init(Scratch::default, |scratch, t| backward_tile(set, out, image_grads, t, scratch))
+        .map_init(Scratch::default, |scratch, t| {
+            backward_tile(set, out, image_grads, t, scratch)
+        })
         .collect();
     for tg in &tiles {
         grads.background += tg.background;
@@ -358,7 +392,14 @@ pub fn render_backward(
             if !any {
                 return false;
             }
-            let sg = project_splat_vjp(set.positions[b], set.log_scales[b], set.quaternions[b], camera, &d_t, Vec3::ZERO);
+            let sg = project_splat_vjp(
+                set.positions[b],
+                set.log_scales[b],
+                set.quaternions[b],
+                camera,
+                &d_t,
+                Vec3::ZERO,
+            );
             let d_pos_sh = sh_colour_vjp(degree, set.sh_of(b), set.positions[b], centre, d_rgb, d_sh);
             *d_pos += sg.d_position + d_pos_sh;
             *d_scale += sg.d_log_scales;
@@ -368,5 +409,10 @@ pub fn render_backward(
             true
         })
         .collect();
-    touched.iter().enumerate().filter(|(_, t)| **t).map(|(b, _)| b as u32).collect()
+    touched
+        .iter()
+        .enumerate()
+        .filter(|(_, t)| **t)
+        .map(|(b, _)| b as u32)
+        .collect()
 }

@@ -95,7 +95,9 @@ pub fn bin(prepared: &[Option<Prepared>], width: u32, height: u32) -> TileBins {
         rest = tail;
     }
     let depth_of = |b: u32| prepared[b as usize].as_ref().map_or(0.0, |p| p.depth);
-    slices.into_par_iter().for_each(|s| s.sort_by(|&a, &b| depth_of(a).total_cmp(&depth_of(b))));
+    slices
+        .into_par_iter()
+        .for_each(|s| s.sort_by(|&a, &b| depth_of(a).total_cmp(&depth_of(b))));
     // Billboard-major index, each billboard's entries in tile order.
     let mut billboard_entries = vec![0u32; total];
     let mut bcursor: Vec<u32> = billboard_offsets[..prepared.len()].to_vec();
@@ -103,5 +105,12 @@ pub fn bin(prepared: &[Option<Prepared>], width: u32, height: u32) -> TileBins {
         billboard_entries[bcursor[b as usize] as usize] = e as u32;
         bcursor[b as usize] += 1;
     }
-    TileBins { tiles_x, tiles_y, tile_offsets, entries, billboard_offsets, billboard_entries }
+    TileBins {
+        tiles_x,
+        tiles_y,
+        tile_offsets,
+        entries,
+        billboard_offsets,
+        billboard_entries,
+    }
 }

@@ -98,16 +98,25 @@ fn shade_pixel(
     let (px, py) = (i as f32 + 0.5, j as f32 + 0.5);
     let ts = set.texture_size;
     let mut t = 1.0f32;
-    let mut out = PixelOut { median: 0.0, ..Default::default() };
+    let mut out = PixelOut {
+        median: 0.0,
+        ..Default::default()
+    };
     let mut colour = [0.0f32; 3];
     for (k, &b) in list.iter().enumerate() {
-        let Some(p) = prepared[b as usize].as_ref() else { continue };
+        let Some(p) = prepared[b as usize].as_ref() else {
+            continue;
+        };
         if !p.covers(i, j) {
             continue;
         }
         out.evaluated += 1;
-        let Some(hit) = intersect(&p.transform, px, py) else { continue };
-        let Some(taps) = bilinear::taps(hit.u, hit.v, ts) else { continue };
+        let Some(hit) = intersect(&p.transform, px, py) else {
+            continue;
+        };
+        let Some(taps) = bilinear::taps(hit.u, hit.v, ts) else {
+            continue;
+        };
         let a = taps.sample_one(set.alpha_of(b as usize));
         let alpha = a.min(params.max_alpha);
         if alpha < params.min_alpha {
@@ -197,7 +206,10 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
         normal: vec![0.0; n_pix * 3],
         impact: vec![0.0; set.len()],
         visible: prepared.iter().map(Option::is_some).collect(),
-        stats: RenderStats { tile_entries: bins.entries.len() as u64, ..Default::default() },
+        stats: RenderStats {
+            tile_entries: bins.entries.len() as u64,
+            ..Default::default()
+        },
         state: ForwardState {
             camera: *camera,
             settings: *settings,
@@ -226,7 +238,10 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
     // Per-billboard impact: entries summed in tile order (fixed, thread-independent).
     out.impact.par_iter_mut().enumerate().for_each(|(b, imp)| {
         let r = bins.billboard_offsets[b] as usize..bins.billboard_offsets[b + 1] as usize;
-        *imp = bins.billboard_entries[r].iter().map(|&e| entry_impact[e as usize]).sum();
+        *imp = bins.billboard_entries[r]
+            .iter()
+            .map(|&e| entry_impact[e as usize])
+            .sum();
     });
     out.state.prepared = prepared;
     out.state.bins = bins;

@@ -125,6 +125,10 @@ pub struct RenderSettings {
 
 impl Default for RenderSettings {
     fn default() -> Self {
-        Self { background: Vec3::ZERO, sh_degree: 3, composite: CompositeParams::default() }
+        Self {
+            background: Vec3::ZERO,
+            sh_degree: 3,
+            composite: CompositeParams::default(),
+        }
     }
 }

@@ -54,5 +54,8 @@ pub fn prepare_one(set: &BillboardSet<'_>, i: usize, camera: &Camera, settings: 
 
 /// Prepares every billboard in parallel; entry `i` belongs to billboard `i`.
 pub fn preprocess(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings) -> Vec<Option<Prepared>> {
-    (0..set.len()).into_par_iter().map(|i| prepare_one(set, i, camera, settings)).collect()
+    (0..set.len())
+        .into_par_iter()
+        .map(|i| prepare_one(set, i, camera, settings))
+        .collect()
 }

@@ -42,8 +42,9 @@ pub fn render_reference(set: &BillboardSet<'_>, camera: &Camera, settings: &Rend
         projected.push(p);
     }
     order.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
-    let sh_rgb: Vec<_> =
-        (0..set.len()).map(|b| sh_colour(settings.sh_degree, set.sh_of(b), set.positions[b], camera.centre()).rgb).collect();
+    let sh_rgb: Vec<_> = (0..set.len())
+        .map(|b| sh_colour(settings.sh_degree, set.sh_of(b), set.positions[b], camera.centre()).rgb)
+        .collect();
     let mut out = ReferenceOutput {
         rgb: vec![0.0; 3 * n_pix],
         alpha: vec![0.0; n_pix],
@@ -51,7 +52,13 @@ pub fn render_reference(set: &BillboardSet<'_>, camera: &Camera, settings: &Rend
         impact: vec![0.0; set.len()],
     };
     // Features per entry: r, g, b, 1 (opacity), depth; background (bg, 0, 0).
-    let background = [settings.background.x, settings.background.y, settings.background.z, 0.0, 0.0];
+    let background = [
+        settings.background.x,
+        settings.background.y,
+        settings.background.z,
+        0.0,
+        0.0,
+    ];
     let mut alphas = Vec::new();
     let mut features = Vec::new();
     let mut ids = Vec::new();
@@ -63,13 +70,21 @@ pub fn render_reference(set: &BillboardSet<'_>, camera: &Camera, settings: &Rend
             ids.clear();
             for &(b, _) in &order {
                 let p = projected[b].as_ref().expect("sorted billboards are projected");
-                let Some(hit) = intersect(&p.transform, px, py) else { continue };
+                let Some(hit) = intersect(&p.transform, px, py) else {
+                    continue;
+                };
                 let mut a = [0.0f32];
                 bilinear::sample(set.alpha_of(b), ts, 1, hit.u, hit.v, &mut a);
                 let mut c = [0.0f32; 3];
                 bilinear::sample(set.colour_of(b), ts, 3, hit.u, hit.v, &mut c);
                 alphas.push(a[0]);
-                features.extend_from_slice(&[c[0] + sh_rgb[b].x, c[1] + sh_rgb[b].y, c[2] + sh_rgb[b].z, 1.0, hit.depth]);
+                features.extend_from_slice(&[
+                    c[0] + sh_rgb[b].x,
+                    c[1] + sh_rgb[b].y,
+                    c[2] + sh_rgb[b].z,
+                    1.0,
+                    hit.depth,
+                ]);
                 ids.push(b);
             }
             let r = composite(&alphas, &features, 5, &background, &settings.composite);
