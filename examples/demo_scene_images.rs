@@ -9,11 +9,25 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let scene = generate(&DemoConfig::default());
     for (split, views) in [("train", &scene.train), ("test", &scene.test)] {
         for (i, view) in views.iter().enumerate() {
-            let bytes: Vec<u8> = view.rgb.iter().map(|&c| (c.clamp(0.0, 1.0) * 255.0 + 0.5) as u8).collect();
+            let bytes: Vec<u8> = view
+                .rgb
+                .iter()
+                .map(|&c| (c.clamp(0.0, 1.0) * 255.0 + 0.5) as u8)
+                .collect();
             let path = format!("{dir}/{split}_{i:03}.png");
-            image::save_buffer(&path, &bytes, view.camera.width, view.camera.height, image::ExtendedColorType::Rgb8)?;
+            image::save_buffer(
+                &path,
+                &bytes,
+                view.camera.width,
+                view.camera.height,
+                image::ExtendedColorType::Rgb8,
+            )?;
         }
     }
-    println!("wrote {} train and {} test views to {dir}", scene.train.len(), scene.test.len());
+    println!(
+        "wrote {} train and {} test views to {dir}",
+        scene.train.len(),
+        scene.test.len()
+    );
     Ok(())
 }

@@ -15,6 +15,8 @@ pub mod billboards;
 pub mod camera;
 pub mod demo;
 pub mod gradcheck;
+pub mod init;
+pub mod loss;
 pub mod raster;
 pub mod rng;
 pub mod stages;

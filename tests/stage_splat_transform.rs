@@ -723,8 +723,8 @@ fn translated_scene(seed: u64) -> impl Iterator<Item = (Camera, BillboardPose)> 
     })
 }
 
-/// Family B: billboard 1e4 units away from a camera at the origin, half sides 50-500 (a distant
-/// object of a few pixels to tens of pixels at fx = 60... up to 500 px).
+/// Family B: billboard far from the camera: the strategy's scene scaled by 2000-3000 about the
+/// camera centre (view depth 4e3-1.8e4, half sides 100-1500, same angular size), fx = fy = 600.
 fn distant_scene(seed: u64) -> impl Iterator<Item = (Camera, BillboardPose)> {
     let mut cfg = seeded_config(1);
     cfg.rng_seed = RngSeed::Fixed(seed);
@@ -865,4 +865,22 @@ fn measure_tolerances() {
     println!("round trip: {rt:?}");
     println!("far A (coordinates 1e4): {fa:?}");
     println!("far B (distance 1e4): {fb:?}");
+}
+
+#[test]
+fn unit_disk_touching_the_camera_plane() {
+    // q = (1, 1, 1, 1)/2: t_u = +y, t_v = +z, n = +x, all exact. With s_v equal to the centre's
+    // depth, d = tw.x² + tw.y² − tw.z² = s_v² − z² is exactly 0: the reference culls it.
+    let cam = identity_camera(64, 48);
+    let q = [1.0, 1.0, 1.0, 1.0];
+    let ls = 1.5f32;
+    let z = ls.exp();
+    assert!(project_splat(Vec3::new(0.5, 0.0, z), Vec2::new(-1.0, ls), q, &cam).is_none());
+    // One ulp larger scale: d tiny but not 0. Kept, with a finite (or +inf) box and never NaN.
+    let ps = project_splat(Vec3::new(0.5, 0.0, z), Vec2::new(-1.0, ls.next_up()), q, &cam).expect("d ≠ 0");
+    assert!(!ps.centre.is_nan() && !ps.half_extent.is_nan(), "{ps:?}");
+    assert!(ps.reference_radius() >= 3.0);
+    // The square crosses the near plane: its bounds still come out finite.
+    let b = square_screen_bounds(&ps.transform, support()).unwrap();
+    assert!(b.min.is_finite() && b.max.is_finite());
 }

@@ -68,7 +68,7 @@ fn guarded_lines(t: &SplatTransform, px: f32, py: f32) -> Option<(Vec3, Vec3, Ve
     let (m, n) = (k.x * l.y, k.y * l.x);
     let p = Vec3::new(k.y * l.z - k.z * l.y, k.z * l.x - k.x * l.z, m - n);
     let apz = p.z.abs();
-    // Negated comparisons so that NaN is rejected.
+    // Both comparisons are false for NaN, so NaN is rejected.
     let accurate = apz > (GRAZING_EPS * (m.abs() + n.abs())).max(f32::MIN_POSITIVE);
     let bounded = p.x.abs().max(p.y.abs()) < UV_LIMIT * apz;
     (accurate && bounded).then_some((k, l, p))
@@ -97,7 +97,9 @@ pub fn intersect(t: &SplatTransform, px: f32, py: f32) -> Option<PlaneHit> {
     let (u, v) = (p.x * inv, p.y * inv);
     let depth = u * t.tw.x + v * t.tw.y + t.tw.z;
     // Written so that NaN and +inf depths are rejected too.
-    (depth >= NEAR_PLANE && depth < f32::INFINITY).then_some(PlaneHit { u, v, depth })
+    (NEAR_PLANE..f32::INFINITY)
+        .contains(&depth)
+        .then_some(PlaneHit { u, v, depth })
 }
 
 /// Backward pass of [`intersect`]: given `∂L/∂u`, `∂L/∂v`, `∂L/∂depth` at the hit of pixel
@@ -125,7 +127,7 @@ pub fn intersect_vjp(t: &SplatTransform, px: f32, py: f32, d_u: f32, d_v: f32, d
     let inv = 1.0 / p.z;
     let (u, v) = (p.x * inv, p.y * inv);
     let depth = u * t.tw.x + v * t.tw.y + t.tw.z;
-    if !(depth >= NEAR_PLANE && depth < f32::INFINITY) {
+    if !(NEAR_PLANE..f32::INFINITY).contains(&depth) {
         return SplatTransform::default();
     }
     let gu = d_u + d_depth * t.tw.x;

@@ -29,8 +29,8 @@ pub const QUAT_NORM_SQ_MIN: f32 = 1e-8;
 #[inline]
 fn normalise(q: [f32; 4]) -> Option<([f32; 4], f32)> {
     let n2 = q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3];
-    // `!(n2 >= MIN)` is also true for NaN; an infinite component gives n2 = inf.
-    if !(n2 >= QUAT_NORM_SQ_MIN) || !n2.is_finite() {
+    // Rejects NaN too; an infinite component (or an overflowing sum) gives n2 = inf.
+    if !(QUAT_NORM_SQ_MIN..f32::INFINITY).contains(&n2) {
         return None;
     }
     let inv = 1.0 / n2.sqrt();

@@ -95,7 +95,8 @@ pub struct ProjectedSplat {
     /// Half extent of the axis-aligned bounding box of the projected unit disk (same caveat as
     /// [`ProjectedSplat::centre`]; negative squared extents are clamped to 0 as in the reference).
     /// Equal to the reference's closed form in exact arithmetic but evaluated without its
-    /// cancellation (see `docs/numerics-geometry.md`).
+    /// cancellation (see `docs/numerics-geometry.md`). `+inf` (with `centre` the projected 3D
+    /// centre) when the box overflows f32 because the disk grazes the camera plane.
     pub half_extent: Vec2,
     /// `exp(log_scales)`: the half side lengths `(s_u, s_v)` in world units.
     pub scales: Vec2,
@@ -182,10 +183,13 @@ fn transform_of(a: Vec3, b: Vec3, c: Vec3, camera: &Camera) -> SplatTransform {
 ///
 /// Returns `None` (culled) when
 /// - the centre's view depth is `≤` [`NEAR_PLANE`] (or NaN),
+/// - any entry of `T` or the normal is not finite (NaN or overflowing inputs, e.g. a log-scale
+///   above 88.7),
 /// - `cos θ = −(R_cw·n)·p_view` is exactly 0 (camera exactly in the billboard's plane: `T` is
 ///   singular),
-/// - `d = tw.x² + tw.y² − tw.z²` is exactly 0 (the unit-disk box formula divides by it),
-/// - any entry of `T`, the normal or the box is not finite (NaN or overflowing inputs).
+/// - `d = tw.x² + tw.y² − tw.z²` is exactly 0 (the unit-disk box formula divides by it).
+///
+/// These are the reference's culls (§3.1, §3.5 of the spec) plus the finiteness check.
 ///
 /// ```
 /// use bbsplat::camera::Camera;
@@ -207,39 +211,33 @@ pub fn project_splat(
     quaternion: [f32; 4],
     camera: &Camera,
 ) -> Option<ProjectedSplat> {
+    project_with_geometry(position, log_scales, quaternion, camera).map(|(p, _)| p)
+}
+
+/// [`project_splat`], also returning the intermediate geometry for the backward pass.
+#[inline]
+fn project_with_geometry(
+    position: Vec3,
+    log_scales: Vec2,
+    quaternion: [f32; 4],
+    camera: &Camera,
+) -> Option<(ProjectedSplat, Geometry)> {
     let g = geometry(position, log_scales, quaternion, camera);
-    // `!(z > NEAR)` also culls NaN depths.
-    if !(g.c.z > NEAR_PLANE) {
+    if g.c.z.is_nan() || g.c.z <= NEAR_PLANE {
         return None;
     }
     let transform = transform_of(g.a, g.b, g.c, camera);
+    let SplatTransform { tu, tv, tw } = transform;
+    if !(tu.is_finite() && tv.is_finite() && tw.is_finite() && g.normal_view.is_finite()) {
+        return None;
+    }
     let cos_theta = -g.normal_view.dot(g.c);
     if cos_theta == 0.0 {
         return None;
     }
     let normal_sign = if cos_theta > 0.0 { 1.0 } else { -1.0 };
-    let SplatTransform { tu, tv, tw } = transform;
-    let d = tw.x * tw.x + tw.y * tw.y - tw.z * tw.z;
-    if d == 0.0 {
-        return None;
-    }
-    let f = Vec3::new(1.0, 1.0, -1.0) / d;
-    let centre = Vec2::new((f * tu).dot(tw), (f * tv).dot(tw));
-    // The reference evaluates h² = centre² − Σ f_k·Tu_k², which cancels catastrophically for small
-    // splats (absolute error ~√ε·|centre| ≈ 3.5e-4·|centre| px). By Cauchy-Binet the same quantity
-    // is (m.x² + m.y² − m.z²)/d² with m = Tu × Tw, whose terms do not cancel.
-    let extent = |m: Vec3| (m.x * m.x + m.y * m.y - m.z * m.z).max(0.0).sqrt() / d.abs();
-    let half_extent = Vec2::new(extent(tu.cross(tw)), extent(tv.cross(tw)));
-    let finite = tu.is_finite()
-        && tv.is_finite()
-        && tw.is_finite()
-        && g.normal_view.is_finite()
-        && centre.is_finite()
-        && half_extent.is_finite();
-    if !finite {
-        return None;
-    }
-    Some(ProjectedSplat {
+    let (centre, half_extent) = unit_disk_box(&transform)?;
+    let projected = ProjectedSplat {
         transform,
         normal_view: g.normal_view * normal_sign,
         normal_sign,
@@ -247,7 +245,38 @@ pub fn project_splat(
         centre,
         half_extent,
         scales: g.scales,
-    })
+    };
+    Some((projected, g))
+}
+
+/// The reference's screen box of the projected unit disk (2DGS closed form), or `None` when
+/// `d = tw.x² + tw.y² − tw.z²` is exactly 0.
+///
+/// Evaluated in f64 from the f32 entries of `T` (once per billboard and view) and rounded once:
+/// - the reference's `h² = centre² − Σ f_k·Tu_k²` cancels catastrophically for small splats
+///   (absolute error ~`√ε·|centre|`, i.e. ~0.01 px at 40 px from the origin in f32). By
+///   Cauchy-Binet it equals `(m.x² + m.y² − m.z²)/d²` with `m = Tu × Tw`, whose terms do not
+///   cancel; that form is used;
+/// - when `d` is merely tiny (the unit disk grazes the camera plane) the box can overflow f32:
+///   then the centre falls back to the projected 3D centre and the half extent to `+inf` (a
+///   conservative box), never NaN.
+#[inline]
+fn unit_disk_box(t: &SplatTransform) -> Option<(Vec2, Vec2)> {
+    let (tu, tv, tw) = (t.tu.as_dvec3(), t.tv.as_dvec3(), t.tw.as_dvec3());
+    let d = tw.x * tw.x + tw.y * tw.y - tw.z * tw.z;
+    if d == 0.0 {
+        return None;
+    }
+    let f = DVec3::new(1.0, 1.0, -1.0) / d;
+    let centre = DVec2::new((f * tu).dot(tw), (f * tv).dot(tw)).as_vec2();
+    let extent = |m: DVec3| ((m.x * m.x + m.y * m.y - m.z * m.z).max(0.0).sqrt() / d.abs()) as f32;
+    let half_extent = Vec2::new(extent(tu.cross(tw)), extent(tv.cross(tw)));
+    if centre.is_finite() && half_extent.is_finite() {
+        Some((centre, half_extent))
+    } else {
+        // tw.z is the centre's view depth (> NEAR_PLANE here).
+        Some((Vec2::new(t.tu.z, t.tv.z) / t.tw.z, Vec2::splat(f32::INFINITY)))
+    }
 }
 
 /// Backward pass of [`project_splat`]: gradients of a loss with respect to position, log-scales and
@@ -282,10 +311,9 @@ pub fn project_splat_vjp(
     d_transform: &SplatTransform,
     d_normal_view: Vec3,
 ) -> SplatGrads {
-    let Some(projected) = project_splat(position, log_scales, quaternion, camera) else {
+    let Some((projected, g)) = project_with_geometry(position, log_scales, quaternion, camera) else {
         return SplatGrads::default();
     };
-    let g = geometry(position, log_scales, quaternion, camera);
     let SplatTransform { tu: du, tv: dv, tw: dw } = *d_transform;
     // T = K·M with M = [a | b | c]: ∂L/∂M = Kᵀ·∂L/∂T. Row 0 of ∂L/∂M is fx·du, row 1 fy·dv,
     // row 2 cx·du + cy·dv + dw; column j of M is a, b, c.

@@ -1,0 +1,48 @@
+//! Initialisation benches: farthest point sampling and the Fibonacci sphere.
+//!
+//! `cargo bench --bench init -- --warm-up-time 1 --measurement-time 3`
+
+use bbsplat::init::fibonacci::{fibonacci_sphere, sky_radius};
+use bbsplat::init::fps::{farthest_point_sampling, farthest_point_sampling_dense};
+use bbsplat::rng::Rng;
+use criterion::{BenchmarkId, Criterion, black_box, criterion_group, criterion_main};
+use glam::Vec3;
+
+fn cloud(n: usize) -> Vec<Vec3> {
+    let mut rng = Rng::new(42);
+    (0..n)
+        .map(|_| Vec3::new(rng.range(-10.0, 10.0), rng.range(-10.0, 10.0), rng.range(-3.0, 3.0)))
+        .collect()
+}
+
+fn fps(c: &mut Criterion) {
+    let mut group = c.benchmark_group("fps");
+    group.sample_size(10);
+    let points = cloud(100_000);
+    for k in [1_000usize, 10_000] {
+        group.bench_with_input(BenchmarkId::new("pruned_n100k", k), &k, |b, &k| {
+            b.iter(|| farthest_point_sampling(black_box(&points), k).unwrap())
+        });
+    }
+    // The O(N·k) oracle, for comparison (10k picks take seconds: 1k only).
+    group.bench_with_input(BenchmarkId::new("dense_n100k", 1_000), &1_000, |b, &k| {
+        b.iter(|| farthest_point_sampling_dense(black_box(&points), k).unwrap())
+    });
+    // The reference's scale: 300k SfM points down to a 140k budget.
+    let big = cloud(300_000);
+    group.bench_with_input(BenchmarkId::new("pruned_n300k", 140_000), &140_000, |b, &k| {
+        b.iter(|| farthest_point_sampling(black_box(&big), k).unwrap())
+    });
+    group.finish();
+}
+
+fn fibonacci(c: &mut Criterion) {
+    c.bench_function("fibonacci_sphere/10k", |b| {
+        b.iter(|| fibonacci_sphere(black_box(10_000), 100.0, Vec3::ZERO))
+    });
+    let points = cloud(300_000);
+    c.bench_function("sky_radius_robust/300k", |b| b.iter(|| sky_radius(black_box(&points))));
+}
+
+criterion_group!(benches, fps, fibonacci);
+criterion_main!(benches);

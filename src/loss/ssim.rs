@@ -1,0 +1,633 @@
+//! Structural similarity (SSIM) as Inria 3DGS and BBSplat train and evaluate with it, and its
+//! analytic gradient with respect to the first image.
+//!
+//! # Definition
+//!
+//! Per channel, with `G` the 11×11 Gaussian window (σ = 1.5, normalised to sum 1; separable,
+//! the outer product of the normalised 1-D window [`gaussian_window`]) and `*` the 2-D
+//! correlation with zero padding:
+//!
+//! ```text
+//! μa = G*a   μb = G*b   σa² = G*(a²) − μa²   σb² = G*(b²) − μb²   σab = G*(a·b) − μa·μb
+//! S  = (2·μa·μb + C1)·(2·σab + C2) / ((μa² + μb² + C1)·(σa² + σb² + C2)),  C1 = 0.01², C2 = 0.03²
+//! ```
+//!
+//! and `SSIM` is the mean of the map `S` over all map pixels and channels. The constants assume
+//! a data range of 1.
+//!
+//! # Padding (the border)
+//!
+//! - [`Padding::Same`] (reference, Inria `conv2d(padding = 5)`): the map has one value per
+//!   image pixel, windows reaching past the border see zeros there. Near the border the
+//!   window mass inside the image is below 1, which lowers μ and inflates σ² (zeros look like
+//!   structure), so border values are not those of a cropped image.
+//! - [`Padding::Valid`] (gsplat's fused SSIM): only the `(w − 10) × (h − 10)` positions whose
+//!   window lies inside the image. Its values equal the interior of the "same" map bit for bit.
+//!   Needs `w, h ≥ 11`.
+//!
+//! # Gradient
+//!
+//! With `D = B1·B2`, `A1 = 2μaμb + C1`, `A2 = 2σab + C2`, `B1 = μa² + μb² + C1`,
+//! `B2 = σa² + σb² + C2` and the raw moments `Saa = G*(a²)`, `Sab = G*(a·b)`, the partials of
+//! one map value (with `b` constant) are
+//!
+//! ```text
+//! ∂S/∂μa  = 2μb·(A2 − A1)/D − 2μa·S·(1/B1 − 1/B2)
+//! ∂S/∂Saa = −S/B2
+//! ∂S/∂Sab = 2·A1/D
+//! ```
+//!
+//! and the gradient for a map cotangent `ω` is `Gᵀ*(ω·∂S/∂μa) + 2a·Gᵀ*(ω·∂S/∂Saa) +
+//! b·Gᵀ*(ω·∂S/∂Sab)`, where `Gᵀ*` is the adjoint of the padded correlation (the same symmetric
+//! window, shifted back for "valid"). For the mean, `ω = d_ssim / (number of map values)`.
+//!
+//! # Precision
+//!
+//! Inputs and gradients are f32, but the moments, the map values and the backward are computed
+//! in **f64**. The variance `G*(a²) − μa²` cancels catastrophically where the image is flat: in
+//! f32 the error of the difference is ~1e-7 against `σ² + C2 ≈ 1e-3`, which makes the map
+//! wrong by up to ~1e-4 relative (enough to hide or fake gradient errors in a finite-difference
+//! check), while in f64 it is ~1e-13. The f64 passes cost about twice the f32 ones.
+//!
+//! # Cost and determinism
+//!
+//! Two 11-tap 1-D passes per moment (5 moments forward, 3 backward), i.e. `O(pixels·11)` per
+//! map, row by row in parallel with rayon. Every output value is accumulated by
+//! one thread in a fixed tap order and the mean is summed in f64 per row and then over rows in
+//! order, so results are identical for any number of threads.
+//!
+//! ```
+//! use bbsplat::loss::ssim::{Padding, ssim, ssim_vjp};
+//! let (w, h, c) = (12, 11, 3);
+//! let a: Vec<f32> = (0..w * h * c).map(|i| ((i * 37) % 101) as f32 / 100.0).collect();
+//! assert!((ssim(&a, &a, w, h, c, Padding::Same).unwrap() - 1.0).abs() < 1e-12);
+//! let b: Vec<f32> = a.iter().map(|v| 1.0 - v).collect();
+//! let s = ssim(&a, &b, w, h, c, Padding::Valid).unwrap();
+//! assert!(s < 0.0); // anti-correlated
+//! let g = ssim_vjp(&a, &b, w, h, c, Padding::Valid, 1.0).unwrap();
+//! assert_eq!(g.len(), a.len());
+//! ```
+
+use super::LossError;
+use rayon::prelude::*;
+
+/// Side of the square window.
+pub const WINDOW_SIZE: usize = 11;
+/// Half side of the window: the "same" zero padding width.
+pub const RADIUS: usize = 5;
+/// Standard deviation of the Gaussian window in pixels.
+pub const SIGMA: f64 = 1.5;
+/// Luminance stabiliser `(0.01·L)²` for data range `L = 1`.
+pub const C1: f64 = 0.01 * 0.01;
+/// Contrast stabiliser `(0.03·L)²` for data range `L = 1`.
+pub const C2: f64 = 0.03 * 0.03;
+
+/// How windows at the image border are handled (see the [module documentation](self)).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Padding {
+    /// Zero padding of 5 pixels: one map value per pixel (reference, the default).
+    #[default]
+    Same,
+    /// No padding: only windows fully inside the image, `(w − 10) × (h − 10)` map values.
+    Valid,
+}
+
+/// The normalised 1-D Gaussian window: `exp(−(k − 5)²/(2σ²))` for `k in 0..11`, divided by
+/// its sum, in f64. The 2-D window is its outer product.
+pub fn gaussian_window() -> [f64; WINDOW_SIZE] {
+    let raw: [f64; WINDOW_SIZE] = std::array::from_fn(|k| {
+        let d = k as f64 - RADIUS as f64;
+        (-d * d / (2.0 * SIGMA * SIGMA)).exp()
+    });
+    let sum: f64 = raw.iter().sum();
+    raw.map(|v| v / sum)
+}
+
+/// Size `(width, height)` of the SSIM map of a `width × height` image.
+///
+/// # Errors
+///
+/// [`LossError::Empty`] for a zero size, [`LossError::TooSmallForValid`] for "valid" padding on
+/// an image smaller than 11×11.
+pub fn map_size(width: usize, height: usize, padding: Padding) -> Result<(usize, usize), LossError> {
+    Ok(Geometry::new(width, height, 1, padding)?.map_dims())
+}
+
+/// Mean SSIM of `a` against `b` (interleaved, row-major, `width × height × channels`).
+///
+/// # Errors
+///
+/// [`LossError`] if a buffer does not hold `width·height·channels` values, the image is empty,
+/// or it is smaller than 11×11 with "valid" padding.
+pub fn ssim(
+    a: &[f32],
+    b: &[f32],
+    width: usize,
+    height: usize,
+    channels: usize,
+    padding: Padding,
+) -> Result<f64, LossError> {
+    let geo = Geometry::new(width, height, channels, padding)?;
+    geo.check(a, b)?;
+    let row_sums: Vec<f64> = (0..geo.oh)
+        .into_par_iter()
+        .map_init(
+            || Scratch::new(&geo),
+            |scratch, oy| {
+                let [ma, mb, saa, sbb, sab] = scratch.row_moments(a, b, &geo, oy);
+                (0..geo.out_row())
+                    .map(|j| ssim_value(ma[j], mb[j], saa[j], sbb[j], sab[j]))
+                    .sum::<f64>()
+            },
+        )
+        .collect();
+    Ok(row_sums.iter().sum::<f64>() / geo.map_len() as f64)
+}
+
+/// The SSIM map: `map_width × map_height × channels` values, interleaved and row-major like
+/// the images (map size from [`map_size`]).
+///
+/// # Errors
+///
+/// As [`ssim`].
+pub fn ssim_map(
+    a: &[f32],
+    b: &[f32],
+    width: usize,
+    height: usize,
+    channels: usize,
+    padding: Padding,
+) -> Result<Vec<f32>, LossError> {
+    let geo = Geometry::new(width, height, channels, padding)?;
+    geo.check(a, b)?;
+    let mut map = vec![0.0f32; geo.map_len()];
+    map.par_chunks_mut(geo.out_row()).enumerate().for_each_init(
+        || Scratch::new(&geo),
+        |scratch, (oy, row)| {
+            let [ma, mb, saa, sbb, sab] = scratch.row_moments(a, b, &geo, oy);
+            for (j, s) in row.iter_mut().enumerate() {
+                *s = ssim_value(ma[j], mb[j], saa[j], sbb[j], sab[j]) as f32;
+            }
+        },
+    );
+    Ok(map)
+}
+
+/// `d_ssim · ∂SSIM/∂a`: the gradient of the mean SSIM with respect to `a`, scaled by the
+/// upstream derivative `d_ssim` of the (f64) scalar SSIM (`b` is constant). Same layout as `a`.
+///
+/// # Errors
+///
+/// As [`ssim`].
+pub fn ssim_vjp(
+    a: &[f32],
+    b: &[f32],
+    width: usize,
+    height: usize,
+    channels: usize,
+    padding: Padding,
+    d_ssim: f64,
+) -> Result<Vec<f32>, LossError> {
+    Ok(ssim_with_grad(a, b, width, height, channels, padding, d_ssim)?.1)
+}
+
+/// The mean SSIM and `d_ssim · ∂SSIM/∂a` in one pass (the forward work is shared).
+///
+/// # Errors
+///
+/// As [`ssim`].
+pub fn ssim_with_grad(
+    a: &[f32],
+    b: &[f32],
+    width: usize,
+    height: usize,
+    channels: usize,
+    padding: Padding,
+    d_ssim: f64,
+) -> Result<(f64, Vec<f32>), LossError> {
+    let geo = Geometry::new(width, height, channels, padding)?;
+    geo.check(a, b)?;
+    let weight = d_ssim / geo.map_len() as f64;
+    let (sum, grad) = value_and_grad(a, b, &geo, Cotangent::Uniform(weight), ssim_partials);
+    Ok((sum / geo.map_len() as f64, grad))
+}
+
+/// The vector-Jacobian product of [`ssim_map`]: `Σ_p d_map[p]·∂S_p/∂a`, for a cotangent
+/// `d_map` with the map's layout and size.
+///
+/// # Errors
+///
+/// As [`ssim`], and [`LossError::BadLength`] if `d_map` does not match the map size.
+pub fn ssim_map_vjp(
+    a: &[f32],
+    b: &[f32],
+    width: usize,
+    height: usize,
+    channels: usize,
+    padding: Padding,
+    d_map: &[f32],
+) -> Result<Vec<f32>, LossError> {
+    let geo = Geometry::new(width, height, channels, padding)?;
+    geo.check(a, b)?;
+    if d_map.len() != geo.map_len() {
+        return Err(LossError::BadLength {
+            which: "d_map",
+            expected: geo.map_len(),
+            got: d_map.len(),
+        });
+    }
+    Ok(value_and_grad(a, b, &geo, Cotangent::Map(d_map), ssim_partials).1)
+}
+
+/// Number of moment maps: μa, μb, G*(a²), G*(b²), G*(a·b).
+const MOMENTS: usize = 5;
+/// Number of backward maps: ∂/∂μa, ∂/∂Saa, ∂/∂Sab.
+const PARTIALS: usize = 3;
+
+/// Image and map dimensions for one call.
+#[derive(Clone, Copy, Debug)]
+struct Geometry {
+    w: usize,
+    h: usize,
+    c: usize,
+    /// Map width and height.
+    ow: usize,
+    oh: usize,
+    /// Map pixel `i` is centred on image pixel `i + off` (0 for "same", 5 for "valid").
+    off: isize,
+    g: [f64; WINDOW_SIZE],
+}
+
+impl Geometry {
+    fn new(w: usize, h: usize, c: usize, padding: Padding) -> Result<Self, LossError> {
+        if w == 0 || h == 0 || c == 0 {
+            return Err(LossError::Empty {
+                width: w,
+                height: h,
+                channels: c,
+            });
+        }
+        let (ow, oh, off) = match padding {
+            Padding::Same => (w, h, 0),
+            Padding::Valid => {
+                if w < WINDOW_SIZE || h < WINDOW_SIZE {
+                    return Err(LossError::TooSmallForValid { width: w, height: h });
+                }
+                (w - 2 * RADIUS, h - 2 * RADIUS, RADIUS as isize)
+            }
+        };
+        Ok(Self {
+            w,
+            h,
+            c,
+            ow,
+            oh,
+            off,
+            g: gaussian_window(),
+        })
+    }
+
+    fn check(&self, a: &[f32], b: &[f32]) -> Result<(), LossError> {
+        let expected = self.w * self.h * self.c;
+        for (which, buf) in [("a", a), ("b", b)] {
+            if buf.len() != expected {
+                return Err(LossError::BadLength {
+                    which,
+                    expected,
+                    got: buf.len(),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    fn map_dims(&self) -> (usize, usize) {
+        (self.ow, self.oh)
+    }
+
+    /// Values per image row.
+    fn in_row(&self) -> usize {
+        self.w * self.c
+    }
+
+    /// Values per map row.
+    fn out_row(&self) -> usize {
+        self.ow * self.c
+    }
+
+    fn map_len(&self) -> usize {
+        self.ow * self.oh * self.c
+    }
+}
+
+/// `out[i] = Σ_k g[k]·input[i + k − 5 + off]` over pixels (each `stride` values), zero outside
+/// `0..n_in`; `out` holds `n_out` pixels. Taps are added to 0 in increasing `k`, skipping those
+/// outside, so an output whose window is inside the image gets the same bits whatever the
+/// padding.
+fn correlate_row(input: &[f64], out: &mut [f64], n_in: usize, stride: usize, off: isize, g: &[f64; WINDOW_SIZE]) {
+    let n_out = out.len() / stride;
+    let r = RADIUS as isize;
+    // Output pixels lo..hi have all 11 taps inside 0..n_in.
+    let lo = (r - off).clamp(0, n_out as isize) as usize;
+    let hi = (n_in as isize - r - off).clamp(lo as isize, n_out as isize) as usize;
+    for i in (0..lo).chain(hi..n_out) {
+        for ch in 0..stride {
+            let mut acc = 0.0;
+            for (k, &gk) in g.iter().enumerate() {
+                let x = i as isize + k as isize - r + off;
+                if x >= 0 && x < n_in as isize {
+                    acc += gk * input[x as usize * stride + ch];
+                }
+            }
+            out[i * stride + ch] = acc;
+        }
+    }
+    if hi > lo {
+        let len = (hi - lo) * stride;
+        let start = (lo as isize + off - r) as usize * stride;
+        let taps: [&[f64]; WINDOW_SIZE] = std::array::from_fn(|k| &input[start + k * stride..][..len]);
+        for (j, o) in out[lo * stride..hi * stride].iter_mut().enumerate() {
+            let mut acc = 0.0;
+            for (tap, &gk) in taps.iter().zip(g) {
+                acc += gk * tap[j];
+            }
+            *o = acc;
+        }
+    }
+}
+
+/// Per-thread buffers for one map row of moments.
+struct Scratch {
+    /// The vertical pass of a, b, a², b², a·b: five image-width rows.
+    vertical: Vec<f64>,
+    /// The five moment rows of the map: μa, μb, Saa, Sbb, Sab.
+    moments: Vec<f64>,
+}
+
+impl Scratch {
+    fn new(geo: &Geometry) -> Self {
+        Self {
+            vertical: vec![0.0; MOMENTS * geo.in_row()],
+            moments: vec![0.0; MOMENTS * geo.out_row()],
+        }
+    }
+
+    /// The five moments of map row `oy`: the vertical pass over the products (formed on the
+    /// fly, in f64, where the products of f32 values are exact), then the horizontal pass.
+    fn row_moments(&mut self, a: &[f32], b: &[f32], geo: &Geometry, oy: usize) -> [&[f64]; MOMENTS] {
+        let lin = geo.in_row();
+        self.vertical.fill(0.0);
+        {
+            let [v0, v1, v2, v3, v4] = split5_mut(&mut self.vertical, lin);
+            for (k, &gk) in geo.g.iter().enumerate() {
+                let y = oy as isize + k as isize - RADIUS as isize + geo.off;
+                if y < 0 || y >= geo.h as isize {
+                    continue;
+                }
+                let y = y as usize;
+                let (ra, rb) = (&a[y * lin..(y + 1) * lin], &b[y * lin..(y + 1) * lin]);
+                for j in 0..lin {
+                    let (x, z) = (ra[j] as f64, rb[j] as f64);
+                    v0[j] += gk * x;
+                    v1[j] += gk * z;
+                    v2[j] += gk * (x * x);
+                    v3[j] += gk * (z * z);
+                    v4[j] += gk * (x * z);
+                }
+            }
+        }
+        let lout = geo.out_row();
+        for (src, dst) in self.vertical.chunks(lin).zip(self.moments.chunks_mut(lout)) {
+            correlate_row(src, dst, geo.w, geo.c, geo.off, &geo.g);
+        }
+        split5(&self.moments, lout)
+    }
+}
+
+/// `out[m] = Σ_k g[k]·rows[oy + k − 5 + off][m]` for each of the `maps` interleaved maps of a
+/// buffer laid out `[row][map][len]` with `n_rows` rows; rows outside are zero.
+#[allow(clippy::too_many_arguments)]
+fn vertical_pass(
+    rows: &[f64],
+    maps: usize,
+    len: usize,
+    n_rows: usize,
+    oy: usize,
+    off: isize,
+    g: &[f64; WINDOW_SIZE],
+    out: &mut [f64],
+) {
+    out.fill(0.0);
+    for (k, &gk) in g.iter().enumerate() {
+        let y = oy as isize + k as isize - RADIUS as isize + off;
+        if y < 0 || y >= n_rows as isize {
+            continue;
+        }
+        let src = &rows[y as usize * maps * len..(y as usize + 1) * maps * len];
+        for (o, &x) in out.iter_mut().zip(src) {
+            *o += gk * x;
+        }
+    }
+}
+
+fn split5(buf: &[f64], len: usize) -> [&[f64]; MOMENTS] {
+    std::array::from_fn(|m| &buf[m * len..(m + 1) * len])
+}
+
+fn split5_mut(buf: &mut [f64], len: usize) -> [&mut [f64]; MOMENTS] {
+    let mut it = buf.chunks_mut(len);
+    std::array::from_fn(|_| it.next().expect("five rows"))
+}
+
+/// One SSIM map value from the five moments.
+#[inline]
+fn ssim_value(ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64) -> f64 {
+    let (a1, a2, b1, b2) = terms(ma, mb, saa, sbb, sab);
+    (a1 * a2) / (b1 * b2)
+}
+
+/// `(A1, A2, B1, B2)` of the SSIM formula.
+#[inline]
+fn terms(ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64) -> (f64, f64, f64, f64) {
+    let (maa, mbb, mab) = (ma * ma, mb * mb, ma * mb);
+    let a1 = 2.0 * mab + C1;
+    let a2 = 2.0 * (sab - mab) + C2;
+    let b1 = maa + mbb + C1;
+    let b2 = (saa - maa) + (sbb - mbb) + C2;
+    (a1, a2, b1, b2)
+}
+
+/// `[S, ∂S/∂μa, ∂S/∂Saa, ∂S/∂Sab]` for one map value.
+#[inline]
+fn ssim_partials(ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64) -> [f64; 4] {
+    let (a1, a2, b1, b2) = terms(ma, mb, saa, sbb, sab);
+    let d = b1 * b2;
+    // S exactly as `ssim_value` computes it, so forward-only and forward+backward agree.
+    let s = (a1 * a2) / d;
+    // One more division: 1/B1 = B2/D and 1/B2 = B1/D.
+    let inv_d = 1.0 / d;
+    let d_mu = 2.0 * (mb * (a2 - a1) - ma * s * (b2 - b1)) * inv_d;
+    let d_saa = -s * b1 * inv_d;
+    let d_sab = 2.0 * a1 * inv_d;
+    [s, d_mu, d_saa, d_sab]
+}
+
+/// The cotangent of the map: one weight for all values (the mean) or one per value.
+#[derive(Clone, Copy)]
+enum Cotangent<'a> {
+    Uniform(f64),
+    Map(&'a [f32]),
+}
+
+/// Forward and backward in one go: returns `(Σ S over the map, ∂(Σ ω·S)/∂a)`.
+///
+/// `partials` computes `[S, ∂S/∂μa, ∂S/∂Saa, ∂S/∂Sab]` from the moments (a parameter so that
+/// tests can inject faults).
+fn value_and_grad<P>(a: &[f32], b: &[f32], geo: &Geometry, cot: Cotangent<'_>, partials: P) -> (f64, Vec<f32>)
+where
+    P: Fn(f64, f64, f64, f64, f64) -> [f64; 4] + Sync,
+{
+    let lout = geo.out_row();
+    let lin = geo.in_row();
+
+    // Per map row: the sum of S, and the three weighted partial maps.
+    let mut dbuf = vec![0.0f64; geo.oh * PARTIALS * lout];
+    let mut row_sums = vec![0.0f64; geo.oh];
+    dbuf.par_chunks_mut(PARTIALS * lout)
+        .zip(row_sums.par_iter_mut())
+        .enumerate()
+        .for_each_init(
+            || Scratch::new(geo),
+            |scratch, (oy, (drow, sum))| {
+                let [ma, mb, saa, sbb, sab] = scratch.row_moments(a, b, geo, oy);
+                let (d_mu, rest) = drow.split_at_mut(lout);
+                let (d_saa, d_sab) = rest.split_at_mut(lout);
+                let mut acc = 0.0f64;
+                for j in 0..lout {
+                    let [s, p_mu, p_saa, p_sab] = partials(ma[j], mb[j], saa[j], sbb[j], sab[j]);
+                    let w = match cot {
+                        Cotangent::Uniform(w) => w,
+                        Cotangent::Map(m) => m[oy * lout + j] as f64,
+                    };
+                    acc += s;
+                    d_mu[j] = w * p_mu;
+                    d_saa[j] = w * p_saa;
+                    d_sab[j] = w * p_sab;
+                }
+                *sum = acc;
+            },
+        );
+
+    // Per image row: the adjoint of the vertical pass (map rows to image rows, shift −off),
+    // the adjoint of the horizontal pass, then the chain rule through a, a², a·b.
+    let mut grad = vec![0.0f32; geo.h * lin];
+    grad.par_chunks_mut(lin).enumerate().for_each_init(
+        || (vec![0.0f64; PARTIALS * lout], vec![0.0f64; PARTIALS * lin]),
+        |(vertical, horizontal), (y, out)| {
+            vertical_pass(&dbuf, PARTIALS, lout, geo.oh, y, -geo.off, &geo.g, vertical);
+            for (src, dst) in vertical.chunks(lout).zip(horizontal.chunks_mut(lin)) {
+                correlate_row(src, dst, geo.ow, geo.c, -geo.off, &geo.g);
+            }
+            let (t_mu, rest) = horizontal.split_at(lin);
+            let (t_saa, t_sab) = rest.split_at(lin);
+            let (ra, rb) = (&a[y * lin..(y + 1) * lin], &b[y * lin..(y + 1) * lin]);
+            for j in 0..lin {
+                out[j] = (t_mu[j] + 2.0 * ra[j] as f64 * t_saa[j] + rb[j] as f64 * t_sab[j]) as f32;
+            }
+        },
+    );
+    (row_sums.iter().sum(), grad)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gradcheck::{GradTolerance, StepRule, compare, numerical_gradient};
+    use crate::rng::Rng;
+
+    fn image(n: usize, seed: u64) -> Vec<f32> {
+        let mut rng = Rng::new(seed);
+        (0..n).map(|_| rng.range(0.05, 0.95)).collect()
+    }
+
+    /// FD check of `value_and_grad` with the given partials against the correct forward.
+    fn fd_check<P>(partials: P, padding: Padding, seed: u64) -> crate::gradcheck::GradReport
+    where
+        P: Fn(f64, f64, f64, f64, f64) -> [f64; 4] + Sync,
+    {
+        let (w, h, c) = (13, 12, 2);
+        let a = image(w * h * c, seed);
+        let b = image(w * h * c, seed + 100);
+        let geo = Geometry::new(w, h, c, padding).unwrap();
+        // The loss is the sum of the map (M·SSIM) so that gradients are O(1).
+        let m = geo.map_len() as f64;
+        let analytic: Vec<f64> = value_and_grad(&a, &b, &geo, Cotangent::Uniform(1.0), partials)
+            .1
+            .iter()
+            .map(|&g| g as f64)
+            .collect();
+        let idx: Vec<usize> = (0..a.len()).collect();
+        let numeric = numerical_gradient(
+            |x| ssim(x, &b, w, h, c, padding).unwrap() * m,
+            &a,
+            &idx,
+            StepRule::default(),
+        );
+        compare(&analytic, &numeric, &GradTolerance::default())
+    }
+
+    #[test]
+    fn correct_partials_pass() {
+        for padding in [Padding::Same, Padding::Valid] {
+            let r = fd_check(ssim_partials, padding, 1);
+            assert!(r.passed(), "{padding:?}: {r}");
+        }
+    }
+
+    #[test]
+    fn dropping_the_covariance_term_fails() {
+        // Forget that σab = Sab − μa·μb depends on μa (the −2μb·A1/D part of ∂S/∂μa).
+        let broken = |ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64| {
+            let [s, d_mu, d_saa, d_sab] = ssim_partials(ma, mb, saa, sbb, sab);
+            let (a1, _, b1, b2) = terms(ma, mb, saa, sbb, sab);
+            [s, d_mu + 2.0 * mb * a1 / (b1 * b2), d_saa, d_sab]
+        };
+        for padding in [Padding::Same, Padding::Valid] {
+            let r = fd_check(broken, padding, 2);
+            assert!(!r.passed(), "{padding:?}: {r}");
+        }
+    }
+
+    #[test]
+    fn dropping_the_sab_gradient_fails() {
+        let broken = |ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64| {
+            let [s, d_mu, d_saa, _] = ssim_partials(ma, mb, saa, sbb, sab);
+            [s, d_mu, d_saa, 0.0]
+        };
+        let r = fd_check(broken, Padding::Same, 3);
+        assert!(!r.passed(), "{r}");
+    }
+
+    #[test]
+    fn one_percent_scale_fails() {
+        let broken = |ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64| {
+            let [s, d_mu, d_saa, d_sab] = ssim_partials(ma, mb, saa, sbb, sab);
+            [s, 1.01 * d_mu, 1.01 * d_saa, 1.01 * d_sab]
+        };
+        for seed in 0..4 {
+            let r = fd_check(broken, Padding::Same, 10 + seed);
+            assert!(!r.passed(), "seed {seed}: {r}");
+        }
+    }
+
+    #[test]
+    fn window_is_normalised_and_symmetric() {
+        let g = gaussian_window();
+        let sum: f64 = g.iter().sum();
+        assert!((sum - 1.0).abs() < 1e-15, "{sum}");
+        for k in 0..WINDOW_SIZE {
+            assert_eq!(g[k], g[WINDOW_SIZE - 1 - k]);
+        }
+        assert!(g[5] > g[4] && g[0] > 0.0);
+    }
+}
