@@ -147,7 +147,7 @@ fn shade_pixel(
 }
 
 /// Splits `data` into consecutive mutable chunks of the given lengths.
-pub(crate) fn split_by_lengths<'a, T>(mut data: &'a mut [T], lengths: impl Iterator<Item = usize>) -> Vec<&'a mut [T]> {
+pub(crate) fn split_by_lengths<T>(mut data: &mut [T], lengths: impl Iterator<Item = usize>) -> Vec<&mut [T]> {
     let mut out = Vec::new();
     for len in lengths {
         let (head, tail) = data.split_at_mut(len);
