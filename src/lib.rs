@@ -10,13 +10,20 @@
 //! `docs/numerics.md`; every module states the ones it relies on.
 
 #![warn(missing_docs)]
+// Numeric kernels index several parallel arrays with one loop counter; iterator chains would hide
+// the index arithmetic the docs describe.
+#![allow(clippy::needless_range_loop)]
 
+pub mod billboards;
 pub mod camera;
 pub mod demo;
 pub mod gradcheck;
 pub mod init;
 pub mod loss;
+pub mod model;
+pub mod raster;
 pub mod rng;
 pub mod scene;
 pub mod stages;
 pub mod strategies;
+pub mod train;

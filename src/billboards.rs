@@ -1,0 +1,165 @@
+//! Owned billboard parameters (structure of arrays) and a seeded random-scene generator.
+
+use crate::camera::Camera;
+use crate::raster::{BillboardSet, SH_FLOATS};
+use crate::rng::Rng;
+use glam::{Vec2, Vec3};
+
+/// Owned billboard parameters with *activated* textures, laid out as [`BillboardSet`] expects.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Billboards {
+    /// Centres in world coordinates.
+    pub positions: Vec<Vec3>,
+    /// Raw quaternions (w, x, y, z).
+    pub quaternions: Vec<[f32; 4]>,
+    /// Log half side lengths.
+    pub log_scales: Vec<Vec2>,
+    /// SH coefficients, 48 per billboard, `[coeff][rgb]`.
+    pub sh: Vec<f32>,
+    /// Alpha textures in `[0, 1]`, `TS²` per billboard.
+    pub alpha: Vec<f32>,
+    /// Colour textures in `[0, 1]`, `3·TS²` per billboard.
+    pub colour: Vec<f32>,
+    /// Texture side.
+    pub texture_size: usize,
+}
+
+impl Billboards {
+    /// An empty set with textures of side `texture_size`.
+    pub fn empty(texture_size: usize) -> Self {
+        Self {
+            positions: Vec::new(),
+            quaternions: Vec::new(),
+            log_scales: Vec::new(),
+            sh: Vec::new(),
+            alpha: Vec::new(),
+            colour: Vec::new(),
+            texture_size,
+        }
+    }
+
+    /// Number of billboards.
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// True when empty.
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+
+    /// Borrowed view for the rasterizer.
+    pub fn as_set(&self) -> BillboardSet<'_> {
+        BillboardSet {
+            positions: &self.positions,
+            quaternions: &self.quaternions,
+            log_scales: &self.log_scales,
+            sh: &self.sh,
+            alpha: &self.alpha,
+            colour: &self.colour,
+            texture_size: self.texture_size,
+        }
+    }
+
+    /// Appends billboard `i` of `other` (same texture size).
+    pub fn push_from(&mut self, other: &Billboards, i: usize) {
+        assert_eq!(self.texture_size, other.texture_size, "texture sizes differ");
+        let t = self.texture_size * self.texture_size;
+        self.positions.push(other.positions[i]);
+        self.quaternions.push(other.quaternions[i]);
+        self.log_scales.push(other.log_scales[i]);
+        self.sh.extend_from_slice(&other.sh[i * SH_FLOATS..(i + 1) * SH_FLOATS]);
+        self.alpha.extend_from_slice(&other.alpha[i * t..(i + 1) * t]);
+        self.colour.extend_from_slice(&other.colour[i * 3 * t..(i + 1) * 3 * t]);
+    }
+
+    /// Concatenation of `self` and `other`.
+    pub fn concat(&self, other: &Billboards) -> Billboards {
+        let mut out = self.clone();
+        for i in 0..other.len() {
+            out.push_from(other, i);
+        }
+        out
+    }
+}
+
+/// Settings of [`random_scene`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RandomSceneConfig {
+    /// Number of billboards.
+    pub billboards: usize,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Texture side.
+    pub texture_size: usize,
+    /// Billboard footprint in pixels (side of the square seen face-on); the benchmark scene uses
+    /// `width / sqrt(billboards)` so that the overlap per pixel stays roughly constant.
+    pub footprint_px: f32,
+    /// Alpha texel range; keep inside `(1/255, 0.99)` for smooth tests.
+    pub alpha_range: (f32, f32),
+    /// Seed.
+    pub seed: u64,
+}
+
+impl RandomSceneConfig {
+    /// The standard benchmark scene of `n` billboards at `width × height` with TS = 16.
+    pub fn benchmark(n: usize, width: u32, height: u32) -> Self {
+        Self {
+            billboards: n,
+            width,
+            height,
+            texture_size: 16,
+            footprint_px: width as f32 / (n as f32).sqrt(),
+            alpha_range: (0.0, 1.0),
+            seed: 0,
+        }
+    }
+}
+
+/// The identity-pose camera of the random scenes: at the origin looking along +z,
+/// `fx = fy = width`, principal point at the image centre.
+pub fn random_scene_camera(width: u32, height: u32) -> Camera {
+    crate::strategies::identity_camera(width, height)
+}
+
+/// A seeded random scene in front of [`random_scene_camera`]: centres at uniform pixel positions
+/// and view depth in `[2, 8]`, uniformly random rotations, half sides giving the requested
+/// footprint, uniform random textures and SH coefficients (DC around mid-grey, higher bands
+/// small).
+pub fn random_scene(config: &RandomSceneConfig) -> Billboards {
+    let mut rng = Rng::new(config.seed);
+    let cam = random_scene_camera(config.width, config.height);
+    let ts = config.texture_size;
+    let t = ts * ts;
+    let mut b = Billboards::empty(ts);
+    for _ in 0..config.billboards {
+        let (x, y) = (
+            rng.range(0.0, config.width as f32),
+            rng.range(0.0, config.height as f32),
+        );
+        let z = rng.range(2.0, 8.0);
+        b.positions
+            .push(Vec3::new((x - cam.cx) / cam.fx * z, (y - cam.cy) / cam.fy * z, z));
+        // Uniform rotation: normalised Gaussian 4-vector.
+        let q = [rng.normal(), rng.normal(), rng.normal(), rng.normal()];
+        b.quaternions.push(q);
+        // Footprint in pixels ≈ 2·s·fx/z  ⇒  s = footprint·z / (2 fx).
+        let s = (config.footprint_px * z / (2.0 * cam.fx)).max(1e-6);
+        let jitter = Vec2::new(rng.range(-0.2, 0.2), rng.range(-0.2, 0.2));
+        b.log_scales.push(Vec2::splat(s.ln()) + jitter);
+        for k in 0..SH_FLOATS {
+            let v = if k < 3 {
+                rng.range(-0.5, 0.5)
+            } else {
+                rng.range(-0.1, 0.1)
+            };
+            b.sh.push(v);
+        }
+        let (lo, hi) = config.alpha_range;
+        b.alpha.extend((0..t).map(|_| rng.range(lo, hi)));
+        b.colour.extend((0..3 * t).map(|_| rng.uniform()));
+    }
+    b
+}

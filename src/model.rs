@@ -1,0 +1,232 @@
+//! The trainable billboard model: raw parameters, initialisation and activation.
+//!
+//! Raw parameters follow `bbsplat-spec.md` §1: position, raw quaternion (w, x, y, z), two log
+//! half side lengths, 48 SH coefficients (`[coeff][rgb]`), and alpha and colour texture
+//! *logits*. Activated textures (`sigmoid(logit)`) are what the rasterizer sees. Alpha texels
+//! that start at exactly zero in the reference initialisation (15 of 256 at TS = 16) stay zero
+//! through an explicit mask shared by every billboard, instead of infinite logits.
+
+use crate::billboards::Billboards;
+use crate::raster::SH_FLOATS;
+use crate::rng::Rng;
+use crate::stages::sh::rgb_to_sh;
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+/// The reference initial alpha texture (`assets/alpha_init_gaussian_small.png`, 16×16, values
+/// 0-255, row = v index, column = u index), before the 0.5 factor.
+pub const INITIAL_ALPHA_16: [[u8; 16]; 16] = [
+    [0, 0, 0, 1, 2, 3, 3, 4, 4, 4, 3, 2, 1, 1, 0, 0],
+    [0, 0, 1, 2, 4, 6, 9, 10, 11, 10, 7, 5, 3, 2, 1, 0],
+    [0, 1, 3, 5, 10, 15, 21, 25, 25, 23, 18, 12, 7, 4, 2, 1],
+    [1, 2, 5, 11, 20, 32, 43, 51, 53, 48, 37, 26, 15, 8, 3, 1],
+    [2, 4, 10, 20, 36, 57, 77, 92, 96, 86, 67, 46, 27, 14, 7, 3],
+    [3, 6, 15, 32, 57, 89, 121, 144, 149, 135, 106, 72, 43, 22, 10, 4],
+    [3, 9, 21, 43, 77, 121, 166, 197, 204, 184, 144, 99, 59, 31, 13, 5],
+    [4, 10, 25, 51, 92, 144, 197, 234, 242, 219, 171, 117, 70, 36, 16, 7],
+    [4, 11, 25, 53, 96, 149, 204, 242, 251, 226, 177, 121, 72, 37, 17, 7],
+    [4, 10, 23, 48, 86, 135, 184, 219, 226, 204, 160, 110, 65, 34, 15, 6],
+    [3, 7, 18, 37, 67, 106, 144, 171, 177, 160, 126, 86, 51, 26, 12, 5],
+    [2, 5, 12, 26, 46, 72, 99, 117, 121, 110, 86, 59, 35, 18, 8, 3],
+    [1, 3, 7, 15, 27, 43, 59, 70, 72, 65, 51, 35, 21, 11, 5, 2],
+    [1, 2, 4, 8, 14, 22, 31, 36, 37, 34, 26, 18, 11, 6, 2, 1],
+    [0, 1, 2, 3, 7, 10, 13, 16, 17, 15, 12, 8, 5, 2, 1, 0],
+    [0, 0, 1, 1, 3, 4, 5, 7, 7, 6, 5, 3, 2, 1, 0, 0],
+];
+
+/// The initial alpha texture for side `ts`: `0.5 · table/255`, the 16×16 table resampled with
+/// align-corners bilinear interpolation for other sizes (exact copy at 16). Values in
+/// `[0, 0.5)`; texels that are exactly zero stay zero during training (see [`Model::alpha_mask`]).
+pub fn initial_alpha(ts: usize) -> Vec<f32> {
+    let table = |r: usize, c: usize| 0.5 * INITIAL_ALPHA_16[r][c] as f32 / 255.0;
+    if ts == 16 {
+        return (0..256).map(|i| table(i / 16, i % 16)).collect();
+    }
+    let mut out = Vec::with_capacity(ts * ts);
+    for r in 0..ts {
+        for c in 0..ts {
+            let map = |i: usize| i as f32 * 15.0 / (ts - 1) as f32;
+            let (y, x) = (map(r), map(c));
+            let (y0, x0) = (y.floor() as usize, x.floor() as usize);
+            let (y1, x1) = ((y0 + 1).min(15), (x0 + 1).min(15));
+            let (fy, fx) = (y - y0 as f32, x - x0 as f32);
+            let top = table(y0, x0) * (1.0 - fx) + table(y0, x1) * fx;
+            let bottom = table(y1, x0) * (1.0 - fx) + table(y1, x1) * fx;
+            out.push(top * (1.0 - fy) + bottom * fy);
+        }
+    }
+    out
+}
+
+/// `ln(p / (1 − p))`.
+#[inline]
+pub fn logit(p: f32) -> f32 {
+    (p / (1.0 - p)).ln()
+}
+
+/// `1 / (1 + e^{−x})`.
+#[inline]
+pub fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + (-x).exp())
+}
+
+/// Raw, trainable billboard parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Model {
+    /// Centres (world).
+    pub positions: Vec<Vec3>,
+    /// Raw quaternions (w, x, y, z).
+    pub quaternions: Vec<[f32; 4]>,
+    /// Log half side lengths.
+    pub log_scales: Vec<Vec2>,
+    /// SH coefficients, 48 per billboard.
+    pub sh: Vec<f32>,
+    /// Alpha logits, `TS²` per billboard.
+    pub alpha_logits: Vec<f32>,
+    /// Colour logits, `3·TS²` per billboard.
+    pub colour_logits: Vec<f32>,
+    /// Per texel (shared by all billboards): false for texels held at alpha 0.
+    pub alpha_mask: Vec<bool>,
+    /// Texture side.
+    pub texture_size: usize,
+}
+
+impl Model {
+    /// Number of billboards.
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// True when the model has no billboard.
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+
+    /// Initialises one billboard per point (spec §1.1): alpha `0.5·G`, colour texture 0.1,
+    /// SH DC `RGB2SH(colour) − 0.1`, higher SH 0, both log-scales
+    /// `ln √max(d̄², 1e-7)` with `d̄²` the mean squared distance to the 3 nearest other points,
+    /// rotation from 4 uniform `[0, 1)` numbers (seeded).
+    ///
+    /// Nearest neighbours are found by brute force in parallel, `O(N²)`: fine for the tens of
+    /// thousands of points of the demo and tests.
+    pub fn from_points(points: &[Vec3], colours: &[[f32; 3]], texture_size: usize, seed: u64) -> Self {
+        assert_eq!(points.len(), colours.len(), "one colour per point");
+        let n = points.len();
+        let t = texture_size * texture_size;
+        let alpha0 = initial_alpha(texture_size);
+        let alpha_mask: Vec<bool> = alpha0.iter().map(|&a| a > 0.0).collect();
+        let alpha_row: Vec<f32> = alpha0.iter().map(|&a| if a > 0.0 { logit(a) } else { 0.0 }).collect();
+        let mean_sq_3nn: Vec<f32> = (0..n)
+            .into_par_iter()
+            .map(|i| {
+                let mut best = [f32::INFINITY; 3];
+                for (j, q) in points.iter().enumerate() {
+                    if j == i {
+                        continue;
+                    }
+                    let d = points[i].distance_squared(*q);
+                    if d < best[2] {
+                        best[2] = d;
+                        best.sort_by(f32::total_cmp);
+                    }
+                }
+                let found: Vec<f32> = best.into_iter().filter(|d| d.is_finite()).collect();
+                if found.is_empty() {
+                    1e-7
+                } else {
+                    found.iter().sum::<f32>() / found.len() as f32
+                }
+            })
+            .collect();
+        let mut rng = Rng::new(seed);
+        let mut model = Model {
+            positions: points.to_vec(),
+            quaternions: Vec::with_capacity(n),
+            log_scales: Vec::with_capacity(n),
+            sh: vec![0.0; n * SH_FLOATS],
+            alpha_logits: Vec::with_capacity(n * t),
+            colour_logits: vec![logit(0.1); n * 3 * t],
+            alpha_mask,
+            texture_size,
+        };
+        for i in 0..n {
+            model
+                .quaternions
+                .push([rng.uniform(), rng.uniform(), rng.uniform(), rng.uniform()]);
+            model.log_scales.push(Vec2::splat(mean_sq_3nn[i].max(1e-7).sqrt().ln()));
+            for c in 0..3 {
+                model.sh[i * SH_FLOATS + c] = rgb_to_sh(colours[i][c]) - 0.1;
+            }
+            model.alpha_logits.extend_from_slice(&alpha_row);
+        }
+        model
+    }
+
+    /// Activated textures and geometry in the layout of the rasterizer.
+    pub fn activate(&self) -> Billboards {
+        let mut b = Billboards {
+            positions: self.positions.clone(),
+            quaternions: self.quaternions.clone(),
+            log_scales: self.log_scales.clone(),
+            sh: self.sh.clone(),
+            alpha: vec![0.0; self.alpha_logits.len()],
+            colour: vec![0.0; self.colour_logits.len()],
+            texture_size: self.texture_size,
+        };
+        for i in 0..self.len() {
+            self.activate_row(i, &mut b);
+        }
+        b
+    }
+
+    /// Refreshes billboard `i` of `out` (geometry, SH and activated textures) from the model.
+    pub fn activate_row(&self, i: usize, out: &mut Billboards) {
+        let t = self.texture_size * self.texture_size;
+        out.positions[i] = self.positions[i];
+        out.quaternions[i] = self.quaternions[i];
+        out.log_scales[i] = self.log_scales[i];
+        out.sh[i * SH_FLOATS..(i + 1) * SH_FLOATS].copy_from_slice(&self.sh[i * SH_FLOATS..(i + 1) * SH_FLOATS]);
+        for k in 0..t {
+            out.alpha[i * t + k] = if self.alpha_mask[k] {
+                sigmoid(self.alpha_logits[i * t + k])
+            } else {
+                0.0
+            };
+        }
+        for k in 0..3 * t {
+            out.colour[i * 3 * t + k] = sigmoid(self.colour_logits[i * 3 * t + k]);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn initial_alpha_matches_the_reference() {
+        let a = initial_alpha(16);
+        assert_eq!(a.iter().filter(|&&x| x == 0.0).count(), 15);
+        let peak = a.iter().cloned().fold(0.0, f32::max);
+        assert!((peak - 0.5 * 251.0 / 255.0).abs() < 1e-6);
+        let mean = a.iter().sum::<f32>() / 256.0;
+        assert!((mean - 0.0875).abs() < 1e-3, "{mean}");
+        // Resampled sizes keep the corners at zero and the peak near the centre.
+        let a8 = initial_alpha(8);
+        assert_eq!(a8[0], 0.0);
+        assert!(a8[3 * 8 + 3] > 0.3);
+    }
+
+    #[test]
+    fn masked_texels_stay_zero_and_scales_follow_neighbours() {
+        let pts = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z, Vec3::splat(5.0)];
+        let m = Model::from_points(&pts, &[[0.5; 3]; 5], 16, 0);
+        let b = m.activate();
+        assert_eq!(b.alpha[0], 0.0);
+        assert!((b.colour[7] - 0.1).abs() < 1e-6);
+        // Point 0 has three neighbours at distance 1: log-scale ln(1) = 0.
+        assert!(m.log_scales[0].x.abs() < 1e-6);
+        // SH DC reproduces the point colour minus 0.1 in SH units.
+        assert!((m.sh[0] - (rgb_to_sh(0.5) - 0.1)).abs() < 1e-6);
+    }
+}

@@ -1,0 +1,418 @@
+//! Tiled backward pass.
+//!
+//! Per pixel the tile list is walked front to back again (up to the last blended entry, known
+//! from the forward pass) to rebuild each blended entry's alpha, transmittance `T_i`, hit and
+//! colour. A back-to-front pass then applies the compositing recursion without ever dividing
+//! by `1 − α`: with `B` the normalised colour behind entry `i` (starting at the background),
+//! `∂L/∂α_i = T_i · Σ_ch g_ch (f_i,ch − B_ch)` and `B ← α_i f_i + (1 − α_i) B`.
+//!
+//! Gradients are first accumulated per tile entry (one (tile, billboard) pair) in the tile's
+//! scratch, then summed per billboard over its entries in tile order, so the result does not
+//! depend on how rayon schedules tiles. Texture gradients are kept sparse per entry (only the
+//! texels some pixel of the tile touched).
+
+use super::forward::{RenderOutput, split_by_lengths, tile_pixels};
+use super::preprocess::Prepared;
+use super::{BillboardSet, SH_FLOATS};
+use crate::stages::bilinear::{self, BilinearTaps};
+use crate::stages::composite::ClampGradient;
+use crate::stages::ray_plane::{PlaneHit, intersect, intersect_vjp};
+use crate::stages::sh::sh_colour_vjp;
+use crate::stages::splat_transform::{SplatTransform, project_splat_vjp};
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+/// Gradients of a scalar loss with respect to every billboard parameter and the background.
+///
+/// Dense per billboard, laid out like [`BillboardSet`]. [`render_backward`] *adds* into it, so
+/// several views can be accumulated; rows of billboards that received nothing are untouched.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderGradients {
+    /// `∂L/∂position`.
+    pub positions: Vec<Vec3>,
+    /// `∂L/∂quaternion` (raw, w x y z).
+    pub quaternions: Vec<[f32; 4]>,
+    /// `∂L/∂log_scales`.
+    pub log_scales: Vec<Vec2>,
+    /// `∂L/∂SH`, 48 floats per billboard.
+    pub sh: Vec<f32>,
+    /// `∂L/∂alpha texel` (activated texture values).
+    pub alpha: Vec<f32>,
+    /// `∂L/∂colour texel` (activated texture values).
+    pub colour: Vec<f32>,
+    /// `∂L/∂background`.
+    pub background: Vec3,
+}
+
+impl RenderGradients {
+    /// All-zero gradients for `n` billboards with textures of side `texture_size`.
+    pub fn zeros(n: usize, texture_size: usize) -> Self {
+        let t = texture_size * texture_size;
+        Self {
+            positions: vec![Vec3::ZERO; n],
+            quaternions: vec![[0.0; 4]; n],
+            log_scales: vec![Vec2::ZERO; n],
+            sh: vec![0.0; n * SH_FLOATS],
+            alpha: vec![0.0; n * t],
+            colour: vec![0.0; n * 3 * t],
+            background: Vec3::ZERO,
+        }
+    }
+}
+
+/// Upstream gradients of the loss with respect to the render's images.
+#[derive(Clone, Copy, Debug)]
+pub struct ImageGradients<'a> {
+    /// `∂L/∂rgb`, interleaved like [`RenderOutput::rgb`].
+    pub rgb: &'a [f32],
+    /// `∂L/∂alpha` per pixel, if the loss uses the opacity map.
+    pub alpha: Option<&'a [f32]>,
+    /// `∂L/∂depth` per pixel (of the alpha-weighted depth map), if the loss uses it.
+    pub depth: Option<&'a [f32]>,
+}
+
+/// One blended entry of a pixel, rebuilt for the backward pass.
+#[derive(Clone, Copy)]
+struct Blended {
+    slot: u32,
+    billboard: u32,
+    alpha: f32,
+    clamped: bool,
+    t: f32,
+    hit: PlaneHit,
+    taps: BilinearTaps,
+    colour: Vec3,
+}
+
+/// Per-entry geometric gradients accumulated over a tile's pixels.
+#[derive(Clone, Copy)]
+struct EntryGrad {
+    transform: SplatTransform,
+    rgb: Vec3,
+}
+
+const ZERO_TRANSFORM: SplatTransform = SplatTransform {
+    tu: Vec3::ZERO,
+    tv: Vec3::ZERO,
+    tw: Vec3::ZERO,
+};
+
+fn add_transform(acc: &mut SplatTransform, d: &SplatTransform) {
+    acc.tu += d.tu;
+    acc.tv += d.tv;
+    acc.tw += d.tw;
+}
+
+/// What one tile hands to the per-billboard reduction.
+struct TileGrads {
+    geometry: Vec<EntryGrad>,
+    /// Texture gradients of entry `k` are `texels[tex_offsets[k]..tex_offsets[k + 1]]`.
+    tex_offsets: Vec<u32>,
+    /// (texel index within a channel, [∂alpha, ∂r, ∂g, ∂b]).
+    texels: Vec<(u32, [f32; 4])>,
+    background: Vec3,
+}
+
+/// Reusable per-task scratch of the tile backward.
+#[derive(Default)]
+struct Scratch {
+    blended: Vec<Blended>,
+    /// Dense texture gradients per entry: `[alpha TS²][colour 3·TS²]`.
+    dense: Vec<f32>,
+    /// Stamp per (entry, texel): equal to `stamp` when that texel was touched in this tile.
+    marks: Vec<u32>,
+    stamp: u32,
+    /// Touched (entry, texel) pairs in first-touch order.
+    touched: Vec<(u32, u32)>,
+}
+
+impl Scratch {
+    fn begin_tile(&mut self, entries: usize, texels: usize) {
+        if self.marks.len() < entries * texels {
+            self.marks.resize(entries * texels, 0);
+            self.dense.resize(entries * texels * 4, 0.0);
+        }
+        self.stamp = self.stamp.wrapping_add(1);
+        if self.stamp == 0 {
+            self.marks.iter_mut().for_each(|m| *m = 0);
+            self.stamp = 1;
+        }
+        self.touched.clear();
+    }
+
+    /// Makes the texels of `taps` for entry `slot` live (zeroed on first touch).
+    fn touch(&mut self, slot: u32, taps: &BilinearTaps, texels: usize) {
+        for &idx in taps.indices() {
+            let m = slot as usize * texels + idx as usize;
+            if self.marks[m] != self.stamp {
+                self.marks[m] = self.stamp;
+                let base = slot as usize * texels * 4;
+                for c in 0..4 {
+                    self.dense[base + c * texels + idx as usize] = 0.0;
+                }
+                self.touched.push((slot, idx));
+            }
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn backward_tile(
+    set: &BillboardSet<'_>,
+    out: &RenderOutput,
+    grads_in: &ImageGradients<'_>,
+    tile: usize,
+    scratch: &mut Scratch,
+) -> TileGrads {
+    let state = &out.state;
+    let bins = &state.bins;
+    let range = bins.tile_range(tile);
+    let list = &bins.entries[range];
+    let prepared: &[Option<Prepared>] = &state.prepared;
+    let settings = &state.settings;
+    let params = &settings.composite;
+    let ts = set.texture_size;
+    let texels = ts * ts;
+    let width = out.width;
+    let (i0, j0, i1, j1) = tile_pixels(bins, tile, width, out.height);
+    let mut geometry = vec![
+        EntryGrad {
+            transform: ZERO_TRANSFORM,
+            rgb: Vec3::ZERO
+        };
+        list.len()
+    ];
+    let mut background = Vec3::ZERO;
+    scratch.begin_tile(list.len(), texels);
+    let bg = settings.background;
+    for j in j0..j1 {
+        for i in i0..i1 {
+            let p = (j * width + i) as usize;
+            let g_rgb = Vec3::from_slice(&grads_in.rgb[3 * p..3 * p + 3]);
+            let g_alpha = grads_in.alpha.map_or(0.0, |a| a[p]);
+            let g_depth = grads_in.depth.map_or(0.0, |d| d[p]);
+            let walked = state.walked[p] as usize;
+            let final_t = state.final_transmittance[p];
+            background += g_rgb * final_t;
+            if walked == 0 {
+                continue;
+            }
+            // Front to back: rebuild the blended entries and their transmittances.
+            let (px, py) = (i as f32 + 0.5, j as f32 + 0.5);
+            scratch.blended.clear();
+            let mut t = 1.0f32;
+            let mut colour = [0.0f32; 3];
+            for (k, &b) in list[..walked].iter().enumerate() {
+                let Some(pr) = prepared[b as usize].as_ref() else {
+                    continue;
+                };
+                if !pr.covers(i, j) {
+                    continue;
+                }
+                let Some(hit) = intersect(&pr.transform, px, py) else {
+                    continue;
+                };
+                let Some(taps) = bilinear::taps(hit.u, hit.v, ts) else {
+                    continue;
+                };
+                let a = taps.sample_one(set.alpha_of(b as usize));
+                let alpha = a.min(params.max_alpha);
+                if alpha < params.min_alpha {
+                    continue;
+                }
+                taps.sample(set.colour_of(b as usize), 3, &mut colour);
+                scratch.blended.push(Blended {
+                    slot: k as u32,
+                    billboard: b,
+                    alpha,
+                    clamped: a > params.max_alpha,
+                    t,
+                    hit,
+                    taps,
+                    colour: Vec3::from_array(colour) + pr.rgb,
+                });
+                t *= 1.0 - alpha;
+            }
+            // Back to front: features (r, g, b, 1, depth); behind-colour starts at the background.
+            let mut behind_rgb = bg;
+            let mut behind_alpha = 0.0f32;
+            let mut behind_depth = 0.0f32;
+            for e in (0..scratch.blended.len()).rev() {
+                let bl = scratch.blended[e];
+                let w = bl.alpha * bl.t;
+                let d_alpha = bl.t
+                    * ((bl.colour - behind_rgb).dot(g_rgb)
+                        + (1.0 - behind_alpha) * g_alpha
+                        + (bl.hit.depth - behind_depth) * g_depth);
+                behind_rgb = bl.colour * bl.alpha + behind_rgb * (1.0 - bl.alpha);
+                behind_alpha = bl.alpha + behind_alpha * (1.0 - bl.alpha);
+                behind_depth = bl.hit.depth * bl.alpha + behind_depth * (1.0 - bl.alpha);
+                // The clamp min(max_alpha, a): exact derivative (0 where active) or the
+                // reference's pass-through, as the compositing parameters say.
+                let d_tex_alpha = match (bl.clamped, params.clamp_gradient) {
+                    (true, ClampGradient::Exact) => 0.0,
+                    _ => d_alpha,
+                };
+                let d_colour = g_rgb * w;
+                let b = bl.billboard as usize;
+                scratch.touch(bl.slot, &bl.taps, texels);
+                let base = bl.slot as usize * texels * 4;
+                let (alpha_grad, colour_grad) = scratch.dense[base..base + 4 * texels].split_at_mut(texels);
+                let (du_a, dv_a) = bl.taps.accumulate_vjp_one(set.alpha_of(b), d_tex_alpha, alpha_grad);
+                let (du_c, dv_c) = bl
+                    .taps
+                    .accumulate_vjp(set.colour_of(b), 3, &d_colour.to_array(), colour_grad);
+                let pr = prepared[b].as_ref().expect("blended entries are prepared");
+                let d_t = intersect_vjp(&pr.transform, px, py, du_a + du_c, dv_a + dv_c, w * g_depth);
+                let eg = &mut geometry[bl.slot as usize];
+                add_transform(&mut eg.transform, &d_t);
+                eg.rgb += d_colour;
+            }
+        }
+    }
+    // Sparse texture gradients, grouped by entry (stable: first-touch order within an entry).
+    let mut counts = vec![0u32; list.len() + 1];
+    for &(slot, _) in &scratch.touched {
+        counts[slot as usize + 1] += 1;
+    }
+    for k in 0..list.len() {
+        counts[k + 1] += counts[k];
+    }
+    let mut texels_out = vec![(0u32, [0.0f32; 4]); scratch.touched.len()];
+    let mut cursor = counts.clone();
+    for &(slot, idx) in &scratch.touched {
+        let base = slot as usize * texels * 4;
+        let v = [
+            scratch.dense[base + idx as usize],
+            scratch.dense[base + texels + idx as usize],
+            scratch.dense[base + 2 * texels + idx as usize],
+            scratch.dense[base + 3 * texels + idx as usize],
+        ];
+        texels_out[cursor[slot as usize] as usize] = (idx, v);
+        cursor[slot as usize] += 1;
+    }
+    TileGrads {
+        geometry,
+        tex_offsets: counts,
+        texels: texels_out,
+        background,
+    }
+}
+
+/// Back-propagates image gradients to every billboard parameter and the background, adding
+/// into `grads`. Returns the indices of the billboards that received a gradient (those with at
+/// least one blended pixel), in increasing order.
+///
+/// Deterministic: bit-identical for any number of rayon threads.
+///
+/// # Panics
+/// When the gradient images do not match the render's size or `grads` does not match `set`.
+pub fn render_backward(
+    set: &BillboardSet<'_>,
+    out: &RenderOutput,
+    image_grads: &ImageGradients<'_>,
+    grads: &mut RenderGradients,
+) -> Vec<u32> {
+    let n_pix = (out.width * out.height) as usize;
+    assert_eq!(image_grads.rgb.len(), 3 * n_pix, "one RGB gradient per pixel");
+    assert!(
+        image_grads.alpha.is_none_or(|a| a.len() == n_pix),
+        "one alpha gradient per pixel"
+    );
+    assert!(
+        image_grads.depth.is_none_or(|d| d.len() == n_pix),
+        "one depth gradient per pixel"
+    );
+    assert_eq!(
+        grads.positions.len(),
+        set.len(),
+        "gradient buffers must match the billboard set"
+    );
+    let state = &out.state;
+    let bins = &state.bins;
+    let n_tiles = bins.tile_count();
+    let tiles: Vec<TileGrads> = (0..n_tiles)
+        .into_par_iter()
+        .map_init(Scratch::default, |scratch, t| {
+            backward_tile(set, out, image_grads, t, scratch)
+        })
+        .collect();
+    for tg in &tiles {
+        grads.background += tg.background;
+    }
+    // Tile of each entry, for the billboard-major reduction.
+    let mut entry_tile = vec![0u32; bins.entries.len()];
+    for (t, chunk) in split_by_lengths(&mut entry_tile, (0..n_tiles).map(|t| bins.tile_range(t).len()))
+        .into_iter()
+        .enumerate()
+    {
+        chunk.fill(t as u32);
+    }
+    let texels = set.texels();
+    let camera = &state.camera;
+    let centre = camera.centre();
+    let degree = state.settings.sh_degree;
+    let touched: Vec<bool> = (
+        grads.positions.par_iter_mut(),
+        grads.quaternions.par_iter_mut(),
+        grads.log_scales.par_iter_mut(),
+        grads.sh.par_chunks_mut(SH_FLOATS),
+        grads.alpha.par_chunks_mut(texels),
+        grads.colour.par_chunks_mut(3 * texels),
+    )
+        .into_par_iter()
+        .enumerate()
+        .map(|(b, (d_pos, d_quat, d_scale, d_sh, d_alpha, d_colour))| {
+            let r = bins.billboard_offsets[b] as usize..bins.billboard_offsets[b + 1] as usize;
+            if r.is_empty() {
+                return false;
+            }
+            let mut d_t = ZERO_TRANSFORM;
+            let mut d_rgb = Vec3::ZERO;
+            let mut any = false;
+            for &e in &bins.billboard_entries[r] {
+                let t = entry_tile[e as usize] as usize;
+                let k = e as usize - bins.tile_offsets[t] as usize;
+                let tg = &tiles[t];
+                let tex = &tg.texels[tg.tex_offsets[k] as usize..tg.tex_offsets[k + 1] as usize];
+                if tex.is_empty() {
+                    continue;
+                }
+                any = true;
+                add_transform(&mut d_t, &tg.geometry[k].transform);
+                d_rgb += tg.geometry[k].rgb;
+                for &(idx, v) in tex {
+                    let idx = idx as usize;
+                    d_alpha[idx] += v[0];
+                    d_colour[idx] += v[1];
+                    d_colour[texels + idx] += v[2];
+                    d_colour[2 * texels + idx] += v[3];
+                }
+            }
+            if !any {
+                return false;
+            }
+            let sg = project_splat_vjp(
+                set.positions[b],
+                set.log_scales[b],
+                set.quaternions[b],
+                camera,
+                &d_t,
+                Vec3::ZERO,
+            );
+            let d_pos_sh = sh_colour_vjp(degree, set.sh_of(b), set.positions[b], centre, d_rgb, d_sh);
+            *d_pos += sg.d_position + d_pos_sh;
+            *d_scale += sg.d_log_scales;
+            for (q, dq) in d_quat.iter_mut().zip(sg.d_quaternion) {
+                *q += dq;
+            }
+            true
+        })
+        .collect();
+    touched
+        .iter()
+        .enumerate()
+        .filter(|(_, t)| **t)
+        .map(|(b, _)| b as u32)
+        .collect()
+}

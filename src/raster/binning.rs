@@ -1,0 +1,116 @@
+//! Tile binning: which billboards each 16×16 tile must consider, in depth order.
+
+use super::TILE_SIZE;
+use super::preprocess::Prepared;
+use rayon::prelude::*;
+
+/// Per-tile lists of billboards and the billboard-major index of the same entries.
+///
+/// An *entry* is one (tile, billboard) pair. Entries are stored tile by tile (tiles in
+/// row-major order); within a tile they are sorted by the billboard's centre view depth, ties
+/// broken by billboard index (the order of the reference's stable radix sort).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TileBins {
+    /// Number of tile columns.
+    pub tiles_x: u32,
+    /// Number of tile rows.
+    pub tiles_y: u32,
+    /// Entry range of tile `t` is `tile_offsets[t]..tile_offsets[t + 1]`.
+    pub tile_offsets: Vec<u32>,
+    /// Billboard index of each entry.
+    pub entries: Vec<u32>,
+    /// Entries of billboard `b` are `billboard_entries[billboard_offsets[b]..billboard_offsets[b + 1]]`.
+    pub billboard_offsets: Vec<u32>,
+    /// Global entry indices grouped by billboard, each group in tile order.
+    pub billboard_entries: Vec<u32>,
+}
+
+impl TileBins {
+    /// Number of tiles.
+    pub fn tile_count(&self) -> usize {
+        (self.tiles_x * self.tiles_y) as usize
+    }
+
+    /// Entry range of tile `t`.
+    pub fn tile_range(&self, t: usize) -> std::ops::Range<usize> {
+        self.tile_offsets[t] as usize..self.tile_offsets[t + 1] as usize
+    }
+}
+
+fn tile_rect(p: &Prepared) -> ([u32; 2], [u32; 2]) {
+    (
+        [p.pixel_min[0] / TILE_SIZE, p.pixel_min[1] / TILE_SIZE],
+        [p.pixel_max[0] / TILE_SIZE, p.pixel_max[1] / TILE_SIZE],
+    )
+}
+
+/// Bins the prepared billboards of an image of `width × height` pixels.
+pub fn bin(prepared: &[Option<Prepared>], width: u32, height: u32) -> TileBins {
+    let tiles_x = width.div_ceil(TILE_SIZE);
+    let tiles_y = height.div_ceil(TILE_SIZE);
+    let n_tiles = (tiles_x * tiles_y) as usize;
+    // Count entries per tile and per billboard.
+    let mut tile_counts = vec![0u32; n_tiles + 1];
+    let mut billboard_offsets = vec![0u32; prepared.len() + 1];
+    for (b, p) in prepared.iter().enumerate() {
+        if let Some(p) = p {
+            let (lo, hi) = tile_rect(p);
+            for ty in lo[1]..=hi[1] {
+                for tx in lo[0]..=hi[0] {
+                    tile_counts[(ty * tiles_x + tx) as usize] += 1;
+                }
+            }
+            billboard_offsets[b + 1] = (hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1);
+        }
+    }
+    let mut tile_offsets = vec![0u32; n_tiles + 1];
+    for t in 0..n_tiles {
+        tile_offsets[t + 1] = tile_offsets[t] + tile_counts[t];
+    }
+    for b in 0..prepared.len() {
+        billboard_offsets[b + 1] += billboard_offsets[b];
+    }
+    let total = tile_offsets[n_tiles] as usize;
+    // Scatter in billboard order, so that each tile starts sorted by index.
+    let mut entries = vec![0u32; total];
+    let mut cursor: Vec<u32> = tile_offsets[..n_tiles].to_vec();
+    for (b, p) in prepared.iter().enumerate() {
+        if let Some(p) = p {
+            let (lo, hi) = tile_rect(p);
+            for ty in lo[1]..=hi[1] {
+                for tx in lo[0]..=hi[0] {
+                    let t = (ty * tiles_x + tx) as usize;
+                    entries[cursor[t] as usize] = b as u32;
+                    cursor[t] += 1;
+                }
+            }
+        }
+    }
+    // Stable sort of each tile by depth keeps index order among equal depths.
+    let mut slices: Vec<&mut [u32]> = Vec::with_capacity(n_tiles);
+    let mut rest = entries.as_mut_slice();
+    for t in 0..n_tiles {
+        let (head, tail) = rest.split_at_mut(tile_counts[t] as usize);
+        slices.push(head);
+        rest = tail;
+    }
+    let depth_of = |b: u32| prepared[b as usize].as_ref().map_or(0.0, |p| p.depth);
+    slices
+        .into_par_iter()
+        .for_each(|s| s.sort_by(|&a, &b| depth_of(a).total_cmp(&depth_of(b))));
+    // Billboard-major index, each billboard's entries in tile order.
+    let mut billboard_entries = vec![0u32; total];
+    let mut bcursor: Vec<u32> = billboard_offsets[..prepared.len()].to_vec();
+    for (e, &b) in entries.iter().enumerate() {
+        billboard_entries[bcursor[b as usize] as usize] = e as u32;
+        bcursor[b as usize] += 1;
+    }
+    TileBins {
+        tiles_x,
+        tiles_y,
+        tile_offsets,
+        entries,
+        billboard_offsets,
+        billboard_entries,
+    }
+}

@@ -1,0 +1,249 @@
+//! Tiled forward pass: front-to-back compositing of every pixel over its tile's list.
+
+use super::binning::{TileBins, bin};
+use super::preprocess::{Prepared, preprocess};
+use super::{BillboardSet, RenderSettings, TILE_SIZE};
+use crate::camera::Camera;
+use crate::stages::bilinear;
+use crate::stages::ray_plane::intersect;
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// Everything the backward pass needs from the forward pass.
+#[derive(Clone, Debug)]
+pub struct ForwardState {
+    /// The camera that was rendered.
+    pub camera: Camera,
+    /// The settings of the render.
+    pub settings: RenderSettings,
+    /// Per billboard: its prepared data, `None` when culled.
+    pub prepared: Vec<Option<Prepared>>,
+    /// Tile lists.
+    pub bins: TileBins,
+    /// Per pixel: transmittance left after the last blended billboard.
+    pub final_transmittance: Vec<f32>,
+    /// Per pixel: number of entries of its tile list walked up to and including the last
+    /// blended one (0 when nothing was blended).
+    pub walked: Vec<u32>,
+}
+
+/// The images and per-billboard statistics of a render.
+#[derive(Clone, Debug)]
+pub struct RenderOutput {
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Colour, interleaved RGB row-major: `Σ c·α·T + T_final·background`. Not clamped.
+    pub rgb: Vec<f32>,
+    /// Accumulated opacity `1 − T_final` per pixel (computed as `Σ α·T`).
+    pub alpha: Vec<f32>,
+    /// Alpha-weighted depth `Σ α·T·z` per pixel, z the view depth of the hit. Divide by
+    /// [`RenderOutput::alpha`] for the expected depth of the visible surface.
+    pub depth: Vec<f32>,
+    /// Median depth per pixel: view depth of the last blended hit with `T > 0.5` before it and
+    /// `α > 0.05` (the reference's rule); 0 where there is none. Not differentiable.
+    pub median_depth: Vec<f32>,
+    /// Alpha-weighted view-space normal `Σ α·T·n`, interleaved xyz, normals facing the camera.
+    pub normal: Vec<f32>,
+    /// Per billboard: `Σ α·T` over all pixels of this view (the "impact"); 0 when culled.
+    pub impact: Vec<f32>,
+    /// Per billboard: true when it was not culled by preprocessing (it touches the screen).
+    pub visible: Vec<bool>,
+    /// Work counters of this render.
+    pub stats: RenderStats,
+    /// What the backward pass needs.
+    pub state: ForwardState,
+}
+
+/// Work counters of one render, for performance reports.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RenderStats {
+    /// (tile, billboard) entries after binning.
+    pub tile_entries: u64,
+    /// (pixel, billboard) pairs whose ray-plane intersection was evaluated (the pixel centre was
+    /// inside the billboard's screen box).
+    pub evaluated_pairs: u64,
+    /// (pixel, billboard) pairs that were blended.
+    pub blended_pairs: u64,
+}
+
+/// Per-pixel values a tile produces.
+#[derive(Clone, Copy, Default)]
+struct PixelOut {
+    rgb: Vec3,
+    alpha: f32,
+    depth: f32,
+    median: f32,
+    normal: Vec3,
+    final_t: f32,
+    walked: u32,
+    evaluated: u32,
+    blended: u32,
+}
+
+/// Composites one pixel of a tile; adds `α·T` of each blended entry to `impact`.
+#[inline]
+#[allow(clippy::too_many_arguments)]
+fn shade_pixel(
+    set: &BillboardSet<'_>,
+    settings: &RenderSettings,
+    prepared: &[Option<Prepared>],
+    list: &[u32],
+    impact: &mut [f32],
+    i: u32,
+    j: u32,
+) -> PixelOut {
+    let params = &settings.composite;
+    let (px, py) = (i as f32 + 0.5, j as f32 + 0.5);
+    let ts = set.texture_size;
+    let mut t = 1.0f32;
+    let mut out = PixelOut {
+        median: 0.0,
+        ..Default::default()
+    };
+    let mut colour = [0.0f32; 3];
+    for (k, &b) in list.iter().enumerate() {
+        let Some(p) = prepared[b as usize].as_ref() else {
+            continue;
+        };
+        if !p.covers(i, j) {
+            continue;
+        }
+        out.evaluated += 1;
+        let Some(hit) = intersect(&p.transform, px, py) else {
+            continue;
+        };
+        let Some(taps) = bilinear::taps(hit.u, hit.v, ts) else {
+            continue;
+        };
+        let a = taps.sample_one(set.alpha_of(b as usize));
+        let alpha = a.min(params.max_alpha);
+        if alpha < params.min_alpha {
+            continue;
+        }
+        let next_t = t * (1.0 - alpha);
+        if next_t < params.min_transmittance {
+            break;
+        }
+        let w = alpha * t;
+        taps.sample(set.colour_of(b as usize), 3, &mut colour);
+        let c = Vec3::from_array(colour) + p.rgb;
+        out.rgb += c * w;
+        out.alpha += w;
+        out.depth += hit.depth * w;
+        out.normal += p.normal * w;
+        if t > 0.5 && alpha > 0.05 {
+            out.median = hit.depth;
+        }
+        impact[k] += w;
+        out.blended += 1;
+        t = next_t;
+        out.walked = k as u32 + 1;
+    }
+    out.rgb += settings.background * t;
+    out.final_t = t;
+    out
+}
+
+/// Splits `data` into consecutive mutable chunks of the given lengths.
+pub(crate) fn split_by_lengths<T>(mut data: &mut [T], lengths: impl Iterator<Item = usize>) -> Vec<&mut [T]> {
+    let mut out = Vec::new();
+    for len in lengths {
+        let (head, tail) = data.split_at_mut(len);
+        out.push(head);
+        data = tail;
+    }
+    out
+}
+
+/// The pixel rectangle of tile `t`: `(i0, j0, i1, j1)`, exclusive ends.
+pub(crate) fn tile_pixels(bins: &TileBins, t: usize, width: u32, height: u32) -> (u32, u32, u32, u32) {
+    let tx = t as u32 % bins.tiles_x;
+    let ty = t as u32 / bins.tiles_x;
+    let i0 = tx * TILE_SIZE;
+    let j0 = ty * TILE_SIZE;
+    (i0, j0, (i0 + TILE_SIZE).min(width), (j0 + TILE_SIZE).min(height))
+}
+
+/// Renders the billboards seen by `camera`.
+///
+/// Deterministic: the same inputs give bit-identical outputs for any number of rayon threads.
+///
+/// # Panics
+/// When the slices of `set` have inconsistent lengths (see [`BillboardSet::assert_consistent`]).
+pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings) -> RenderOutput {
+    set.assert_consistent();
+    let (w, h) = (camera.width, camera.height);
+    let n_pix = camera.pixel_count();
+    let prepared = preprocess(set, camera, settings);
+    let bins = bin(&prepared, w, h);
+    let n_tiles = bins.tile_count();
+    let mut entry_impact = vec![0.0f32; bins.entries.len()];
+    let impact_chunks = split_by_lengths(&mut entry_impact, (0..n_tiles).map(|t| bins.tile_range(t).len()));
+    let tiles: Vec<Vec<PixelOut>> = impact_chunks
+        .into_par_iter()
+        .enumerate()
+        .map(|(t, impact)| {
+            let list = &bins.entries[bins.tile_range(t)];
+            let (i0, j0, i1, j1) = tile_pixels(&bins, t, w, h);
+            let mut pixels = Vec::with_capacity(((i1 - i0) * (j1 - j0)) as usize);
+            for j in j0..j1 {
+                for i in i0..i1 {
+                    pixels.push(shade_pixel(set, settings, &prepared, list, impact, i, j));
+                }
+            }
+            pixels
+        })
+        .collect();
+    let mut out = RenderOutput {
+        width: w,
+        height: h,
+        rgb: vec![0.0; n_pix * 3],
+        alpha: vec![0.0; n_pix],
+        depth: vec![0.0; n_pix],
+        median_depth: vec![0.0; n_pix],
+        normal: vec![0.0; n_pix * 3],
+        impact: vec![0.0; set.len()],
+        visible: prepared.iter().map(Option::is_some).collect(),
+        stats: RenderStats {
+            tile_entries: bins.entries.len() as u64,
+            ..Default::default()
+        },
+        state: ForwardState {
+            camera: *camera,
+            settings: *settings,
+            prepared: Vec::new(),
+            bins: TileBins::default(),
+            final_transmittance: vec![1.0; n_pix],
+            walked: vec![0; n_pix],
+        },
+    };
+    for (t, pixels) in tiles.iter().enumerate() {
+        let (i0, j0, i1, _) = tile_pixels(&bins, t, w, h);
+        let tw = (i1 - i0) as usize;
+        for (k, px) in pixels.iter().enumerate() {
+            let p = (j0 as usize + k / tw) * w as usize + i0 as usize + k % tw;
+            out.rgb[3 * p..3 * p + 3].copy_from_slice(&px.rgb.to_array());
+            out.alpha[p] = px.alpha;
+            out.depth[p] = px.depth;
+            out.median_depth[p] = px.median;
+            out.normal[3 * p..3 * p + 3].copy_from_slice(&px.normal.to_array());
+            out.state.final_transmittance[p] = px.final_t;
+            out.state.walked[p] = px.walked;
+            out.stats.evaluated_pairs += px.evaluated as u64;
+            out.stats.blended_pairs += px.blended as u64;
+        }
+    }
+    // Per-billboard impact: entries summed in tile order (fixed, thread-independent).
+    out.impact.par_iter_mut().enumerate().for_each(|(b, imp)| {
+        let r = bins.billboard_offsets[b] as usize..bins.billboard_offsets[b + 1] as usize;
+        *imp = bins.billboard_entries[r]
+            .iter()
+            .map(|&e| entry_impact[e as usize])
+            .sum();
+    });
+    out.state.prepared = prepared;
+    out.state.bins = bins;
+    out
+}

@@ -1,0 +1,134 @@
+//! The image rasterizer: every billboard of a view, forward and backward, tiled, parallel and
+//! deterministic.
+//!
+//! Pipeline (method: `bbsplat-spec.md` §3-§4):
+//! 1. [`preprocess`]: per billboard, the ray-splat transform, the facing normal, the centre
+//!    depth, the SH colour and a tight screen bounding box of the texture support.
+//! 2. [`binning`]: 16×16-pixel tiles; each tile lists the billboards whose box touches it, sorted
+//!    by centre view depth (ties by billboard index, as the reference's stable radix sort).
+//! 3. [`forward`]: per pixel, front-to-back compositing over its tile's list.
+//! 4. [`backward`]: per pixel, the same list re-walked to rebuild the transmittances, then a
+//!    back-to-front pass giving gradients without dividing by `1 − alpha`; per-tile partial sums
+//!    are reduced per billboard in tile order, so results do not depend on the thread count.
+//!
+//! [`reference`] holds a plain brute-force renderer (every pixel against every billboard) that
+//! the tiled renderer is tested against.
+//!
+//! Conventions: camera and pixel conventions of [`crate::camera`]; textures are *activated*
+//! values (alpha and colour in `[0, 1]`), `TS × TS` per billboard, alpha `[row][col]`, colour
+//! `[channel][row][col]`; SH coefficients `[coeff][rgb]`, 48 floats per billboard. Output images
+//! are interleaved row-major.
+
+pub mod backward;
+pub mod binning;
+pub mod forward;
+pub mod preprocess;
+pub mod reference;
+
+use crate::stages::composite::CompositeParams;
+use glam::{Vec2, Vec3};
+
+pub use backward::{RenderGradients, render_backward};
+pub use forward::{ForwardState, RenderOutput, RenderStats, render};
+
+/// Side of a square screen tile in pixels.
+pub const TILE_SIZE: u32 = 16;
+
+/// Number of SH coefficients stored per billboard and channel (degree 3).
+pub const SH_COEFFS: usize = 16;
+
+/// Floats of SH storage per billboard (`16 × 3`, `[coeff][rgb]`).
+pub const SH_FLOATS: usize = SH_COEFFS * 3;
+
+/// Read-only view of a set of billboards in structure-of-arrays layout.
+#[derive(Clone, Copy, Debug)]
+pub struct BillboardSet<'a> {
+    /// Centres in world coordinates.
+    pub positions: &'a [Vec3],
+    /// Raw quaternions (w, x, y, z), normalised at use.
+    pub quaternions: &'a [[f32; 4]],
+    /// Natural logarithms of the half side lengths along the two tangent axes.
+    pub log_scales: &'a [Vec2],
+    /// SH coefficients, `[billboard][coeff][rgb]`, 48 floats per billboard.
+    pub sh: &'a [f32],
+    /// Activated alpha textures in `[0, 1]`, `[billboard][row][col]`.
+    pub alpha: &'a [f32],
+    /// Activated colour textures in `[0, 1]`, `[billboard][channel][row][col]`.
+    pub colour: &'a [f32],
+    /// Texture side `TS ≥ 2`.
+    pub texture_size: usize,
+}
+
+impl BillboardSet<'_> {
+    /// Number of billboards.
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// True when there is no billboard.
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+
+    /// Texels per channel, `TS²`.
+    pub fn texels(&self) -> usize {
+        self.texture_size * self.texture_size
+    }
+
+    /// Checks that every slice has the length implied by the number of positions.
+    ///
+    /// # Panics
+    /// When a slice length is inconsistent or `TS < 2`: this is a programming error of the caller,
+    /// not bad user input.
+    pub fn assert_consistent(&self) {
+        let n = self.len();
+        let t = self.texels();
+        assert!(self.texture_size >= 2, "texture size must be at least 2");
+        assert_eq!(self.quaternions.len(), n, "one quaternion per billboard");
+        assert_eq!(self.log_scales.len(), n, "one scale pair per billboard");
+        assert_eq!(self.sh.len(), n * SH_FLOATS, "48 SH floats per billboard");
+        assert_eq!(self.alpha.len(), n * t, "TS² alpha texels per billboard");
+        assert_eq!(self.colour.len(), n * 3 * t, "3·TS² colour texels per billboard");
+    }
+
+    /// The alpha texture of billboard `i`.
+    #[inline]
+    pub fn alpha_of(&self, i: usize) -> &[f32] {
+        let t = self.texels();
+        &self.alpha[i * t..(i + 1) * t]
+    }
+
+    /// The colour texture of billboard `i`.
+    #[inline]
+    pub fn colour_of(&self, i: usize) -> &[f32] {
+        let t = 3 * self.texels();
+        &self.colour[i * t..(i + 1) * t]
+    }
+
+    /// The SH coefficients of billboard `i`.
+    #[inline]
+    pub fn sh_of(&self, i: usize) -> &[f32] {
+        &self.sh[i * SH_FLOATS..(i + 1) * SH_FLOATS]
+    }
+}
+
+/// Settings of one render.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RenderSettings {
+    /// Colour behind everything (linear RGB).
+    pub background: Vec3,
+    /// Active SH degree, 0 to 3.
+    pub sh_degree: u32,
+    /// Compositing thresholds (alpha clamp, alpha cut-off, transmittance stop).
+    pub composite: CompositeParams,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        Self {
+            background: Vec3::ZERO,
+            sh_degree: 3,
+            composite: CompositeParams::default(),
+        }
+    }
+}

@@ -1,0 +1,61 @@
+//! Per-billboard preprocessing: transform, normal, depth, SH colour and a tight screen box.
+
+use super::{BillboardSet, RenderSettings};
+use crate::camera::Camera;
+use crate::stages::sh::sh_colour;
+use crate::stages::splat_transform::{SplatTransform, project_splat, square_screen_bounds, support_half_side};
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// What the per-pixel passes need of one visible billboard.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Prepared {
+    /// Rows of the ray-splat matrix `T`.
+    pub transform: SplatTransform,
+    /// Unit normal in view space, flipped to face the camera.
+    pub normal: Vec3,
+    /// View-space depth of the centre, the sort key.
+    pub depth: f32,
+    /// SH colour (`Σ + 0.5`, clamped at 0), added to the sampled colour texture.
+    pub rgb: Vec3,
+    /// First pixel column and row whose centre lies in the screen box (inclusive).
+    pub pixel_min: [u32; 2],
+    /// Last pixel column and row whose centre lies in the screen box (inclusive).
+    pub pixel_max: [u32; 2],
+}
+
+impl Prepared {
+    /// True when pixel `(i, j)` has its centre inside the billboard's screen box.
+    #[inline]
+    pub fn covers(&self, i: u32, j: u32) -> bool {
+        i >= self.pixel_min[0] && i <= self.pixel_max[0] && j >= self.pixel_min[1] && j <= self.pixel_max[1]
+    }
+}
+
+/// Prepares one billboard; `None` when it cannot contribute to any pixel of this view (behind
+/// the near plane, exactly edge-on, degenerate, or off screen).
+pub fn prepare_one(set: &BillboardSet<'_>, i: usize, camera: &Camera, settings: &RenderSettings) -> Option<Prepared> {
+    let position = set.positions[i];
+    let projected = project_splat(position, set.log_scales[i], set.quaternions[i], camera)?;
+    // Tight box of the texture support square (clipped by the near plane), as pixel indices.
+    let rect = square_screen_bounds(&projected.transform, support_half_side(set.texture_size))?
+        .pixel_rect(camera.width, camera.height)?;
+    let (pixel_min, pixel_max) = ([rect.x_min, rect.y_min], [rect.x_max - 1, rect.y_max - 1]);
+    let rgb = sh_colour(settings.sh_degree, set.sh_of(i), position, camera.centre()).rgb;
+    Some(Prepared {
+        transform: projected.transform,
+        normal: projected.normal_view,
+        depth: projected.view_depth,
+        rgb,
+        pixel_min,
+        pixel_max,
+    })
+}
+
+/// Prepares every billboard in parallel; entry `i` belongs to billboard `i`.
+pub fn preprocess(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings) -> Vec<Option<Prepared>> {
+    (0..set.len())
+        .into_par_iter()
+        .map(|i| prepare_one(set, i, camera, settings))
+        .collect()
+}
