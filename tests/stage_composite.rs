@@ -483,7 +483,7 @@ fn run_of_099(n: usize, rng: &mut Rng) -> (Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32
     // no cancellation, and the relative error measures the algorithm, not the data.
     let features: Vec<f32> = (0..n * C)
         .map(|k| {
-            let base = if (k / C) % 2 == 0 { 0.1 } else { 0.7 };
+            let base = if (k / C).is_multiple_of(2) { 0.1 } else { 0.7 };
             base + 0.2 * rng.uniform_f64() as f32
         })
         .collect();

@@ -42,10 +42,10 @@ fn find_images_dir(model_dir: &Path) -> Result<PathBuf, SceneError> {
     let mut candidates = Vec::new();
     let name = |p: &Path| p.file_name().and_then(|n| n.to_str()).map(str::to_owned);
     if let Some(parent) = model_dir.parent() {
-        if name(parent).as_deref() == Some("sparse") {
-            if let Some(root) = parent.parent() {
-                candidates.push(root.join("images"));
-            }
+        if name(parent).as_deref() == Some("sparse")
+            && let Some(root) = parent.parent()
+        {
+            candidates.push(root.join("images"));
         }
         candidates.push(parent.join("images"));
     }

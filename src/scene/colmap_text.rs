@@ -137,7 +137,7 @@ pub fn parse_images(text: &str, file: &Path) -> Result<Vec<ColmapImage>, SceneEr
         let points_line = if next_is_points { lines.next() } else { None };
         if let Some((pln, pline)) = points_line {
             let toks: Vec<&str> = pline.split_whitespace().collect();
-            if toks.len() % 3 != 0 {
+            if !toks.len().is_multiple_of(3) {
                 return Err(e(
                     pln,
                     format!(
@@ -209,7 +209,7 @@ pub fn parse_points(text: &str, file: &Path) -> Result<Vec<ColmapPoint3D>, Scene
         }
         let error = float(it.next(), "ERROR").map_err(e)?;
         let rest: Vec<&str> = it.collect();
-        if rest.len() % 2 != 0 {
+        if !rest.len().is_multiple_of(2) {
             return Err(e(format!(
                 "the track must be pairs IMAGE_ID POINT2D_IDX, found {} values",
                 rest.len()

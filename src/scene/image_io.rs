@@ -123,11 +123,11 @@ pub(crate) fn resize_area(src: &[f32], w: usize, h: usize, nw: usize, nh: usize)
 pub(crate) fn target_size(w: u32, h: u32, factor: u32, max_width: Option<u32>) -> (u32, u32) {
     let div = |v: u32| ((v as u64 + factor as u64 / 2) / factor as u64).max(1) as u32;
     let (mut nw, mut nh) = (div(w), div(h));
-    if let Some(m) = max_width {
-        if nw > m {
-            nh = ((nh as f64 * m as f64 / nw as f64).round() as u32).max(1);
-            nw = m;
-        }
+    if let Some(m) = max_width
+        && nw > m
+    {
+        nh = ((nh as f64 * m as f64 / nw as f64).round() as u32).max(1);
+        nw = m;
     }
     (nw, nh)
 }

@@ -236,10 +236,10 @@ fn check_model(v: &Value, _where: &str) -> Result<(), String> {
     if v.get("is_fisheye").and_then(Value::as_bool) == Some(true) {
         return Err("fisheye cameras (is_fisheye: true) are not supported".into());
     }
-    if let Some(k4) = v.get("k4").and_then(Value::as_f64) {
-        if k4 != 0.0 {
-            return Err(format!("k4 = {k4} (a fisheye coefficient) is not supported"));
-        }
+    if let Some(k4) = v.get("k4").and_then(Value::as_f64)
+        && k4 != 0.0
+    {
+        return Err(format!("k4 = {k4} (a fisheye coefficient) is not supported"));
     }
     Ok(())
 }
