@@ -68,9 +68,11 @@ fn guarded_lines(t: &SplatTransform, px: f32, py: f32) -> Option<(Vec3, Vec3, Ve
     let (m, n) = (k.x * l.y, k.y * l.x);
     let p = Vec3::new(k.y * l.z - k.z * l.y, k.z * l.x - k.x * l.z, m - n);
     let apz = p.z.abs();
-    // Both comparisons are false for NaN, so NaN is rejected.
+    // Every comparison is false for NaN, so NaN is rejected (`max` ignores NaN, hence it is only
+    // used where a NaN operand also makes `p.z` NaN).
     let accurate = apz > (GRAZING_EPS * (m.abs() + n.abs())).max(f32::MIN_POSITIVE);
-    let bounded = p.x.abs().max(p.y.abs()) < UV_LIMIT * apz;
+    let limit = UV_LIMIT * apz;
+    let bounded = p.x.abs() < limit && p.y.abs() < limit;
     (accurate && bounded).then_some((k, l, p))
 }
 
