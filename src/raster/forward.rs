@@ -90,10 +90,12 @@ fn shade_pixel(
     settings: &RenderSettings,
     prepared: &[Option<Prepared>],
     list: &[u32],
+    boxes: &[[u8; 4]],
     impact: &mut [f32],
     i: u32,
     j: u32,
 ) -> PixelOut {
+    let (li, lj) = ((i % TILE_SIZE) as u8, (j % TILE_SIZE) as u8);
     let params = &settings.composite;
     let (px, py) = (i as f32 + 0.5, j as f32 + 0.5);
     let ts = set.texture_size;
@@ -104,12 +106,12 @@ fn shade_pixel(
     };
     let mut colour = [0.0f32; 3];
     for (k, &b) in list.iter().enumerate() {
+        if !box_covers(&boxes[k], li, lj) {
+            continue;
+        }
         let Some(p) = prepared[b as usize].as_ref() else {
             continue;
         };
-        if !p.covers(i, j) {
-            continue;
-        }
         out.evaluated += 1;
         let Some(hit) = intersect(&p.transform, px, py) else {
             continue;
@@ -144,6 +146,28 @@ fn shade_pixel(
     out.rgb += settings.background * t;
     out.final_t = t;
     out
+}
+
+/// Tile-local pixel boxes `[x0, y0, x1, y1]` (inclusive, clamped to the tile) of a tile's
+/// entries: the per-pixel reject test reads these 4 contiguous bytes instead of the whole
+/// prepared record of each billboard.
+pub(crate) fn local_boxes(prepared: &[Option<Prepared>], list: &[u32], i0: u32, j0: u32) -> Vec<[u8; 4]> {
+    let last = TILE_SIZE - 1;
+    list.iter()
+        .map(|&b| {
+            let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
+            let lo = |v: u32, o: u32| v.saturating_sub(o).min(last) as u8;
+            let hi = |v: u32, o: u32| if v < o { 0 } else { (v - o).min(last) as u8 };
+            // A box entirely left of / above the tile cannot be binned here; keep it exact anyway.
+            [lo(p.pixel_min[0], i0), lo(p.pixel_min[1], j0), hi(p.pixel_max[0], i0), hi(p.pixel_max[1], j0)]
+        })
+        .collect()
+}
+
+/// True when tile-local pixel `(li, lj)` lies in `bx`.
+#[inline]
+pub(crate) fn box_covers(bx: &[u8; 4], li: u8, lj: u8) -> bool {
+    li >= bx[0] && li <= bx[2] && lj >= bx[1] && lj <= bx[3]
 }
 
 /// Splits `data` into consecutive mutable chunks of the given lengths.
@@ -187,10 +211,11 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
         .map(|(t, impact)| {
             let list = &bins.entries[bins.tile_range(t)];
             let (i0, j0, i1, j1) = tile_pixels(&bins, t, w, h);
+            let boxes = local_boxes(&prepared, list, i0, j0);
             let mut pixels = Vec::with_capacity(((i1 - i0) * (j1 - j0)) as usize);
             for j in j0..j1 {
                 for i in i0..i1 {
-                    pixels.push(shade_pixel(set, settings, &prepared, list, impact, i, j));
+                    pixels.push(shade_pixel(set, settings, &prepared, list, &boxes, impact, i, j));
                 }
             }
             pixels

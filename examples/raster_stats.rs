@@ -1,0 +1,54 @@
+//! Work statistics and phase timings of the rasterizer on the standard benchmark scene.
+//!
+//! `cargo run --release --example raster_stats -- 256 50000`
+use bbsplat::billboards::{RandomSceneConfig, random_scene, random_scene_camera};
+use bbsplat::raster::backward::ImageGradients;
+use bbsplat::raster::binning::bin;
+use bbsplat::raster::preprocess::preprocess;
+use bbsplat::raster::{RenderGradients, RenderSettings, render, render_backward};
+use std::time::Instant;
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let size: u32 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(256);
+    let n: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(50_000);
+    let scene = random_scene(&RandomSceneConfig::benchmark(n, size, size));
+    let cam = random_scene_camera(size, size);
+    let settings = RenderSettings::default();
+    let set = scene.as_set();
+    let reps = 10;
+    let time = |f: &mut dyn FnMut()| {
+        f();
+        let t = Instant::now();
+        for _ in 0..reps {
+            f();
+        }
+        t.elapsed().as_secs_f64() * 1e3 / reps as f64
+    };
+    let mut prepared = Vec::new();
+    let t_pre = time(&mut || prepared = preprocess(&set, &cam, &settings));
+    let t_bin = time(&mut || {
+        bin(&prepared, size, size);
+    });
+    let mut out = render(&set, &cam, &settings);
+    let t_fwd = time(&mut || out = render(&set, &cam, &settings));
+    let d_rgb = vec![1e-3f32; (size * size * 3) as usize];
+    let mut grads = RenderGradients::zeros(n, 16);
+    let t_bwd = time(&mut || {
+        render_backward(&set, &out, &ImageGradients { rgb: &d_rgb, alpha: None, depth: None }, &mut grads);
+    });
+    let px = (size * size) as f64;
+    let s = out.stats;
+    println!("{size}x{size}, N = {n}, TS = 16, {} threads", rayon::current_num_threads());
+    println!("  tile entries {} ({:.1} per billboard)", s.tile_entries, s.tile_entries as f64 / n as f64);
+    println!(
+        "  evaluated pairs per pixel {:.1}, blended pairs per pixel {:.1}",
+        s.evaluated_pairs as f64 / px,
+        s.blended_pairs as f64 / px
+    );
+    println!("  preprocess {t_pre:.2} ms, binning {t_bin:.2} ms, forward total {t_fwd:.2} ms, backward {t_bwd:.2} ms");
+    println!(
+        "  forward ns per evaluated pair (whole forward / pairs): {:.1}",
+        t_fwd * 1e6 / s.evaluated_pairs.max(1) as f64
+    );
+}
