@@ -62,6 +62,14 @@ pub fn texel_coordinate(c: f32, ts: usize) -> f64 {
     (c as f64 + 1.0) * (0.5 * (ts - 1) as f64)
 }
 
+/// `⌊x⌋` for `x ∈ [−1, 65536]`, without `f64::floor` (a libm call on baseline x86-64): the
+/// truncating cast is in range and exact there, then corrected for negative non-integers.
+#[inline]
+fn floor_in_range(x: f64) -> i64 {
+    let t = x as i64;
+    if (t as f64) > x { t - 1 } else { t }
+}
+
 /// The bilinear taps at `(u, v)` for a `ts × ts` texture, or `None` when no tap lies inside the
 /// texture (`X ∉ [−1, ts)` or `Y ∉ [−1, ts)`, which includes NaN and infinite coordinates).
 ///
@@ -93,13 +101,10 @@ pub fn taps(u: f32, v: f32, ts: usize) -> Option<BilinearTaps> {
     if !(x >= -1.0 && x < limit && y >= -1.0 && y < limit) {
         return None;
     }
-    let x0 = x.floor();
-    let y0 = y.floor();
-    let fx = (x - x0) as f32;
-    let fy = (y - y0) as f32;
-    // In [−1, ts − 1]: the casts are exact.
-    let ix = x0 as i64;
-    let iy = y0 as i64;
+    let ix = floor_in_range(x);
+    let iy = floor_in_range(y);
+    let fx = (x - ix as f64) as f32;
+    let fy = (y - iy as f64) as f32;
     let s = (0.5 * (ts - 1) as f64) as f32; // dX/du = dY/dv
     let gx = [1.0 - fx, fx];
     let gy = [1.0 - fy, fy];
@@ -194,6 +199,14 @@ impl BilinearTaps {
         &self.d_weight_dv[..self.len as usize]
     }
 
+    /// Interior fast path (4 taps): fixed trip count, same summation order as the general loops.
+    #[inline]
+    fn dot4(&self, tex: &[f32]) -> f32 {
+        let [i0, i1, i2, i3] = self.index.map(|i| i as usize);
+        let w = self.weight;
+        0.0 + w[0] * tex[i0] + w[1] * tex[i1] + w[2] * tex[i2] + w[3] * tex[i3]
+    }
+
     #[inline]
     fn check_lengths(&self, texels: &[f32], channels: usize) -> usize {
         let plane = self.ts as usize * self.ts as usize;
@@ -216,11 +229,8 @@ impl BilinearTaps {
         let out = &mut out[..channels];
         let n = self.len as usize;
         if n == 4 {
-            // Interior fast path: fixed trip count, same summation order as the general loop.
-            let [i0, i1, i2, i3] = self.index.map(|i| i as usize);
-            let w = self.weight;
             for (tex, o) in texels.chunks_exact(plane).zip(out.iter_mut()) {
-                *o = 0.0 + w[0] * tex[i0] + w[1] * tex[i1] + w[2] * tex[i2] + w[3] * tex[i3];
+                *o = self.dot4(tex);
             }
             return;
         }
@@ -242,6 +252,9 @@ impl BilinearTaps {
     pub fn sample_one(&self, texels: &[f32]) -> f32 {
         self.check_lengths(texels, 1);
         let n = self.len as usize;
+        if n == 4 {
+            return self.dot4(texels);
+        }
         let mut acc = 0.0;
         for k in 0..n {
             acc += self.weight[k] * texels[self.index[k] as usize];

@@ -64,7 +64,8 @@ pub struct CompositeParams {
     /// Entries with clamped alpha below this are skipped (reference 1/255: below one 8-bit level).
     pub min_alpha: f32,
     /// Compositing stops before an entry that would bring the transmittance below this
-    /// (reference 1e-4: what is behind can change the pixel by at most 1e-4 of the background).
+    /// (reference 1e-4). The stopping entry itself is not blended; with `max_alpha = 0.99` a stop
+    /// needs `T < 0.01`, so the dropped entries weigh less than 0.01 in total (not 1e-4).
     pub min_transmittance: f32,
     /// Gradient through the `max_alpha` clamp.
     pub clamp_gradient: ClampGradient,

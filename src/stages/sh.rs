@@ -229,7 +229,12 @@ fn view_direction(position: Vec3, camera_centre: Vec3) -> Option<(Vec3, f32)> {
 #[inline]
 fn basis_for(degree: u32, position: Vec3, camera_centre: Vec3, basis: &mut [f32; 16]) -> Option<(Vec3, f32)> {
     check_degree(degree);
-    let view = view_direction(position, camera_centre);
+    // Degree 0 is view-independent: no direction needed.
+    let view = if degree > 0 {
+        view_direction(position, camera_centre)
+    } else {
+        None
+    };
     match view {
         Some((dir, _)) => sh_basis(degree, dir, basis),
         None => sh_basis(0, Vec3::ZERO, basis),
