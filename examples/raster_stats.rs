@@ -35,12 +35,28 @@ fn main() {
     let d_rgb = vec![1e-3f32; (size * size * 3) as usize];
     let mut grads = RenderGradients::zeros(n, 16);
     let t_bwd = time(&mut || {
-        render_backward(&set, &out, &ImageGradients { rgb: &d_rgb, alpha: None, depth: None }, &mut grads);
+        render_backward(
+            &set,
+            &out,
+            &ImageGradients {
+                rgb: &d_rgb,
+                alpha: None,
+                depth: None,
+            },
+            &mut grads,
+        );
     });
     let px = (size * size) as f64;
     let s = out.stats;
-    println!("{size}x{size}, N = {n}, TS = 16, {} threads", rayon::current_num_threads());
-    println!("  tile entries {} ({:.1} per billboard)", s.tile_entries, s.tile_entries as f64 / n as f64);
+    println!(
+        "{size}x{size}, N = {n}, TS = 16, {} threads",
+        rayon::current_num_threads()
+    );
+    println!(
+        "  tile entries {} ({:.1} per billboard)",
+        s.tile_entries,
+        s.tile_entries as f64 / n as f64
+    );
     println!(
         "  evaluated pairs per pixel {:.1}, blended pairs per pixel {:.1}",
         s.evaluated_pairs as f64 / px,

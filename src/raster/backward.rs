@@ -11,7 +11,7 @@
 //! depend on how rayon schedules tiles. Texture gradients are kept sparse per entry (only the
 //! texels some pixel of the tile touched).
 
-use super::forward::{RenderOutput, box_covers, local_boxes, split_by_lengths, tile_pixels};
+use super::forward::{PixelLists, RenderOutput, local_boxes, split_by_lengths, tile_pixels};
 use super::preprocess::Prepared;
 use super::{BillboardSet, SH_FLOATS};
 use crate::stages::bilinear::{self, BilinearTaps};
@@ -183,7 +183,8 @@ fn backward_tile(
         list.len()
     ];
     let mut background = Vec3::ZERO;
-    let boxes = local_boxes(prepared, list, i0, j0);
+    let mut lists = PixelLists::default();
+    lists.build(&local_boxes(prepared, list, i0, j0));
     scratch.begin_tile(list.len(), texels);
     let bg = settings.background;
     for j in j0..j1 {
@@ -203,11 +204,12 @@ fn backward_tile(
             scratch.blended.clear();
             let mut t = 1.0f32;
             let mut colour = [0.0f32; 3];
-            let (li, lj) = ((i - i0) as u8, (j - j0) as u8);
-            for (k, &b) in list[..walked].iter().enumerate() {
-                if !box_covers(&boxes[k], li, lj) {
-                    continue;
+            for &k in lists.of(i - i0, j - j0) {
+                let k = k as usize;
+                if k >= walked {
+                    break;
                 }
+                let b = list[k];
                 let Some(pr) = prepared[b as usize].as_ref() else {
                     continue;
                 };

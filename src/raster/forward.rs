@@ -90,12 +90,11 @@ fn shade_pixel(
     settings: &RenderSettings,
     prepared: &[Option<Prepared>],
     list: &[u32],
-    boxes: &[[u8; 4]],
+    pixel_list: &[u32],
     impact: &mut [f32],
     i: u32,
     j: u32,
 ) -> PixelOut {
-    let (li, lj) = ((i % TILE_SIZE) as u8, (j % TILE_SIZE) as u8);
     let params = &settings.composite;
     let (px, py) = (i as f32 + 0.5, j as f32 + 0.5);
     let ts = set.texture_size;
@@ -105,10 +104,9 @@ fn shade_pixel(
         ..Default::default()
     };
     let mut colour = [0.0f32; 3];
-    for (k, &b) in list.iter().enumerate() {
-        if !box_covers(&boxes[k], li, lj) {
-            continue;
-        }
+    for &k in pixel_list {
+        let k = k as usize;
+        let b = list[k];
         let Some(p) = prepared[b as usize].as_ref() else {
             continue;
         };
@@ -159,15 +157,60 @@ pub(crate) fn local_boxes(prepared: &[Option<Prepared>], list: &[u32], i0: u32, 
             let lo = |v: u32, o: u32| v.saturating_sub(o).min(last) as u8;
             let hi = |v: u32, o: u32| if v < o { 0 } else { (v - o).min(last) as u8 };
             // A box entirely left of / above the tile cannot be binned here; keep it exact anyway.
-            [lo(p.pixel_min[0], i0), lo(p.pixel_min[1], j0), hi(p.pixel_max[0], i0), hi(p.pixel_max[1], j0)]
+            [
+                lo(p.pixel_min[0], i0),
+                lo(p.pixel_min[1], j0),
+                hi(p.pixel_max[0], i0),
+                hi(p.pixel_max[1], j0),
+            ]
         })
         .collect()
 }
 
-/// True when tile-local pixel `(li, lj)` lies in `bx`.
-#[inline]
-pub(crate) fn box_covers(bx: &[u8; 4], li: u8, lj: u8) -> bool {
-    li >= bx[0] && li <= bx[2] && lj >= bx[1] && lj <= bx[3]
+/// Per-pixel entry lists of one tile (per-pixel culling): the entries of pixel `p` (tile-local,
+/// row-major over 16×16) are `items[offsets[p]..offsets[p + 1]]`, in tile-list (depth) order.
+/// Built by a counting sort over the entries' boxes, `O(entries + pairs)`, so that a pixel visits
+/// only the billboards whose box contains it.
+#[derive(Default)]
+pub(crate) struct PixelLists {
+    pub(crate) offsets: Vec<u32>,
+    pub(crate) items: Vec<u32>,
+}
+
+impl PixelLists {
+    pub(crate) fn build(&mut self, boxes: &[[u8; 4]]) {
+        let side = TILE_SIZE as usize;
+        self.offsets.clear();
+        self.offsets.resize(side * side + 1, 0);
+        for bx in boxes {
+            for y in bx[1]..=bx[3] {
+                for x in bx[0]..=bx[2] {
+                    self.offsets[y as usize * side + x as usize + 1] += 1;
+                }
+            }
+        }
+        for p in 0..side * side {
+            self.offsets[p + 1] += self.offsets[p];
+        }
+        self.items.clear();
+        self.items.resize(self.offsets[side * side] as usize, 0);
+        let mut cursor: Vec<u32> = self.offsets[..side * side].to_vec();
+        for (k, bx) in boxes.iter().enumerate() {
+            for y in bx[1]..=bx[3] {
+                for x in bx[0]..=bx[2] {
+                    let p = y as usize * side + x as usize;
+                    self.items[cursor[p] as usize] = k as u32;
+                    cursor[p] += 1;
+                }
+            }
+        }
+    }
+
+    #[inline]
+    pub(crate) fn of(&self, li: u32, lj: u32) -> &[u32] {
+        let p = (lj * TILE_SIZE + li) as usize;
+        &self.items[self.offsets[p] as usize..self.offsets[p + 1] as usize]
+    }
 }
 
 /// Splits `data` into consecutive mutable chunks of the given lengths.
@@ -211,11 +254,13 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
         .map(|(t, impact)| {
             let list = &bins.entries[bins.tile_range(t)];
             let (i0, j0, i1, j1) = tile_pixels(&bins, t, w, h);
-            let boxes = local_boxes(&prepared, list, i0, j0);
+            let mut lists = PixelLists::default();
+            lists.build(&local_boxes(&prepared, list, i0, j0));
             let mut pixels = Vec::with_capacity(((i1 - i0) * (j1 - j0)) as usize);
             for j in j0..j1 {
                 for i in i0..i1 {
-                    pixels.push(shade_pixel(set, settings, &prepared, list, &boxes, impact, i, j));
+                    let own = lists.of(i - i0, j - j0);
+                    pixels.push(shade_pixel(set, settings, &prepared, list, own, impact, i, j));
                 }
             }
             pixels
