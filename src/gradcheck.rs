@@ -196,6 +196,41 @@ impl fmt::Display for GradReport {
     }
 }
 
+/// The worst value of every criterion over many [`GradReport`]s: what a tolerance should be set
+/// from ("measured, not guessed"). Feed it the reports of a property run over many seeds, print
+/// it, and choose bounds at a stated multiple of the worst values.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct WorstObserved {
+    /// Number of reports added.
+    pub cases: usize,
+    /// Largest elementwise ratio to the tolerance.
+    pub ratio: f64,
+    /// Largest absolute difference.
+    pub max_abs: f64,
+    /// Largest relative L2 error.
+    pub rel_l2: f64,
+    /// Largest `1 − cosine`.
+    pub one_minus_cos: f64,
+    /// Largest `|bias|`.
+    pub bias: f64,
+}
+
+impl WorstObserved {
+    /// Folds one report in.
+    ///
+    /// # Panics
+    /// When the report has a non-finite value: a measurement must not hide one.
+    pub fn add(&mut self, r: &GradReport) {
+        assert!(r.non_finite.is_none(), "{r}");
+        self.cases += 1;
+        self.ratio = self.ratio.max(r.worst_ratio);
+        self.max_abs = self.max_abs.max(r.max_abs_err);
+        self.rel_l2 = self.rel_l2.max(r.rel_l2);
+        self.one_minus_cos = self.one_minus_cos.max(1.0 - r.cosine);
+        self.bias = self.bias.max(r.bias.abs());
+    }
+}
+
 /// Central difference of `loss` with respect to input `index` of `x`.
 ///
 /// The perturbed inputs are rounded to f32 and the divisor is the step that was actually taken.

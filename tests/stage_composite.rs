@@ -662,27 +662,7 @@ proptest! {
 // ---------------------------------------------------------------------------------------------
 // Tolerance measurement (ignored by default).
 
-#[derive(Debug, Default)]
-struct Worst {
-    cases: usize,
-    ratio: f64,
-    max_abs: f64,
-    rel_l2: f64,
-    one_minus_cos: f64,
-    bias: f64,
-}
-
-impl Worst {
-    fn add(&mut self, r: &GradReport) {
-        assert!(r.non_finite.is_none(), "{r}");
-        self.cases += 1;
-        self.ratio = self.ratio.max(r.worst_ratio);
-        self.max_abs = self.max_abs.max(r.max_abs_err);
-        self.rel_l2 = self.rel_l2.max(r.rel_l2);
-        self.one_minus_cos = self.one_minus_cos.max(1.0 - r.cosine);
-        self.bias = self.bias.max(r.bias.abs());
-    }
-}
+use bbsplat::gradcheck::WorstObserved as Worst;
 
 #[test]
 #[ignore = "measurement: run with --ignored --nocapture"]
