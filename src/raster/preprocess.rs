@@ -24,14 +24,6 @@ pub struct Prepared {
     pub pixel_max: [u32; 2],
 }
 
-impl Prepared {
-    /// True when pixel `(i, j)` has its centre inside the billboard's screen box.
-    #[inline]
-    pub fn covers(&self, i: u32, j: u32) -> bool {
-        i >= self.pixel_min[0] && i <= self.pixel_max[0] && j >= self.pixel_min[1] && j <= self.pixel_max[1]
-    }
-}
-
 /// Prepares one billboard; `None` when it cannot contribute to any pixel of this view (behind
 /// the near plane, exactly edge-on, degenerate, or off screen).
 pub fn prepare_one(set: &BillboardSet<'_>, i: usize, camera: &Camera, settings: &RenderSettings) -> Option<Prepared> {
