@@ -117,43 +117,11 @@ struct TileGrads {
 #[derive(Default)]
 struct Scratch {
     blended: Vec<Blended>,
-    /// Dense texture gradients per entry: `[alpha TS²][colour 3·TS²]`.
-    dense: Vec<f32>,
-    /// Stamp per (entry, texel): equal to `stamp` when that texel was touched in this tile.
-    marks: Vec<u32>,
-    stamp: u32,
-    /// Touched (entry, texel) pairs in first-touch order.
-    touched: Vec<(u32, u32)>,
-}
-
-impl Scratch {
-    fn begin_tile(&mut self, entries: usize, texels: usize) {
-        if self.marks.len() < entries * texels {
-            self.marks.resize(entries * texels, 0);
-            self.dense.resize(entries * texels * 4, 0.0);
-        }
-        self.stamp = self.stamp.wrapping_add(1);
-        if self.stamp == 0 {
-            self.marks.iter_mut().for_each(|m| *m = 0);
-            self.stamp = 1;
-        }
-        self.touched.clear();
-    }
-
-    /// Makes the texels of `taps` for entry `slot` live (zeroed on first touch).
-    fn touch(&mut self, slot: u32, taps: &BilinearTaps, texels: usize) {
-        for &idx in taps.indices() {
-            let m = slot as usize * texels + idx as usize;
-            if self.marks[m] != self.stamp {
-                self.marks[m] = self.stamp;
-                let base = slot as usize * texels * 4;
-                for c in 0..4 {
-                    self.dense[base + c * texels + idx as usize] = 0.0;
-                }
-                self.touched.push((slot, idx));
-            }
-        }
-    }
+    /// Texture-gradient contributions `(entry slot, texel, [∂alpha, ∂r, ∂g, ∂b])` in pixel
+    /// order; sorted stably by (slot, texel) and merged at the end of the tile, so the sums are
+    /// taken in a fixed order. Its size is proportional to the tile's pairs, not to its entries
+    /// times the texture size.
+    log: Vec<(u32, u32, [f32; 4])>,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -172,7 +140,6 @@ fn backward_tile(
     let settings = &state.settings;
     let params = &settings.composite;
     let ts = set.texture_size;
-    let texels = ts * ts;
     let width = out.width;
     let (i0, j0, i1, j1) = tile_pixels(bins, tile, width, out.height);
     let mut geometry = vec![
@@ -185,7 +152,7 @@ fn backward_tile(
     let mut background = Vec3::ZERO;
     let mut lists = PixelLists::default();
     lists.build(&local_boxes(prepared, list, i0, j0));
-    scratch.begin_tile(list.len(), texels);
+    scratch.log.clear();
     let bg = settings.background;
     for j in j0..j1 {
         for i in i0..i1 {
@@ -259,41 +226,44 @@ fn backward_tile(
                 };
                 let d_colour = g_rgb * w;
                 let b = bl.billboard as usize;
-                scratch.touch(bl.slot, &bl.taps, texels);
-                let base = bl.slot as usize * texels * 4;
-                let (alpha_grad, colour_grad) = scratch.dense[base..base + 4 * texels].split_at_mut(texels);
-                let (du_a, dv_a) = bl.taps.accumulate_vjp_one(set.alpha_of(b), d_tex_alpha, alpha_grad);
-                let (du_c, dv_c) = bl
-                    .taps
-                    .accumulate_vjp(set.colour_of(b), 3, &d_colour.to_array(), colour_grad);
+                let slot = bl.slot;
+                let log = &mut scratch.log;
+                let (du, dv) = bl.taps.vjp_alpha_colour(
+                    set.alpha_of(b),
+                    set.colour_of(b),
+                    d_tex_alpha,
+                    d_colour.to_array(),
+                    |texel, g| log.push((slot, texel, g)),
+                );
                 let pr = prepared[b].as_ref().expect("blended entries are prepared");
-                let d_t = intersect_vjp(&pr.transform, px, py, du_a + du_c, dv_a + dv_c, w * g_depth);
+                let d_t = intersect_vjp(&pr.transform, px, py, du, dv, w * g_depth);
                 let eg = &mut geometry[bl.slot as usize];
                 add_transform(&mut eg.transform, &d_t);
                 eg.rgb += d_colour;
             }
         }
     }
-    // Sparse texture gradients, grouped by entry (stable: first-touch order within an entry).
+    // Sparse texture gradients grouped by entry: the stable sort keeps pixel order among equal
+    // keys, then each (slot, texel) run is summed in that order.
+    scratch.log.sort_by_key(|&(slot, texel, _)| (slot, texel));
     let mut counts = vec![0u32; list.len() + 1];
-    for &(slot, _) in &scratch.touched {
+    let mut texels_out: Vec<(u32, [f32; 4])> = Vec::with_capacity(scratch.log.len());
+    let mut run = 0;
+    while run < scratch.log.len() {
+        let (slot, texel, mut sum) = scratch.log[run];
+        let mut next = run + 1;
+        while next < scratch.log.len() && scratch.log[next].0 == slot && scratch.log[next].1 == texel {
+            for c in 0..4 {
+                sum[c] += scratch.log[next].2[c];
+            }
+            next += 1;
+        }
+        texels_out.push((texel, sum));
         counts[slot as usize + 1] += 1;
+        run = next;
     }
     for k in 0..list.len() {
         counts[k + 1] += counts[k];
-    }
-    let mut texels_out = vec![(0u32, [0.0f32; 4]); scratch.touched.len()];
-    let mut cursor = counts.clone();
-    for &(slot, idx) in &scratch.touched {
-        let base = slot as usize * texels * 4;
-        let v = [
-            scratch.dense[base + idx as usize],
-            scratch.dense[base + texels + idx as usize],
-            scratch.dense[base + 2 * texels + idx as usize],
-            scratch.dense[base + 3 * texels + idx as usize],
-        ];
-        texels_out[cursor[slot as usize] as usize] = (idx, v);
-        cursor[slot as usize] += 1;
     }
     TileGrads {
         geometry,

@@ -300,6 +300,44 @@ impl BilinearTaps {
     pub fn accumulate_vjp_one(&self, texels: &[f32], g: f32, d_texels: &mut [f32]) -> (f32, f32) {
         self.accumulate_vjp(texels, 1, &[g], d_texels)
     }
+
+    /// Backward of sampling a 1-channel `alpha` texture and a 3-channel `colour` texture at the
+    /// same taps (the rasterizer's pattern), without a dense gradient buffer: calls
+    /// `emit(texel_index, [∂L/∂alpha, ∂L/∂r, ∂L/∂g, ∂L/∂b])` once per tap and returns
+    /// `(∂L/∂u, ∂L/∂v)` for the upstream gradients `d_alpha` and `d_colour`. Equals
+    /// [`BilinearTaps::accumulate_vjp_one`] plus [`BilinearTaps::accumulate_vjp`] with 3
+    /// channels, up to the order of float additions (tested).
+    ///
+    /// # Panics
+    /// If `alpha` does not hold `ts²` values or `colour` `3·ts²`.
+    #[inline]
+    pub fn vjp_alpha_colour(
+        &self,
+        alpha: &[f32],
+        colour: &[f32],
+        d_alpha: f32,
+        d_colour: [f32; 3],
+        mut emit: impl FnMut(u32, [f32; 4]),
+    ) -> (f32, f32) {
+        let plane = self.check_lengths(alpha, 1);
+        self.check_lengths(colour, 3);
+        let (mut du, mut dv) = (0.0f32, 0.0f32);
+        for k in 0..self.len as usize {
+            let i = self.index[k] as usize;
+            let seen = alpha[i] * d_alpha
+                + colour[i] * d_colour[0]
+                + colour[plane + i] * d_colour[1]
+                + colour[2 * plane + i] * d_colour[2];
+            du += self.d_weight_du[k] * seen;
+            dv += self.d_weight_dv[k] * seen;
+            let w = self.weight[k];
+            emit(
+                self.index[k],
+                [w * d_alpha, w * d_colour[0], w * d_colour[1], w * d_colour[2]],
+            );
+        }
+        (du, dv)
+    }
 }
 
 /// Bilinear sample of `channels` channels of a `ts × ts` texture at `(u, v)` into
@@ -332,5 +370,40 @@ pub fn sample_vjp(
     match taps(u, v, ts) {
         Some(t) => t.accumulate_vjp(texels, channels, d_out, d_texels),
         None => (0.0, 0.0),
+    }
+}
+
+#[cfg(test)]
+mod alpha_colour_tests {
+    use super::*;
+
+    #[test]
+    fn vjp_alpha_colour_matches_the_dense_vjps() {
+        let ts = 5;
+        let alpha: Vec<f32> = (0..ts * ts).map(|i| (i as f32 * 0.37).sin().abs()).collect();
+        let colour: Vec<f32> = (0..3 * ts * ts).map(|i| (i as f32 * 0.61).cos().abs()).collect();
+        for &(u, v) in &[(0.13f32, -0.42f32), (-1.05, 0.3), (0.999, 1.02), (0.5, 0.5)] {
+            let taps = taps(u, v, ts).unwrap();
+            let (da, dc) = (0.7f32, [0.2f32, -0.9, 0.4]);
+            let mut dense_a = vec![0.0; ts * ts];
+            let mut dense_c = vec![0.0; 3 * ts * ts];
+            let (ua, va) = taps.accumulate_vjp_one(&alpha, da, &mut dense_a);
+            let (uc, vc) = taps.accumulate_vjp(&colour, 3, &dc, &mut dense_c);
+            let mut sparse_a = vec![0.0; ts * ts];
+            let mut sparse_c = vec![0.0; 3 * ts * ts];
+            let (du, dv) = taps.vjp_alpha_colour(&alpha, &colour, da, dc, |i, g| {
+                let i = i as usize;
+                sparse_a[i] += g[0];
+                for c in 0..3 {
+                    sparse_c[c * ts * ts + i] += g[c + 1];
+                }
+            });
+            assert!(
+                (du - (ua + uc)).abs() < 1e-5 && (dv - (va + vc)).abs() < 1e-5,
+                "({u}, {v})"
+            );
+            assert_eq!(sparse_a, dense_a);
+            assert_eq!(sparse_c, dense_c);
+        }
     }
 }
