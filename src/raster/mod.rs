@@ -34,11 +34,8 @@ pub use forward::{ForwardState, RenderOutput, RenderStats, render};
 /// Side of a square screen tile in pixels.
 pub const TILE_SIZE: u32 = 16;
 
-/// Number of SH coefficients stored per billboard and channel (degree 3).
-pub const SH_COEFFS: usize = 16;
-
-/// Floats of SH storage per billboard (`16 × 3`, `[coeff][rgb]`).
-pub const SH_FLOATS: usize = SH_COEFFS * 3;
+/// SH storage per billboard: 16 coefficients × 3 channels, `[coeff][rgb]` (defined by the SH stage).
+pub use crate::stages::sh::{SH_COEFFS, SH_FLOATS};
 
 /// Read-only view of a set of billboards in structure-of-arrays layout.
 #[derive(Clone, Copy, Debug)]
