@@ -754,3 +754,18 @@ fn hard_case_empty_scene() {
     let expect: f64 = loss.rgb.iter().step_by(3).sum();
     assert!((g.background.x as f64 - expect).abs() < 1e-3);
 }
+
+/// `render_backward` reports every row it wrote: clearing exactly those rows restores zeros
+/// (the trainer relies on this to avoid re-zeroing the whole buffer each step).
+#[test]
+fn clearing_the_reported_rows_restores_zero_gradients() {
+    let scene = small_scene(300, 64, 48, 8, 10.0, (0.0, 1.0), 8);
+    let cam = random_scene_camera(64, 48);
+    let (_, mut g, touched) = render_and_backward(&scene, &cam, &settings(Vec3::splat(0.5)));
+    assert!(!touched.is_empty() && touched.len() < scene.len(), "some but not all billboards are seen");
+    for &b in &touched {
+        g.clear_row(b as usize);
+    }
+    g.background = Vec3::ZERO;
+    assert_eq!(g, RenderGradients::zeros(scene.len(), scene.texture_size));
+}

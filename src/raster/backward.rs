@@ -58,6 +58,19 @@ impl RenderGradients {
             background: Vec3::ZERO,
         }
     }
+
+    /// Zeroes every gradient of billboard `b` (not the background): after an optimiser has
+    /// consumed the rows [`render_backward`] reported, clearing just those keeps the buffers
+    /// ready for the next accumulation without touching the whole set.
+    pub fn clear_row(&mut self, b: usize) {
+        let t = self.alpha.len() / self.positions.len().max(1);
+        self.positions[b] = Vec3::ZERO;
+        self.quaternions[b] = [0.0; 4];
+        self.log_scales[b] = Vec2::ZERO;
+        self.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS].fill(0.0);
+        self.alpha[b * t..(b + 1) * t].fill(0.0);
+        self.colour[b * 3 * t..(b + 1) * 3 * t].fill(0.0);
+    }
 }
 
 /// Upstream gradients of the loss with respect to the render's images.

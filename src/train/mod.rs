@@ -119,7 +119,7 @@ pub struct Trainer {
     pub model: Model,
     /// Activated copy the rasterizer reads (kept in sync row by row).
     pub activated: Billboards,
-    adam: [AdamGroup; 6],
+    adam: [AdamGroup; 7],
     grads: RenderGradients,
     config: TrainConfig,
     order: Vec<usize>,
@@ -138,7 +138,8 @@ impl Trainer {
             AdamGroup::new(n, 3),
             AdamGroup::new(n, 4),
             AdamGroup::new(n, 2),
-            AdamGroup::new(n, SH_FLOATS),
+            AdamGroup::new(n, 3),
+            AdamGroup::new(n, SH_FLOATS - 3),
             AdamGroup::new(n, t),
             AdamGroup::new(n, 3 * t),
         ];
@@ -212,21 +213,21 @@ impl Trainer {
         let t = self.model.texture_size * self.model.texture_size;
         let m = &mut self.model;
         let g = &mut self.grads;
-        let [a_pos, a_rot, a_scale, a_sh, a_alpha, a_colour] = &mut self.adam;
+        let [a_pos, a_rot, a_scale, a_sh_dc, a_sh_rest, a_alpha, a_colour] = &mut self.adam;
         let mut d_logit = vec![0.0f32; 3 * t];
         for &b in touched {
             let b = b as usize;
             a_pos.step_row(b, m.positions[b].as_mut(), &g.positions[b].to_array(), lr.position, &hp);
             a_rot.step_row(b, &mut m.quaternions[b], &g.quaternions[b], lr.rotation, &hp);
             a_scale.step_row(b, m.log_scales[b].as_mut(), &g.log_scales[b].to_array(), lr.scale, &hp);
-            // SH: the DC triple and the rest have different rates; one moment row covers both.
-            let sh = &mut m.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS];
-            let mut sh_step = sh.to_vec();
-            a_sh.step_row(b, &mut sh_step, &g.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS], 1.0, &hp);
-            for (k, (p, s)) in sh.iter_mut().zip(&sh_step).enumerate() {
-                let rate = if k < 3 { lr.sh_dc } else { lr.sh_rest };
-                *p += (s - *p) * rate;
-            }
+            // SH: degree 0 (3 values) and degrees 1-3 (45 values) have their own rates.
+            let (sh, d_sh) = (
+                &mut m.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS],
+                &g.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS],
+            );
+            let (dc, rest) = sh.split_at_mut(3);
+            a_sh_dc.step_row(b, dc, &d_sh[..3], lr.sh_dc, &hp);
+            a_sh_rest.step_row(b, rest, &d_sh[3..], lr.sh_rest, &hp);
             if lr.alpha > 0.0 {
                 for k in 0..t {
                     let a = self.activated.alpha[b * t + k];
@@ -250,13 +251,7 @@ impl Trainer {
                 );
             }
             m.activate_row(b, &mut self.activated);
-            // Clear the gradient rows for the next step.
-            g.positions[b] = Vec3::ZERO;
-            g.quaternions[b] = [0.0; 4];
-            g.log_scales[b] = glam::Vec2::ZERO;
-            g.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS].fill(0.0);
-            g.alpha[b * t..(b + 1) * t].fill(0.0);
-            g.colour[b * 3 * t..(b + 1) * 3 * t].fill(0.0);
+            g.clear_row(b);
         }
         g.background = Vec3::ZERO;
     }
