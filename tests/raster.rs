@@ -759,7 +759,8 @@ fn hard_case_empty_scene() {
 /// (the trainer relies on this to avoid re-zeroing the whole buffer each step).
 #[test]
 fn clearing_the_reported_rows_restores_zero_gradients() {
-    let scene = small_scene(300, 64, 48, 8, 10.0, (0.0, 1.0), 8);
+    // Culled and fully transparent billboards receive nothing and must not be reported.
+    let scene = small_scene(300, 64, 48, 8, 10.0, (0.0, 1.0), 8).concat(&culled_billboards(8, 9));
     let cam = random_scene_camera(64, 48);
     let (_, mut g, touched) = render_and_backward(&scene, &cam, &settings(Vec3::splat(0.5)));
     assert!(!touched.is_empty() && touched.len() < scene.len(), "some but not all billboards are seen");
