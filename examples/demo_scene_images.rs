@@ -9,11 +9,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let scene = generate(&DemoConfig::default());
     for (split, views) in [("train", &scene.train), ("test", &scene.test)] {
         for (i, view) in views.iter().enumerate() {
-            let bytes: Vec<u8> = view
-                .rgb
-                .iter()
-                .map(|&c| (c.clamp(0.0, 1.0) * 255.0 + 0.5) as u8)
-                .collect();
+            let bytes: Vec<u8> = view.rgb.iter().map(|&c| bbsplat::loss::psnr::quantize_u8(c)).collect();
             let path = format!("{dir}/{split}_{i:03}.png");
             image::save_buffer(
                 &path,
