@@ -22,6 +22,7 @@ pub mod init;
 pub mod loss;
 pub mod model;
 pub mod raster;
+pub mod report;
 pub mod rng;
 pub mod scene;
 pub mod stages;

@@ -1,0 +1,122 @@
+//! Machine-readable records of a training run, shared by `bbsplat train`, `bbsplat eval` and the
+//! sweep tool.
+//!
+//! `bbsplat train` writes a [`TrainSummary`] as `summary.json` into its output folder; the sweep
+//! tool reads it back. Times are wall-clock seconds, sizes are bytes, PSNR is in dB on 8-bit
+//! quantised images (as the reference evaluates), SSIM is the training SSIM (11×11 Gaussian window,
+//! σ = 1.5, zero padding) on the same 8-bit images.
+
+use serde::{Deserialize, Serialize};
+
+/// Version of the [`TrainSummary`] layout; bumped when a field changes meaning.
+pub const SUMMARY_VERSION: u32 = 1;
+
+/// What one training run produced, as written to `summary.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrainSummary {
+    /// Layout version ([`SUMMARY_VERSION`]).
+    pub version: u32,
+    /// The scene folder as given on the command line.
+    pub scene: String,
+    /// Optimisation steps run.
+    pub iterations: usize,
+    /// Billboards in the model.
+    pub billboards: usize,
+    /// Billboards alive at the end (mean alpha above the relocation threshold 0.005).
+    pub alive: usize,
+    /// Texture side.
+    pub texture_size: usize,
+    /// Highest SH degree.
+    pub sh_degree: u32,
+    /// Training image width and height in pixels (of the first training view).
+    pub resolution: [u32; 2],
+    /// Wall-clock seconds spent in training steps (excluding loading, evaluation and saving).
+    pub train_seconds: f64,
+    /// Mean forward-only render time per test frame, milliseconds.
+    pub render_ms_per_frame: f64,
+    /// Mean test-view PSNR (dB, 8-bit images).
+    pub test_psnr: f64,
+    /// Mean test-view SSIM (8-bit images).
+    pub test_ssim: f64,
+    /// Number of test views evaluated.
+    pub test_views: usize,
+    /// Size of the saved model on disk (all files of the model folder), bytes.
+    pub model_bytes: u64,
+    /// Peak resident memory of the process (`VmHWM`), bytes; 0 where unavailable.
+    pub peak_rss_bytes: u64,
+    /// The seed of the run.
+    pub seed: u64,
+    /// Rayon worker threads used.
+    pub threads: usize,
+    /// Test PSNR/SSIM at each evaluation during training: `(step, seconds, psnr, ssim)`.
+    pub curve: Vec<CurvePoint>,
+}
+
+/// One evaluation during training.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CurvePoint {
+    /// Steps done.
+    pub step: usize,
+    /// Training wall-clock seconds so far (evaluation time excluded).
+    pub seconds: f64,
+    /// Mean test PSNR (dB, 8-bit).
+    pub psnr: f64,
+    /// Mean test SSIM (8-bit).
+    pub ssim: f64,
+}
+
+/// Peak resident set size of this process in bytes (`VmHWM` of `/proc/self/status`), or 0 when
+/// the platform does not expose it.
+pub fn peak_rss_bytes() -> u64 {
+    let Ok(status) = std::fs::read_to_string("/proc/self/status") else {
+        return 0;
+    };
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmHWM:"))
+        .and_then(|rest| rest.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
+        .map_or(0, |kb| kb * 1024)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn summary_round_trips_through_json() {
+        let s = TrainSummary {
+            version: SUMMARY_VERSION,
+            scene: "demo".into(),
+            iterations: 10,
+            billboards: 5,
+            alive: 4,
+            texture_size: 16,
+            sh_degree: 3,
+            resolution: [96, 96],
+            train_seconds: 1.5,
+            render_ms_per_frame: 2.0,
+            test_psnr: 20.0,
+            test_ssim: 0.8,
+            test_views: 8,
+            model_bytes: 1234,
+            peak_rss_bytes: peak_rss_bytes(),
+            seed: 0,
+            threads: 2,
+            curve: vec![CurvePoint {
+                step: 10,
+                seconds: 1.5,
+                psnr: 20.0,
+                ssim: 0.8,
+            }],
+        };
+        let text = serde_json::to_string(&s).unwrap();
+        assert_eq!(serde_json::from_str::<TrainSummary>(&text).unwrap(), s);
+    }
+
+    #[test]
+    fn peak_rss_is_reported_on_linux() {
+        if cfg!(target_os = "linux") {
+            assert!(peak_rss_bytes() > 1 << 20);
+        }
+    }
+}
