@@ -17,6 +17,7 @@
 pub mod billboards;
 pub mod camera;
 pub mod demo;
+pub mod eval;
 pub mod gradcheck;
 pub mod init;
 pub mod loss;
