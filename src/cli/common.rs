@@ -1,0 +1,138 @@
+//! Pieces shared by the subcommands: scene-loading flags, thread pool, atomic PNG writes.
+
+use anyhow::{Context, Result};
+use bbsplat::scene::{Background, LoadOptions, Scene, View};
+use bbsplat::train::TrainView;
+use clap::{Args, ValueEnum};
+use std::path::{Path, PathBuf};
+
+/// Background colour flag.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum BackgroundArg {
+    /// `[0, 0, 0]` (the reference's default).
+    Black,
+    /// `[1, 1, 1]` (`--white_background`, used for NeRF-synthetic figures).
+    White,
+}
+
+impl From<BackgroundArg> for Background {
+    fn from(b: BackgroundArg) -> Self {
+        match b {
+            BackgroundArg::Black => Background::Black,
+            BackgroundArg::White => Background::White,
+        }
+    }
+}
+
+/// How a scene folder is read (shared by `train`, `render` and `eval`).
+#[derive(Args, Clone, Debug)]
+pub struct SceneArgs {
+    /// Background composited behind transparent pixels and the billboards.
+    #[arg(long, value_enum, default_value_t = BackgroundArg::Black)]
+    pub background: BackgroundArg,
+    /// Integer image downscale factor (1, 2, 4, 8, ...).
+    #[arg(long, default_value_t = 1)]
+    pub downscale: u32,
+    /// Maximum image width in pixels after `--downscale` (wider images are area-downscaled).
+    #[arg(long)]
+    pub max_width: Option<u32>,
+    /// Without a test list, hold out every n-th view (0: none), as the reference's `--eval`.
+    #[arg(long, default_value_t = 8)]
+    pub test_every: usize,
+}
+
+impl SceneArgs {
+    /// Loads `path` with these options; warnings go to stderr unless `quiet`.
+    pub fn load(&self, path: &Path, quiet: bool) -> Result<Scene> {
+        let options = LoadOptions {
+            background: self.background.into(),
+            downscale: self.downscale,
+            max_width: self.max_width,
+            test_every: self.test_every,
+            print_warnings: !quiet,
+            ..LoadOptions::default()
+        };
+        bbsplat::scene::load(path, &options).with_context(|| format!("loading the scene {}", path.display()))
+    }
+}
+
+/// Which views of a scene a command works on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Split {
+    /// The training views.
+    Train,
+    /// The held-out views.
+    Test,
+}
+
+/// The views of `split`.
+pub fn split_views(scene: &Scene, split: Split) -> &[View] {
+    match split {
+        Split::Train => &scene.train,
+        Split::Test => &scene.test,
+    }
+}
+
+/// Float copies of views for training and evaluation.
+pub fn train_views(views: &[View]) -> Vec<TrainView> {
+    views
+        .iter()
+        .map(|v| TrainView {
+            camera: v.camera,
+            rgb: v.image.to_f32_rgb(),
+        })
+        .collect()
+}
+
+/// Starts the global rayon pool with `threads` workers (all cores when `None`); returns the
+/// number of workers.
+pub fn start_threads(threads: Option<usize>) -> Result<usize> {
+    if let Some(n) = threads {
+        anyhow::ensure!(n >= 1, "--threads must be at least 1");
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .context("starting the thread pool")?;
+    }
+    Ok(rayon::current_num_threads())
+}
+
+/// Writes an interleaved RGB float image as an 8-bit PNG, through a temporary name.
+pub fn write_png_atomic(path: &Path, rgb: &[f32], width: u32, height: u32) -> Result<()> {
+    let bytes: Vec<u8> = rgb.iter().map(|&c| bbsplat::loss::psnr::quantize_u8(c)).collect();
+    let tmp = path.with_extension("png.tmp");
+    image::save_buffer_with_format(
+        &tmp,
+        &bytes,
+        width,
+        height,
+        image::ExtendedColorType::Rgb8,
+        image::ImageFormat::Png,
+    )
+    .with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))?;
+    Ok(())
+}
+
+/// Writes `text` to `path` through a temporary name in the same folder.
+pub fn write_text_atomic(path: &Path, text: &str) -> Result<()> {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))?;
+    Ok(())
+}
+
+/// A file name for a view's render: its name with path separators and the extension replaced.
+pub fn render_file_name(index: usize, name: &str) -> String {
+    let stem = Path::new(name)
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let clean: String = stem
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() || c == '_' || c == '-' { c } else { '_' })
+        .collect();
+    format!("{index:04}_{clean}.png")
+}
