@@ -88,7 +88,10 @@ impl EvalReport {
     /// A plain-text table: one line per view, then the mean.
     pub fn table(&self) -> String {
         let width = self.views.iter().map(|v| v.name.len()).max().unwrap_or(4).max(4);
-        let mut out = format!("{:<width$}  {:>9}  {:>7}  {:>9}\n", "view", "PSNR (dB)", "SSIM", "render ms");
+        let mut out = format!(
+            "{:<width$}  {:>9}  {:>7}  {:>9}\n",
+            "view", "PSNR (dB)", "SSIM", "render ms"
+        );
         for v in &self.views {
             out += &format!(
                 "{:<width$}  {:>9.3}  {:>7.4}  {:>9.1}\n",

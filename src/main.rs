@@ -39,6 +39,10 @@ enum Command {
         /// Rayon worker threads (default: all cores).
         #[arg(long)]
         threads: Option<usize>,
+        /// Write the demo scene as a COLMAP dataset (sparse/0 + images) to this folder instead of
+        /// training, e.g. to try `bbsplat train` without downloading anything.
+        #[arg(long)]
+        export: Option<PathBuf>,
     },
     /// Train a billboard model on a dataset (COLMAP, NeRF-synthetic or instant-ngp, detected).
     Train(cli::train::TrainArgs),
@@ -55,9 +59,10 @@ fn main() -> Result<()> {
             seed,
             output,
             threads,
+            export,
         } => {
             cli::common::start_threads(threads)?;
-            cli::demo::run(iterations, billboards, texture_size, resolution, seed, output)
+            cli::demo::run(iterations, billboards, texture_size, resolution, seed, output, export)
         }
         Command::Train(args) => cli::train::run(args),
     }

@@ -20,6 +20,7 @@ pub fn run(
     resolution: u32,
     seed: u64,
     output: Option<PathBuf>,
+    export: Option<PathBuf>,
 ) -> Result<()> {
     anyhow::ensure!(texture_size >= 2, "--texture-size must be at least 2");
     anyhow::ensure!(resolution >= 8, "--resolution must be at least 8");
@@ -30,6 +31,17 @@ pub fn run(
         points: billboards.max(1) * 2,
         ..DemoConfig::default()
     });
+    if let Some(dir) = export {
+        bbsplat::demo::export_colmap(&scene, &dir)
+            .with_context(|| format!("exporting the demo scene to {}", dir.display()))?;
+        println!(
+            "wrote the demo scene ({} views at {resolution}x{resolution}, {} points) as a COLMAP dataset to {}",
+            scene.train.len() + scene.test.len(),
+            scene.points.len(),
+            dir.display()
+        );
+        return Ok(());
+    }
     let keep = farthest_point_sampling(&scene.points, billboards).context("sampling the initial points")?;
     let points: Vec<Vec3> = keep.iter().map(|&i| scene.points[i]).collect();
     let colours: Vec<[f32; 3]> = keep.iter().map(|&i| scene.colours[i]).collect();
@@ -112,4 +124,3 @@ pub fn run(
     }
     Ok(())
 }
-

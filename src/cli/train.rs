@@ -114,7 +114,11 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let start = Instant::now();
     let scene = args.scene_args.load(&args.scene, args.quiet)?;
     let train = train_views(&scene.train);
-    anyhow::ensure!(!train.is_empty(), "{}: the scene has no training view", args.scene.display());
+    anyhow::ensure!(
+        !train.is_empty(),
+        "{}: the scene has no training view",
+        args.scene.display()
+    );
     let test: Vec<(String, TrainView)> = scene
         .test
         .iter()
@@ -158,8 +162,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         sh_degree: args.sh_degree,
         ..RenderSettings::default()
     };
-    let eval_subset: Vec<(String, TrainView)> =
-        evenly_spaced(&test, args.eval_views).into_iter().cloned().collect();
+    let eval_subset: Vec<(String, TrainView)> = evenly_spaced(&test, args.eval_views).into_iter().cloned().collect();
     let bar = if args.quiet {
         ProgressBar::hidden()
     } else {
@@ -198,10 +201,12 @@ pub fn run(args: TrainArgs) -> Result<()> {
                 ssim,
             });
             if !args.quiet {
-                bar.println(format!(
-                    "step {step:>6}: test PSNR {psnr:.2} dB, SSIM {ssim:.4} ({} views), {train_seconds:.0} s",
-                    eval_subset.len()
-                ));
+                bar.suspend(|| {
+                    println!(
+                        "step {step:>6}: test PSNR {psnr:.2} dB, SSIM {ssim:.4} ({} views), {train_seconds:.0} s",
+                        eval_subset.len()
+                    )
+                });
             }
         }
     }
