@@ -102,6 +102,7 @@ fn demo(
         background: Vec3::from_array(scene.background),
         seed,
         extent: scene_extent(&cameras),
+        ..TrainConfig::default()
     };
     println!(
         "demo scene: {} train / {} test views at {res}x{res}, {} billboards (TS {texture_size}), generated in {:.1} s",
@@ -121,7 +122,7 @@ fn demo(
     let t0 = Instant::now();
     let mut running = 0.0;
     for i in 0..iterations {
-        let log = trainer.step(&train);
+        let log = trainer.step(&train)?;
         running = if i == 0 {
             log.psnr
         } else {
