@@ -123,12 +123,17 @@ fn gaussian_mode_splits_the_opacity_scalar() {
     let seed = 3;
     let mut tr = synthetic(seed, TextureMode::Gaussian);
     let before: Vec<f32> = tr.opacity_logits().to_vec();
+    let before_positions = tr.model.positions.clone();
     assert_eq!(tr.relocate(), DEAD.len());
     let after = tr.opacity_logits();
-    for &d in &DEAD {
-        let s = (0..12).find(|&s| !DEAD.contains(&s) && after[s] == after[d] && after[s] != before[s]);
-        let s = s.expect("the dead slot shares its source's split opacity");
-        let n = DEAD.iter().filter(|&&x| after[x] == after[s]).count() as i32;
+    // Sources identified by the copied (unique) positions.
+    let sources: Vec<usize> = DEAD
+        .iter()
+        .map(|&d| (0..12).find(|&s| before_positions[s] == tr.model.positions[d]).unwrap())
+        .collect();
+    for (&d, &s) in DEAD.iter().zip(&sources) {
+        assert_eq!(after[d], after[s], "the copy shares its source's split opacity");
+        let n = sources.iter().filter(|&&x| x == s).count() as i32;
         let (o, o_split) = (sigmoid(before[s]) as f64, sigmoid(after[s]) as f64);
         let recomposed = 1.0 - (1.0 - o_split).powi(n + 1);
         assert!((recomposed - o).abs() < 1e-6, "seed {seed}: {recomposed} vs {o}");

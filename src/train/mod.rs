@@ -1,10 +1,24 @@
-//! Training: one view per step, photometric loss, analytic gradients, row-sparse Adam.
+//! Training: one view per step, photometric loss + regularisers, analytic gradients, Adam,
+//! relocation of dead billboards, checkpoints.
 //!
-//! This is the first, minimal trainer (issue 5 is open): the loss is `0.8·L1 + 0.2·(1 − SSIM)`,
-//! learning rates and their schedules follow `bbsplat-spec.md` §7 scaled to the number of
-//! iterations (the reference's 32 000 iterations are the 100 % point), the SH degree rises every
-//! 1/32 of the run, textures train from 500/32 000 of the run on. Not yet implemented: the
-//! texture and opacity regularisers (§5.4-5.5) and the relocation of dead billboards (§6).
+//! What a step does ([`Trainer::step`], method: `bbsplat-spec.md` §5-§7, details and measurements
+//! in `docs/training.md`):
+//! 1. draws the next view from a shuffled stack (without replacement, refilled when empty);
+//! 2. renders it, evaluates `0.8·L1 + 0.2·(1 − SSIM)` and back-propagates it to every billboard;
+//! 3. adds the texture regulariser of paper Eq. 9 on the view's impact `Σ α·T` with threshold σ
+//!    (default 500) and the opacity regulariser `0.01 · mean alpha` ([`regularise`]);
+//! 4. steps Adam ([`adam`]) with the learning rates of [`learning_rates`]: dense (every billboard,
+//!    PyTorch semantics, default) or row-sparse (only billboards the view touched), see
+//!    [`AdamMode`];
+//! 5. every [`TrainConfig::relocate_every`] steps inside the scaled window (500, 25 000)/32 000,
+//!    moves dead billboards (mean alpha ≤ 0.005) onto copies of alive ones ([`relocate`]).
+//!
+//! All milestones scale with [`TrainConfig::iterations`] (the reference's 32 000 = 100 %): the SH
+//! degree rises every 1/32 of the run, textures train in [500, 30 000)/32 000, and after
+//! 30 000/32 000 only SH rest and (at the final rate) positions keep moving.
+//! [`TextureMode::Gaussian`] replaces the learned textures with one opacity per billboard times
+//! the fixed initial Gaussian (the "textures off" ablation). [`checkpoint`] saves and restores the
+//! whole state bit for bit. Everything is deterministic for any thread count.
 
 pub mod adam;
 pub mod checkpoint;
@@ -198,7 +212,7 @@ pub fn active_sh_degree(step: usize, iterations: usize, max_degree: u32) -> u32 
 pub fn relocation_due(step: usize, iterations: usize, every: usize) -> bool {
     let it = step + 1;
     every > 0
-        && it % every == 0
+        && it.is_multiple_of(every)
         && !past_milestone(it, iterations, 25_000)
         && (it as u128 * REFERENCE_ITERATIONS as u128) > 500 * iterations.max(1) as u128
 }

@@ -50,12 +50,10 @@ impl RelocationPlan {
 /// billboard whose cumulative-weight interval contains `u · Σ weights` (f64 sums, binary search).
 /// Returns an empty plan (and draws nothing) when no billboard is dead or none is alive.
 pub fn plan_relocation(mean_alpha: &[f32], rng: &mut Rng) -> RelocationPlan {
-    let dead: Vec<usize> = (0..mean_alpha.len())
-        .filter(|&i| !(mean_alpha[i] > DEAD_OPACITY))
-        .collect();
-    let alive: Vec<usize> = (0..mean_alpha.len())
-        .filter(|&i| mean_alpha[i] > DEAD_OPACITY)
-        .collect();
+    // A NaN mean alpha counts as dead (it is not above the threshold).
+    let is_alive = |i: usize| mean_alpha[i] > DEAD_OPACITY;
+    let dead: Vec<usize> = (0..mean_alpha.len()).filter(|&i| !is_alive(i)).collect();
+    let alive: Vec<usize> = (0..mean_alpha.len()).filter(|&i| is_alive(i)).collect();
     if dead.is_empty() || alive.is_empty() {
         return RelocationPlan::default();
     }
