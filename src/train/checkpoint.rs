@@ -492,7 +492,10 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), CheckpointError> {
         })?
         .to_string_lossy()
         .into_owned();
-    let tmp = dir.join(format!(".{name}.tmp.{}", std::process::id()));
+    // Unique per process and per call, so concurrent saves of one process do not share a file.
+    static SAVES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let serial = SAVES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let tmp = dir.join(format!(".{name}.tmp.{}.{serial}", std::process::id()));
     let result = (|| {
         let mut f = std::fs::File::create(&tmp).map_err(io("creating the temporary file"))?;
         f.write_all(bytes).map_err(io("writing"))?;
