@@ -1,4 +1,16 @@
-//! Row-sparse Adam: only the rows (billboards) that received a gradient are updated.
+//! Adam on per-billboard rows, in two modes.
+//!
+//! * **Dense** ([`AdamGroup::step_row_global`] on every row every step): PyTorch `torch.optim.Adam`
+//!   semantics. Every row's moments decay every step (with a zero gradient when the row was not
+//!   seen) and the bias correction uses the global step count `t` shared by all rows, so a row with
+//!   decaying moments keeps moving.
+//! * **Row-sparse** ([`AdamGroup::step_row`] on the rows that received a gradient): a row that is
+//!   not touched is left exactly as it is (no moment decay, no movement), and the bias correction
+//!   uses the row's own count of updates `steps[row]`. This is what a "sparse Adam" does (e.g.
+//!   `torch.optim.SparseAdam` and the sparse mode of gsplat), not what the reference does.
+//!
+//! The update is written in PyTorch's arrangement:
+//! `p -= (lr / (1 − β₁ᵗ)) · m / (√v / √(1 − β₂ᵗ) + ε)`.
 
 /// First and second moments of one parameter group, `row_len` values per billboard.
 #[derive(Clone, Debug, PartialEq)]
@@ -9,8 +21,10 @@ pub struct AdamGroup {
     pub m: Vec<f32>,
     /// Second moments.
     pub v: Vec<f32>,
-    /// Per billboard: number of updates applied (for bias correction).
+    /// Per billboard: number of updates applied (bias correction of the row-sparse mode).
     pub steps: Vec<u32>,
+    /// Steps of the dense mode (the global `t` of PyTorch's Adam).
+    pub global_step: u64,
 }
 
 /// Adam hyper-parameters (reference: β₁ 0.9, β₂ 0.999, ε 1e-15).
@@ -42,7 +56,29 @@ impl AdamGroup {
             m: vec![0.0; rows * row_len],
             v: vec![0.0; rows * row_len],
             steps: vec![0; rows],
+            global_step: 0,
         }
+    }
+
+    /// Number of rows.
+    pub fn rows(&self) -> usize {
+        self.steps.len()
+    }
+
+    /// Zeroes the moments and the update count of `row` (after relocation).
+    pub fn reset_row(&mut self, row: usize) {
+        let n = self.row_len;
+        self.m[row * n..(row + 1) * n].fill(0.0);
+        self.v[row * n..(row + 1) * n].fill(0.0);
+        self.steps[row] = 0;
+    }
+
+    /// One dense-mode Adam step of `row` with the global step count `t ≥ 1` (PyTorch semantics;
+    /// the caller calls it for every row, with a zero gradient for unseen rows, and advances
+    /// [`AdamGroup::global_step`] once per optimiser step). Also counts the update in `steps`.
+    pub fn step_row_global(&mut self, row: usize, params: &mut [f32], grads: &[f32], lr: f32, hp: &AdamParams, t: u64) {
+        self.steps[row] = self.steps[row].saturating_add(1);
+        update(self.row_len, &mut self.m, &mut self.v, row, params, grads, lr, hp, t);
     }
 
     /// One Adam step for billboard `row`: `params -= lr · m̂ / (√v̂ + ε)`, with bias correction by
@@ -51,21 +87,38 @@ impl AdamGroup {
     /// seen in a view is left exactly as it is. This saves the work on unseen rows; how much it saves
     /// and what it changes in quality against dense Adam has not been measured yet.
     pub fn step_row(&mut self, row: usize, params: &mut [f32], grads: &[f32], lr: f32, hp: &AdamParams) {
-        let n = self.row_len;
-        debug_assert_eq!(params.len(), n);
-        debug_assert_eq!(grads.len(), n);
-        self.steps[row] += 1;
-        let t = self.steps[row] as i32;
-        let bc1 = 1.0 - hp.beta1.powi(t);
-        let bc2 = 1.0 - hp.beta2.powi(t);
-        let m = &mut self.m[row * n..(row + 1) * n];
-        let v = &mut self.v[row * n..(row + 1) * n];
-        for k in 0..n {
-            let g = grads[k];
-            m[k] = hp.beta1 * m[k] + (1.0 - hp.beta1) * g;
-            v[k] = hp.beta2 * v[k] + (1.0 - hp.beta2) * g * g;
-            params[k] -= lr * (m[k] / bc1) / ((v[k] / bc2).sqrt() + hp.eps);
-        }
+        self.steps[row] = self.steps[row].saturating_add(1);
+        let t = self.steps[row] as u64;
+        update(self.row_len, &mut self.m, &mut self.v, row, params, grads, lr, hp, t);
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn update(
+    n: usize,
+    m: &mut [f32],
+    v: &mut [f32],
+    row: usize,
+    params: &mut [f32],
+    grads: &[f32],
+    lr: f32,
+    hp: &AdamParams,
+    t: u64,
+) {
+    debug_assert_eq!(params.len(), n);
+    debug_assert_eq!(grads.len(), n);
+    let t = t.min(i32::MAX as u64) as i32;
+    let bc1 = 1.0 - hp.beta1.powi(t);
+    let bc2_sqrt = (1.0 - hp.beta2.powi(t)).sqrt();
+    let step_size = lr / bc1;
+    let m = &mut m[row * n..(row + 1) * n];
+    let v = &mut v[row * n..(row + 1) * n];
+    for k in 0..n {
+        let g = grads[k];
+        m[k] = hp.beta1 * m[k] + (1.0 - hp.beta1) * g;
+        v[k] = hp.beta2 * v[k] + (1.0 - hp.beta2) * g * g;
+        params[k] -= step_size * m[k] / (v[k].sqrt() / bc2_sqrt + hp.eps);
     }
 }
 
@@ -80,6 +133,24 @@ mod tests {
         g.step_row(1, &mut p, &[0.5, -2.0, 0.0], 0.1, &AdamParams::default());
         assert!((p[0] - 0.9).abs() < 1e-6 && (p[1] - 2.1).abs() < 1e-6 && p[2] == 3.0);
         assert_eq!(g.steps, vec![0, 1]);
+    }
+
+    #[test]
+    fn dense_mode_decays_and_moves_an_unseen_row() {
+        // After one seen step, a step with zero gradient still moves the row (PyTorch semantics),
+        // by lr · (β₁·m₁ / (1 − β₁²)) / (√(β₂·v₁) / √(1 − β₂²)).
+        let hp = AdamParams::default();
+        let mut g = AdamGroup::new(1, 1);
+        let mut p = [0.0f32];
+        g.step_row_global(0, &mut p, &[1.0], 0.1, &hp, 1);
+        assert!((p[0] + 0.1).abs() < 1e-6);
+        g.step_row_global(0, &mut p, &[0.0], 0.1, &hp, 2);
+        let (m2, v2) = (0.9 * 0.1f64, 0.999 * 0.001f64);
+        let expected = -0.1 - 0.1 * (m2 / (1.0 - 0.81)) / (v2.sqrt() / (1.0 - 0.999f64 * 0.999).sqrt());
+        assert!((p[0] as f64 - expected).abs() < 1e-5, "{} vs {expected}", p[0]);
+        // Row-sparse mode would not have been called for the unseen row: nothing moves.
+        g.reset_row(0);
+        assert_eq!((g.m[0], g.v[0], g.steps[0]), (0.0, 0.0, 0));
     }
 
     #[test]

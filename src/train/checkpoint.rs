@@ -1,0 +1,549 @@
+//! Training checkpoints: everything needed to continue a run bit for bit.
+//!
+//! # Format (version 1)
+//!
+//! Little-endian, no padding. `T = TS²`, `n` = number of billboards.
+//!
+//! | field | type | notes |
+//! |---|---|---|
+//! | magic | 8 bytes | `BBSPLCKP` |
+//! | version | u32 | 1 |
+//! | file length | u64 | total bytes including the checksum |
+//! | iterations | u64 | [`TrainConfig::iterations`] |
+//! | sh_degree | u32 | ≤ 3 |
+//! | background | 3 × f32 | |
+//! | seed | u64 | |
+//! | extent | f32 | |
+//! | impact_threshold, texture_reg_weight, opacity_reg_weight | 3 × f32 | |
+//! | adam mode | u8 | 0 dense, 1 sparse |
+//! | texture mode | u8 | 0 full, 1 Gaussian |
+//! | relocate | u8 | 0 / 1 |
+//! | relocate_every | u64 | |
+//! | step | u64 | steps done |
+//! | RNG state | 4 × u64 | [`crate::rng::Rng::state`] |
+//! | order length `k`, order | u64, `k` × u64 | view indices still on the shuffled stack (popped from the end) |
+//! | n, TS | u64, u64 | TS ≥ 2 |
+//! | alpha mask | `T` × u8 | 0 / 1 |
+//! | positions, quaternions, log-scales | `3n`, `4n`, `2n` × f32 | |
+//! | SH | `48n` × f32 | `[billboard][coeff][rgb]` |
+//! | alpha logits, colour logits | `Tn`, `3Tn` × f32 | exact bits (masked texels included) |
+//! | opacity count `o`, opacity logits | u64 (0 or n), `o` × f32 | Gaussian mode |
+//! | group count | u32 | 8, order of [`super::group`] |
+//! | per group: row_len, rows, global step | 3 × u64 | rows = n |
+//! | per group: m, v | 2 × `rows·row_len` × f32 | |
+//! | per group: update counts | `rows` × u32 | |
+//! | checksum | u64 | FNV-1a 64 of every preceding byte |
+//!
+//! Derived state is not stored: the activated textures (recomputed from the logits), the
+//! regulariser's `A0` and the Gaussian shape (from TS and the mask), and the gradient buffers
+//! (always zero between steps).
+//!
+//! Reading checks, in order: magic, version, stored length against the file's length
+//! (shorter: [`CheckpointError::Truncated`]), checksum, then every count against what the config
+//! and the model imply ([`CheckpointError::Inconsistent`]). It never panics on bad input and never
+//! allocates more than the file's size.
+
+use super::adam::AdamGroup;
+use super::{AdamMode, TextureMode, TrainConfig, Trainer, adam_groups, group};
+use crate::model::Model;
+use crate::raster::{RenderGradients, SH_FLOATS};
+use crate::rng::Rng;
+use glam::{Vec2, Vec3};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+/// File magic.
+pub const MAGIC: [u8; 8] = *b"BBSPLCKP";
+/// Format version written and read.
+pub const VERSION: u32 = 1;
+
+/// What went wrong reading or writing a checkpoint; every variant names the file.
+#[derive(Debug, Error)]
+pub enum CheckpointError {
+    /// The file system refused.
+    #[error("checkpoint {path}: {action}: {source}")]
+    Io {
+        /// The checkpoint path.
+        path: PathBuf,
+        /// What was being done.
+        action: &'static str,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// Not a bbsplat checkpoint.
+    #[error("checkpoint {path}: not a bbsplat checkpoint (bad magic bytes)")]
+    BadMagic {
+        /// The checkpoint path.
+        path: PathBuf,
+    },
+    /// Written by another format version.
+    #[error("checkpoint {path}: format version {found} is not supported (this build reads version {supported})")]
+    UnsupportedVersion {
+        /// The checkpoint path.
+        path: PathBuf,
+        /// Version in the file.
+        found: u32,
+        /// Version this build reads.
+        supported: u32,
+    },
+    /// The file ends before its stated length.
+    #[error("checkpoint {path}: truncated: {found} bytes, {expected} expected ({what})")]
+    Truncated {
+        /// The checkpoint path.
+        path: PathBuf,
+        /// Bytes expected.
+        expected: u64,
+        /// Bytes found.
+        found: u64,
+        /// Where it ended.
+        what: String,
+    },
+    /// The content does not match its checksum (corrupted).
+    #[error("checkpoint {path}: corrupted: checksum {computed:#018x} does not match the stored {stored:#018x}")]
+    Checksum {
+        /// The checkpoint path.
+        path: PathBuf,
+        /// Stored checksum.
+        stored: u64,
+        /// Checksum of the content.
+        computed: u64,
+    },
+    /// Sizes or values that contradict each other.
+    #[error("checkpoint {path}: inconsistent: {what}")]
+    Inconsistent {
+        /// The checkpoint path.
+        path: PathBuf,
+        /// What is wrong.
+        what: String,
+    },
+}
+
+/// FNV-1a, 64 bit.
+fn fnv1a(data: &[u8]) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    for &b in data {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+struct Writer(Vec<u8>);
+
+impl Writer {
+    fn u8(&mut self, x: u8) {
+        self.0.push(x);
+    }
+    fn u32(&mut self, x: u32) {
+        self.0.extend_from_slice(&x.to_le_bytes());
+    }
+    fn u64(&mut self, x: u64) {
+        self.0.extend_from_slice(&x.to_le_bytes());
+    }
+    fn f32(&mut self, x: f32) {
+        self.0.extend_from_slice(&x.to_le_bytes());
+    }
+    fn f32s(&mut self, xs: &[f32]) {
+        self.0.reserve(4 * xs.len());
+        for &x in xs {
+            self.f32(x);
+        }
+    }
+}
+
+struct Reader<'a> {
+    data: &'a [u8],
+    pos: usize,
+    path: &'a Path,
+}
+
+impl<'a> Reader<'a> {
+    fn inconsistent(&self, what: impl Into<String>) -> CheckpointError {
+        CheckpointError::Inconsistent {
+            path: self.path.to_path_buf(),
+            what: what.into(),
+        }
+    }
+    fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8], CheckpointError> {
+        if self.data.len() - self.pos < n {
+            return Err(self.inconsistent(format!(
+                "{what} needs {n} bytes at offset {} but only {} remain",
+                self.pos,
+                self.data.len() - self.pos
+            )));
+        }
+        let s = &self.data[self.pos..self.pos + n];
+        self.pos += n;
+        Ok(s)
+    }
+    fn u8(&mut self, what: &str) -> Result<u8, CheckpointError> {
+        Ok(self.take(1, what)?[0])
+    }
+    fn u32(&mut self, what: &str) -> Result<u32, CheckpointError> {
+        Ok(u32::from_le_bytes(self.take(4, what)?.try_into().expect("4 bytes")))
+    }
+    fn u64(&mut self, what: &str) -> Result<u64, CheckpointError> {
+        Ok(u64::from_le_bytes(self.take(8, what)?.try_into().expect("8 bytes")))
+    }
+    fn f32(&mut self, what: &str) -> Result<f32, CheckpointError> {
+        Ok(f32::from_le_bytes(self.take(4, what)?.try_into().expect("4 bytes")))
+    }
+    /// A count stored as u64 that must fit the remaining bytes at `unit` bytes each.
+    fn count(&mut self, unit: usize, what: &str) -> Result<usize, CheckpointError> {
+        let c = self.u64(what)?;
+        let remaining = (self.data.len() - self.pos) as u64;
+        if c.checked_mul(unit.max(1) as u64).is_none_or(|b| b > remaining) {
+            return Err(self.inconsistent(format!("{what} = {c} does not fit the {remaining} remaining bytes")));
+        }
+        Ok(c as usize)
+    }
+    fn f32s(&mut self, n: usize, what: &str) -> Result<Vec<f32>, CheckpointError> {
+        let bytes = n
+            .checked_mul(4)
+            .ok_or_else(|| self.inconsistent(format!("{what}: size overflows")))?;
+        let raw = self.take(bytes, what)?;
+        Ok(raw
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
+            .collect())
+    }
+    fn flag(&mut self, what: &str) -> Result<bool, CheckpointError> {
+        match self.u8(what)? {
+            0 => Ok(false),
+            1 => Ok(true),
+            x => Err(self.inconsistent(format!("{what} = {x}, expected 0 or 1"))),
+        }
+    }
+}
+
+fn encode(tr: &Trainer) -> Vec<u8> {
+    let mut w = Writer(Vec::new());
+    w.0.extend_from_slice(&MAGIC);
+    w.u32(VERSION);
+    w.u64(0); // file length, patched below
+    let c = &tr.config;
+    w.u64(c.iterations as u64);
+    w.u32(c.sh_degree);
+    w.f32s(&c.background.to_array());
+    w.u64(c.seed);
+    w.f32(c.extent);
+    w.f32(c.impact_threshold);
+    w.f32(c.texture_reg_weight);
+    w.f32(c.opacity_reg_weight);
+    w.u8(match c.adam {
+        AdamMode::Dense => 0,
+        AdamMode::Sparse => 1,
+    });
+    w.u8(match c.texture_mode {
+        TextureMode::Full => 0,
+        TextureMode::Gaussian => 1,
+    });
+    w.u8(c.relocate as u8);
+    w.u64(c.relocate_every as u64);
+    w.u64(tr.step as u64);
+    for s in tr.rng.state() {
+        w.u64(s);
+    }
+    w.u64(tr.order.len() as u64);
+    for &o in &tr.order {
+        w.u64(o as u64);
+    }
+    let m = &tr.model;
+    w.u64(m.len() as u64);
+    w.u64(m.texture_size as u64);
+    for &b in &m.alpha_mask {
+        w.u8(b as u8);
+    }
+    for p in &m.positions {
+        w.f32s(&p.to_array());
+    }
+    for q in &m.quaternions {
+        w.f32s(q);
+    }
+    for s in &m.log_scales {
+        w.f32s(&s.to_array());
+    }
+    w.f32s(&m.sh);
+    w.f32s(&m.alpha_logits);
+    w.f32s(&m.colour_logits);
+    w.u64(tr.opacity_logits.len() as u64);
+    w.f32s(&tr.opacity_logits);
+    w.u32(tr.adam.len() as u32);
+    for g in &tr.adam {
+        w.u64(g.row_len as u64);
+        w.u64(g.rows() as u64);
+        w.u64(g.global_step);
+        w.f32s(&g.m);
+        w.f32s(&g.v);
+        for &s in &g.steps {
+            w.u32(s);
+        }
+    }
+    let len = (w.0.len() + 8) as u64;
+    w.0[12..20].copy_from_slice(&len.to_le_bytes());
+    let sum = fnv1a(&w.0);
+    w.u64(sum);
+    w.0
+}
+
+fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
+    let p = || path.to_path_buf();
+    if data.len() < 8 || data[..8] != MAGIC {
+        return Err(CheckpointError::BadMagic { path: p() });
+    }
+    if data.len() < 20 {
+        return Err(CheckpointError::Truncated {
+            path: p(),
+            expected: 20,
+            found: data.len() as u64,
+            what: "inside the header".into(),
+        });
+    }
+    let version = u32::from_le_bytes(data[8..12].try_into().expect("4 bytes"));
+    if version != VERSION {
+        return Err(CheckpointError::UnsupportedVersion {
+            path: p(),
+            found: version,
+            supported: VERSION,
+        });
+    }
+    let stated = u64::from_le_bytes(data[12..20].try_into().expect("8 bytes"));
+    let found = data.len() as u64;
+    if found < stated {
+        return Err(CheckpointError::Truncated {
+            path: p(),
+            expected: stated,
+            found,
+            what: "the file is shorter than its header states".into(),
+        });
+    }
+    if found > stated || stated < 28 {
+        return Err(CheckpointError::Inconsistent {
+            path: p(),
+            what: format!("the header states {stated} bytes but the file has {found}"),
+        });
+    }
+    let (body, tail) = data.split_at(data.len() - 8);
+    let stored = u64::from_le_bytes(tail.try_into().expect("8 bytes"));
+    let computed = fnv1a(body);
+    if stored != computed {
+        return Err(CheckpointError::Checksum {
+            path: p(),
+            stored,
+            computed,
+        });
+    }
+    let mut r = Reader {
+        data: body,
+        pos: 20,
+        path,
+    };
+    let iterations = r.u64("iterations")? as usize;
+    let sh_degree = r.u32("sh_degree")?;
+    if sh_degree > 3 {
+        return Err(r.inconsistent(format!("SH degree {sh_degree} > 3")));
+    }
+    let background = Vec3::new(r.f32("background")?, r.f32("background")?, r.f32("background")?);
+    let seed = r.u64("seed")?;
+    let extent = r.f32("extent")?;
+    let impact_threshold = r.f32("impact_threshold")?;
+    let texture_reg_weight = r.f32("texture_reg_weight")?;
+    let opacity_reg_weight = r.f32("opacity_reg_weight")?;
+    let adam = match r.u8("adam mode")? {
+        0 => AdamMode::Dense,
+        1 => AdamMode::Sparse,
+        x => return Err(r.inconsistent(format!("unknown Adam mode {x}"))),
+    };
+    let texture_mode = match r.u8("texture mode")? {
+        0 => TextureMode::Full,
+        1 => TextureMode::Gaussian,
+        x => return Err(r.inconsistent(format!("unknown texture mode {x}"))),
+    };
+    let relocate = r.flag("relocate")?;
+    let relocate_every = r.u64("relocate_every")? as usize;
+    let config = TrainConfig {
+        iterations,
+        sh_degree,
+        background,
+        seed,
+        extent,
+        impact_threshold,
+        texture_reg_weight,
+        opacity_reg_weight,
+        adam,
+        texture_mode,
+        relocate,
+        relocate_every,
+    };
+    let step = r.u64("step")? as usize;
+    let rng = Rng::from_state([r.u64("RNG")?, r.u64("RNG")?, r.u64("RNG")?, r.u64("RNG")?]);
+    let k = r.count(8, "view-order length")?;
+    let order = (0..k)
+        .map(|_| r.u64("view order").map(|x| x as usize))
+        .collect::<Result<Vec<_>, _>>()?;
+    let n = r.count(4 * SH_FLOATS, "billboard count")?;
+    let ts = r.u64("texture size")?;
+    if !(2..=4096).contains(&ts) {
+        return Err(r.inconsistent(format!("texture size {ts} outside 2..=4096")));
+    }
+    let ts = ts as usize;
+    let t = ts * ts;
+    let alpha_mask = (0..t).map(|_| r.flag("alpha mask")).collect::<Result<Vec<_>, _>>()?;
+    let positions = r.f32s(3 * n, "positions")?;
+    let quaternions = r.f32s(4 * n, "quaternions")?;
+    let log_scales = r.f32s(2 * n, "log-scales")?;
+    let sh = r.f32s(SH_FLOATS * n, "SH")?;
+    let alpha_logits = r.f32s(t * n, "alpha logits")?;
+    let colour_logits = r.f32s(3 * t * n, "colour logits")?;
+    let model = Model {
+        positions: positions.chunks_exact(3).map(Vec3::from_slice).collect(),
+        quaternions: quaternions.chunks_exact(4).map(|q| [q[0], q[1], q[2], q[3]]).collect(),
+        log_scales: log_scales.chunks_exact(2).map(Vec2::from_slice).collect(),
+        sh,
+        alpha_logits,
+        colour_logits,
+        alpha_mask,
+        texture_size: ts,
+    };
+    let o = r.count(4, "opacity count")?;
+    let expected_o = if texture_mode == TextureMode::Gaussian { n } else { 0 };
+    if o != expected_o {
+        return Err(r.inconsistent(format!(
+            "{o} opacity logits for {n} billboards in {texture_mode:?} mode (expected {expected_o})"
+        )));
+    }
+    let opacity_logits = r.f32s(o, "opacity logits")?;
+    let groups = r.u32("group count")? as usize;
+    if groups != group::COUNT {
+        return Err(r.inconsistent(format!("{groups} Adam groups, expected {}", group::COUNT)));
+    }
+    let mut adam = adam_groups(0, t);
+    for (gi, g) in adam.iter_mut().enumerate() {
+        let row_len = r.u64("Adam row length")? as usize;
+        let expected_len = g.row_len;
+        if row_len != expected_len {
+            return Err(r.inconsistent(format!(
+                "Adam group {gi}: row length {row_len}, expected {expected_len}"
+            )));
+        }
+        let rows = r.u64("Adam rows")? as usize;
+        if rows != n {
+            return Err(r.inconsistent(format!("Adam group {gi}: {rows} rows for {n} billboards")));
+        }
+        let global_step = r.u64("Adam global step")?;
+        let m = r.f32s(rows * row_len, "Adam first moments")?;
+        let v = r.f32s(rows * row_len, "Adam second moments")?;
+        let steps = (0..rows)
+            .map(|_| r.u32("Adam update counts"))
+            .collect::<Result<Vec<_>, _>>()?;
+        *g = AdamGroup {
+            row_len,
+            m,
+            v,
+            steps,
+            global_step,
+        };
+    }
+    if r.pos != body.len() {
+        return Err(r.inconsistent(format!("{} unexpected bytes before the checksum", body.len() - r.pos)));
+    }
+    let mut trainer = Trainer::new(
+        model,
+        TrainConfig {
+            texture_mode: TextureMode::Full,
+            ..config
+        },
+    );
+    trainer.config = config;
+    trainer.opacity_logits = opacity_logits;
+    if texture_mode == TextureMode::Gaussian {
+        for b in 0..n {
+            trainer.refresh_row(b);
+        }
+    }
+    trainer.adam = adam;
+    trainer.grads = RenderGradients::zeros(n, ts);
+    trainer.order = order;
+    trainer.rng = rng;
+    trainer.step = step;
+    Ok(trainer)
+}
+
+/// Writes `bytes` to `path` atomically: a temporary file in the same folder, flushed to disk,
+/// then renamed over `path`. On error the temporary file is removed and `path` is untouched.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), CheckpointError> {
+    let io = |action: &'static str| {
+        move |source| CheckpointError::Io {
+            path: path.to_path_buf(),
+            action,
+            source,
+        }
+    };
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let name = path
+        .file_name()
+        .ok_or_else(|| CheckpointError::Inconsistent {
+            path: path.to_path_buf(),
+            what: "the path has no file name".into(),
+        })?
+        .to_string_lossy()
+        .into_owned();
+    // Unique per process and per call, so concurrent saves of one process do not share a file.
+    static SAVES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let serial = SAVES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let tmp = dir.join(format!(".{name}.tmp.{}.{serial}", std::process::id()));
+    let result = (|| {
+        let mut f = std::fs::File::create(&tmp).map_err(io("creating the temporary file"))?;
+        f.write_all(bytes).map_err(io("writing"))?;
+        f.sync_all().map_err(io("flushing to disk"))?;
+        drop(f);
+        std::fs::rename(&tmp, path).map_err(io("renaming the temporary file"))
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+impl Trainer {
+    /// The checkpoint bytes of the current state (format in the [module docs](self)).
+    pub fn checkpoint_bytes(&self) -> Vec<u8> {
+        encode(self)
+    }
+
+    /// Rebuilds a trainer from checkpoint bytes; `path` only names the source in errors.
+    ///
+    /// # Errors
+    /// See [`CheckpointError`].
+    pub fn from_checkpoint_bytes(bytes: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
+        decode(bytes, path)
+    }
+
+    /// Saves the whole training state to `path` atomically (temporary file + rename).
+    ///
+    /// # Errors
+    /// [`CheckpointError::Io`] when the folder cannot be written.
+    pub fn save_checkpoint(&self, path: impl AsRef<Path>) -> Result<(), CheckpointError> {
+        write_atomic(path.as_ref(), &encode(self))
+    }
+
+    /// Loads a trainer saved by [`Trainer::save_checkpoint`]; continuing it is bit-identical to
+    /// continuing the trainer that was saved.
+    ///
+    /// # Errors
+    /// See [`CheckpointError`]: unreadable file, bad magic, unsupported version, truncated,
+    /// corrupted (checksum) or inconsistent sizes.
+    pub fn load_checkpoint(path: impl AsRef<Path>) -> Result<Trainer, CheckpointError> {
+        let path = path.as_ref();
+        let bytes = std::fs::read(path).map_err(|source| CheckpointError::Io {
+            path: path.to_path_buf(),
+            action: "reading",
+            source,
+        })?;
+        decode(&bytes, path)
+    }
+}

@@ -1,0 +1,193 @@
+//! Regularisers of the training loss (`bbsplat-spec.md` §5.4-5.5), as pure functions.
+//!
+//! Conventions: textures are *activated* values (sigmoid of the logits) laid out as in
+//! [`crate::raster::BillboardSet`]: alpha `[billboard][row][col]` (`T = TS²` per billboard), colour
+//! `[billboard][channel][row][col]` (`3T` per billboard). Every function returns the value in f64
+//! and *adds* its gradient with respect to the activated textures into the given buffers;
+//! [`chain_sigmoid`] carries an activated-space gradient to the logits and applies the alpha mask.
+//!
+//! Impact: `impact[i]` is the raster's per-view `Σ α·T` of billboard `i` over the view's pixels
+//! ([`crate::raster::RenderOutput::impact`], the post-2025 "fixed" definition). The paper-era
+//! threshold σ = 500 is our default (see `docs/training.md` for the choice).
+
+/// Weight of the texture regulariser in the reference (`1e-4`).
+pub const TEXTURE_REG_WEIGHT: f32 = 1e-4;
+/// Weight of the global opacity regulariser in the reference (`0.01`).
+pub const OPACITY_REG_WEIGHT: f32 = 0.01;
+/// Impact threshold σ of the texture regulariser (paper-era value; current reference code: 100).
+pub const IMPACT_THRESHOLD: f32 = 500.0;
+
+/// Texture regulariser of paper Eq. 9.
+///
+/// With `vis = {i : impact_i > 0}` and the constant weights `w_i = σ − clamp(impact_i, 0, σ)`:
+///
+/// `L = λ · mean_{i∈vis}( mean_k colour_{i,k} · w_i ) + λ · mean_{i∈vis}( |mean_k (alpha_{i,k} − a0_k)| · w_i )`
+///
+/// where the inner means run over all texels (and the 3 channels for colour). Gradients:
+/// `∂L/∂colour_{i,k} = λ·w_i / (|vis|·3T)` and `∂L/∂alpha_{i,k} = λ·w_i·sign(m_i) / (|vis|·T)` with
+/// `m_i` the signed mean alpha difference (`sign(0) = 0`, the subgradient at the kink). When no
+/// billboard is visible the value is 0 and nothing is added (the reference divides by zero).
+/// `alpha0` is the reference alpha texture `A0` (`T` values, shared by all billboards).
+#[allow(clippy::too_many_arguments)]
+pub fn texture_regulariser(
+    alpha: &[f32],
+    colour: &[f32],
+    alpha0: &[f32],
+    impact: &[f32],
+    threshold: f32,
+    weight: f32,
+    d_alpha: &mut [f32],
+    d_colour: &mut [f32],
+) -> f64 {
+    let t = alpha0.len();
+    let n = impact.len();
+    assert_eq!(alpha.len(), n * t, "TS² alpha texels per billboard");
+    assert_eq!(colour.len(), 3 * n * t, "3·TS² colour texels per billboard");
+    assert_eq!(d_alpha.len(), alpha.len(), "alpha gradient buffer");
+    assert_eq!(d_colour.len(), colour.len(), "colour gradient buffer");
+    let vis = impact.iter().filter(|&&x| x > 0.0).count();
+    if vis == 0 || t == 0 {
+        return 0.0;
+    }
+    let threshold = threshold as f64;
+    let lambda = weight as f64;
+    let mut total = 0.0;
+    for i in 0..n {
+        let imp = impact[i] as f64;
+        if imp <= 0.0 {
+            continue;
+        }
+        let w = threshold - imp.clamp(0.0, threshold);
+        if w == 0.0 {
+            continue;
+        }
+        let c = &colour[i * 3 * t..(i + 1) * 3 * t];
+        let mean_c = c.iter().map(|&x| x as f64).sum::<f64>() / (3 * t) as f64;
+        let a = &alpha[i * t..(i + 1) * t];
+        let m = a.iter().zip(alpha0).map(|(&x, &x0)| x as f64 - x0 as f64).sum::<f64>() / t as f64;
+        total += (mean_c + m.abs()) * w;
+        let gc = (lambda * w / (vis as f64 * (3 * t) as f64)) as f32;
+        for g in &mut d_colour[i * 3 * t..(i + 1) * 3 * t] {
+            *g += gc;
+        }
+        let sign = if m > 0.0 {
+            1.0
+        } else if m < 0.0 {
+            -1.0
+        } else {
+            0.0
+        };
+        let ga = (lambda * w * sign / (vis as f64 * t as f64)) as f32;
+        if ga != 0.0 {
+            for g in &mut d_alpha[i * t..(i + 1) * t] {
+                *g += ga;
+            }
+        }
+    }
+    lambda * total / vis as f64
+}
+
+/// Global opacity regulariser: `L = λ · mean over all billboards and texels of alpha`, including
+/// texels held at zero by the alpha mask (the reference's mean runs over all `TS²`). Adds
+/// `λ / (N·T)` to every element of `d_alpha`. An empty model gives 0.
+pub fn opacity_regulariser(alpha: &[f32], weight: f32, d_alpha: &mut [f32]) -> f64 {
+    assert_eq!(d_alpha.len(), alpha.len(), "alpha gradient buffer");
+    if alpha.is_empty() {
+        return 0.0;
+    }
+    let count = alpha.len() as f64;
+    let g = (weight as f64 / count) as f32;
+    for d in d_alpha.iter_mut() {
+        *d += g;
+    }
+    weight as f64 * alpha.iter().map(|&x| x as f64).sum::<f64>() / count
+}
+
+/// The opacity regulariser's value alone (no gradient).
+pub fn opacity_value(alpha: &[f32], weight: f32) -> f64 {
+    if alpha.is_empty() {
+        return 0.0;
+    }
+    weight as f64 * alpha.iter().map(|&x| x as f64).sum::<f64>() / alpha.len() as f64
+}
+
+/// Carries a gradient with respect to activated values `y = sigmoid(x)` to the logits `x`:
+/// `∂L/∂x = ∂L/∂y · y·(1 − y)`, multiplied by 0 where `mask` (per texel, repeating every
+/// `mask.len()` values) is false. `mask = None` keeps every element.
+pub fn chain_sigmoid(activated: &[f32], d_activated: &[f32], mask: Option<&[bool]>, d_logits: &mut [f32]) {
+    assert_eq!(activated.len(), d_activated.len());
+    assert_eq!(activated.len(), d_logits.len());
+    for k in 0..activated.len() {
+        let keep = mask.is_none_or(|m| m[k % m.len()]);
+        let y = activated[k];
+        d_logits[k] = if keep { d_activated[k] * y * (1.0 - y) } else { 0.0 };
+    }
+}
+
+/// Mean alpha of each billboard over its `t` texels.
+pub fn mean_alpha(alpha: &[f32], t: usize) -> Vec<f32> {
+    alpha
+        .chunks_exact(t.max(1))
+        .map(|row| (row.iter().map(|&x| x as f64).sum::<f64>() / t as f64) as f32)
+        .collect()
+}
+
+/// Gaussian-billboard alpha (texture mode [`super::TextureMode::Gaussian`]): texel `k` of billboard
+/// `i` is `sigmoid(ω_i) · shape_k`, with `shape` the fixed initial Gaussian (peak ≤ 1).
+pub fn gaussian_alpha(opacity_logits: &[f32], shape: &[f32]) -> Vec<f32> {
+    let mut out = Vec::with_capacity(opacity_logits.len() * shape.len());
+    for &w in opacity_logits {
+        let o = crate::model::sigmoid(w);
+        out.extend(shape.iter().map(|&s| o * s));
+    }
+    out
+}
+
+/// Gradient of the loss with respect to the opacity logit `ω` of one Gaussian billboard, given
+/// the gradient with respect to its alpha texels: `∂L/∂ω = o(1 − o) · Σ_k ∂L/∂α_k · shape_k`,
+/// `o = sigmoid(ω)`. Summed in f64.
+pub fn gaussian_opacity_grad(opacity_logit: f32, d_alpha: &[f32], shape: &[f32]) -> f32 {
+    let o = crate::model::sigmoid(opacity_logit) as f64;
+    let s: f64 = d_alpha.iter().zip(shape).map(|(&g, &s)| g as f64 * s as f64).sum();
+    (o * (1.0 - o) * s) as f32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn empty_visibility_is_zero_not_nan() {
+        let t = 4;
+        let alpha = vec![0.3; 2 * t];
+        let colour = vec![0.2; 6 * t];
+        let (mut da, mut dc) = (vec![0.0; 2 * t], vec![0.0; 6 * t]);
+        let v = texture_regulariser(&alpha, &colour, &[0.1; 4], &[0.0, 0.0], 500.0, 1e-4, &mut da, &mut dc);
+        assert_eq!(v, 0.0);
+        assert!(da.iter().chain(&dc).all(|&g| g == 0.0));
+        assert_eq!(opacity_regulariser(&[], 0.01, &mut []), 0.0);
+    }
+
+    #[test]
+    fn strongly_visible_billboards_are_not_regularised() {
+        let t = 4;
+        let alpha = vec![0.3; 2 * t];
+        let colour = vec![0.2; 6 * t];
+        let (mut da, mut dc) = (vec![0.0; 2 * t], vec![0.0; 6 * t]);
+        // Billboard 0 at impact 600 ≥ σ: weight 0. Billboard 1 at 100: weight 400, |vis| = 2.
+        let v = texture_regulariser(
+            &alpha,
+            &colour,
+            &[0.1; 4],
+            &[600.0, 100.0],
+            500.0,
+            1e-4,
+            &mut da,
+            &mut dc,
+        );
+        let expected = 1e-4 * (0.2 + 0.2) * 400.0 / 2.0;
+        assert!((v - expected).abs() < 1e-9, "{v} vs {expected}");
+        assert!(da[..t].iter().chain(&dc[..3 * t]).all(|&g| g == 0.0));
+        assert!(da[t..].iter().all(|&g| g > 0.0));
+    }
+}
