@@ -62,6 +62,7 @@ pub fn run(
         background: Vec3::from_array(scene.background),
         seed,
         extent: scene_extent(&cameras),
+        ..TrainConfig::default()
     };
     println!(
         "demo scene: {} train / {} test views at {res}x{res}, {} billboards (TS {texture_size}), generated in {:.1} s",
@@ -81,7 +82,7 @@ pub fn run(
     let t0 = Instant::now();
     let mut running = 0.0;
     for i in 0..iterations {
-        let log = trainer.step(&train);
+        let log = trainer.step(&train)?;
         running = if i == 0 {
             log.psnr
         } else {

@@ -135,6 +135,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         background,
         seed: args.seed,
         extent: scene.extent,
+        ..TrainConfig::default()
     };
     let cam0 = train[0].camera;
     println!(
@@ -182,7 +183,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
             anyhow::bail!("interrupted at step {}", trainer.step_index());
         }
         let t0 = Instant::now();
-        let log = trainer.step(&train);
+        let log = trainer.step(&train)?;
         train_seconds += t0.elapsed().as_secs_f64();
         running_psnr = if running_psnr.is_nan() {
             log.psnr
