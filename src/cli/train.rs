@@ -9,8 +9,8 @@ use bbsplat::raster::RenderSettings;
 use bbsplat::report::{CurvePoint, SUMMARY_VERSION, TrainSummary, peak_rss_bytes};
 use bbsplat::rng::Rng;
 use bbsplat::scene::Scene;
-use bbsplat::train::{TrainConfig, TrainView, Trainer};
-use clap::Args;
+use bbsplat::train::{AdamMode, TextureMode, TrainConfig, TrainView, Trainer};
+use clap::{Args, ValueEnum};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::path::{Path, PathBuf};
@@ -60,6 +60,44 @@ pub struct TrainArgs {
     /// No progress bar or per-evaluation lines; the final summary is still printed.
     #[arg(long)]
     pub quiet: bool,
+    /// Threshold σ of the texture regulariser (paper Eq. 9) on a billboard's per-view impact
+    /// (Σ α·T over its pixels): billboards with less impact have their textures pulled to the
+    /// initial state. The paper uses 500; the current reference code 100.
+    #[arg(long, default_value_t = 500.0)]
+    pub texture_threshold: f32,
+    /// `full`: learned alpha and colour textures (BBSplat); `gaussian`: plain Gaussian billboards
+    /// with one opacity each and SH colour only (the "textures off" ablation).
+    #[arg(long, value_enum, default_value_t = TextureModeArg::Full)]
+    pub texture_mode: TextureModeArg,
+    /// `dense`: every billboard takes an Adam step each iteration (the reference); `sparse`:
+    /// only billboards the view touched.
+    #[arg(long, value_enum, default_value_t = AdamModeArg::Dense)]
+    pub adam: AdamModeArg,
+    /// Do not recycle dead billboards (mean alpha ≤ 0.005).
+    #[arg(long)]
+    pub no_relocate: bool,
+    /// Continue from a checkpoint written by an earlier run (Ctrl-C or `--save-every`); the
+    /// scene and flags should be those of that run. Continuing is bit-identical to not stopping.
+    #[arg(long)]
+    pub resume: Option<PathBuf>,
+}
+
+/// `--texture-mode`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum TextureModeArg {
+    /// Learned textures.
+    Full,
+    /// Gaussian billboards, SH colour only.
+    Gaussian,
+}
+
+/// `--adam`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum AdamModeArg {
+    /// All rows every step.
+    Dense,
+    /// Touched rows only.
+    Sparse,
 }
 
 /// Interim initialisation until the scene initialiser lands: farthest point sampling of the SfM
@@ -135,9 +173,25 @@ pub fn run(args: TrainArgs) -> Result<()> {
         background,
         seed: args.seed,
         extent: scene.extent,
+        impact_threshold: args.texture_threshold,
+        adam: match args.adam {
+            AdamModeArg::Dense => AdamMode::Dense,
+            AdamModeArg::Sparse => AdamMode::Sparse,
+        },
+        texture_mode: match args.texture_mode {
+            TextureModeArg::Full => TextureMode::Full,
+            TextureModeArg::Gaussian => TextureMode::Gaussian,
+        },
+        relocate: !args.no_relocate,
         ..TrainConfig::default()
     };
     let cam0 = train[0].camera;
+    // From here on Ctrl-C saves a checkpoint instead of killing the process.
+    let interrupted = Arc::new(AtomicBool::new(false));
+    {
+        let flag = interrupted.clone();
+        ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
+    }
     println!(
         "{}: {} train / {} test views at {}x{}, {} billboards (TS {}), loaded in {:.1} s, {threads} threads",
         args.scene.display(),
@@ -151,13 +205,23 @@ pub fn run(args: TrainArgs) -> Result<()> {
     );
     std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
 
-    let interrupted = Arc::new(AtomicBool::new(false));
-    {
-        let flag = interrupted.clone();
-        ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
-    }
 
-    let mut trainer = Trainer::new(model, config);
+    let checkpoint = args.output.join("checkpoint.bin");
+    let mut trainer = match &args.resume {
+        Some(path) => {
+            let t = Trainer::load_checkpoint(path).with_context(|| format!("resuming from {}", path.display()))?;
+            anyhow::ensure!(
+                t.config().iterations == args.iterations,
+                "{}: the checkpoint is of a {}-step run, not --iterations {}",
+                path.display(),
+                t.config().iterations,
+                args.iterations
+            );
+            println!("resuming at step {} from {}", t.step_index(), path.display());
+            t
+        }
+        None => Trainer::new(model, config),
+    };
     let eval_settings = RenderSettings {
         background,
         sh_degree: args.sh_degree,
@@ -177,10 +241,20 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let mut curve = Vec::new();
     let mut train_seconds = 0.0;
     let mut running_psnr = f64::NAN;
+    let mut relocated = 0usize;
     while trainer.step_index() < args.iterations {
         if interrupted.load(Ordering::SeqCst) {
             bar.abandon();
-            anyhow::bail!("interrupted at step {}", trainer.step_index());
+            trainer
+                .save_checkpoint(&checkpoint)
+                .with_context(|| format!("saving {}", checkpoint.display()))?;
+            eprintln!(
+                "interrupted at step {}: saved {}; continue with the same command and --resume {}",
+                trainer.step_index(),
+                checkpoint.display(),
+                checkpoint.display()
+            );
+            std::process::exit(130);
         }
         let t0 = Instant::now();
         let log = trainer.step(&train)?;
@@ -192,7 +266,16 @@ pub fn run(args: TrainArgs) -> Result<()> {
         };
         let step = trainer.step_index();
         bar.set_position(step as u64);
-        bar.set_message(format!("loss {:.4} | train PSNR {running_psnr:.2} dB", log.loss));
+        relocated += log.relocated;
+        bar.set_message(format!(
+            "loss {:.4} | train PSNR {running_psnr:.2} dB | relocated {relocated}",
+            log.loss
+        ));
+        if args.save_every > 0 && step % args.save_every == 0 {
+            trainer
+                .save_checkpoint(&checkpoint)
+                .with_context(|| format!("saving {}", checkpoint.display()))?;
+        }
         if args.eval_every > 0 && step % args.eval_every == 0 && step < args.iterations && !eval_subset.is_empty() {
             let (psnr, ssim, _) = evaluate(&trainer, &eval_subset, &eval_settings)?;
             curve.push(CurvePoint {
@@ -228,7 +311,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         scene: args.scene.display().to_string(),
         iterations: args.iterations,
         billboards: trainer.model.len(),
-        alive: trainer.model.len(),
+        alive: trainer.alive_count(),
         texture_size: args.texture_size,
         sh_degree: args.sh_degree,
         resolution: [cam0.width, cam0.height],
