@@ -1,9 +1,11 @@
-//! Initialisation benches: farthest point sampling and the Fibonacci sphere.
+//! Initialisation benches: farthest point sampling, the Fibonacci sphere and the 3-NN scale
+//! statistic (k-d tree and brute force).
 //!
 //! `cargo bench --bench init -- --warm-up-time 1 --measurement-time 3`
 
 use bbsplat::init::fibonacci::{fibonacci_sphere, sky_radius};
 use bbsplat::init::fps::{farthest_point_sampling, farthest_point_sampling_dense};
+use bbsplat::init::knn::{mean_sq_dist_3nn, mean_sq_dist_3nn_brute};
 use bbsplat::rng::Rng;
 use criterion::{BenchmarkId, Criterion, black_box, criterion_group, criterion_main};
 use glam::Vec3;
@@ -44,5 +46,17 @@ fn fibonacci(c: &mut Criterion) {
     c.bench_function("sky_radius_robust/300k", |b| b.iter(|| sky_radius(black_box(&points))));
 }
 
-criterion_group!(benches, fps, fibonacci);
+fn knn(c: &mut Criterion) {
+    let mut group = c.benchmark_group("knn3");
+    group.sample_size(10);
+    let points = cloud(100_000);
+    group.bench_function("kdtree_n100k", |b| b.iter(|| mean_sq_dist_3nn(black_box(&points))));
+    // The O(N²) oracle at a tenth of the size (100k would take minutes).
+    let small = cloud(10_000);
+    group.bench_function("kdtree_n10k", |b| b.iter(|| mean_sq_dist_3nn(black_box(&small))));
+    group.bench_function("brute_n10k", |b| b.iter(|| mean_sq_dist_3nn_brute(black_box(&small))));
+    group.finish();
+}
+
+criterion_group!(benches, fps, fibonacci, knn);
 criterion_main!(benches);

@@ -22,6 +22,7 @@ pub mod gradcheck;
 pub mod init;
 pub mod loss;
 pub mod model;
+pub mod model_file;
 pub mod raster;
 pub mod report;
 pub mod rng;

@@ -7,11 +7,11 @@
 //! through an explicit mask shared by every billboard, instead of infinite logits.
 
 use crate::billboards::Billboards;
+use crate::init::knn::mean_sq_dist_3nn;
 use crate::raster::SH_FLOATS;
 use crate::rng::Rng;
 use crate::stages::sh::rgb_to_sh;
 use glam::{Vec2, Vec3};
-use rayon::prelude::*;
 
 /// The reference initial alpha texture (`assets/alpha_init_gaussian_small.png`, 16×16, values
 /// 0-255, row = v index, column = u index), before the 0.5 factor.
@@ -34,18 +34,31 @@ pub const INITIAL_ALPHA_16: [[u8; 16]; 16] = [
     [0, 0, 1, 1, 3, 4, 5, 7, 7, 6, 5, 3, 2, 1, 0, 0],
 ];
 
-/// The initial alpha texture for side `ts`: `0.5 · table/255`, the 16×16 table resampled with
-/// align-corners bilinear interpolation for other sizes (exact copy at 16). Values in
-/// `[0, 0.5)`; texels that are exactly zero stay zero during training (see [`Model::alpha_mask`]).
-pub fn initial_alpha(ts: usize) -> Vec<f32> {
-    let table = |r: usize, c: usize| 0.5 * INITIAL_ALPHA_16[r][c] as f32 / 255.0;
+/// The full alpha asset `G` for side `ts`: `table/255` (values in `[0, 251/255]`), the 16×16
+/// table resampled with align-corners bilinear interpolation for other sizes (exact copy at 16):
+/// texel `(r, c)` samples the table at `(r·15/(ts−1), c·15/(ts−1))`; `ts = 1` takes the table's
+/// corner `(0, 0)`. This is the reference `G` of the alpha compression (`docs/model-format.md`);
+/// the initial alpha is `0.5·G` ([`initial_alpha`]).
+///
+/// ```
+/// use bbsplat::model::{alpha_asset, initial_alpha};
+/// let g = alpha_asset(16);
+/// assert_eq!(g[8 * 16 + 8], 251.0 / 255.0);
+/// // The initial alpha is exactly half the asset, at any size.
+/// for ts in [4, 16, 23] {
+///     let (g, a) = (alpha_asset(ts), initial_alpha(ts));
+///     assert!(g.iter().zip(&a).all(|(g, a)| 0.5 * g == *a));
+/// }
+/// ```
+pub fn alpha_asset(ts: usize) -> Vec<f32> {
+    let table = |r: usize, c: usize| INITIAL_ALPHA_16[r][c] as f32 / 255.0;
     if ts == 16 {
         return (0..256).map(|i| table(i / 16, i % 16)).collect();
     }
     let mut out = Vec::with_capacity(ts * ts);
     for r in 0..ts {
         for c in 0..ts {
-            let map = |i: usize| i as f32 * 15.0 / (ts - 1) as f32;
+            let map = |i: usize| if ts > 1 { i as f32 * 15.0 / (ts - 1) as f32 } else { 0.0 };
             let (y, x) = (map(r), map(c));
             let (y0, x0) = (y.floor() as usize, x.floor() as usize);
             let (y1, x1) = ((y0 + 1).min(15), (x0 + 1).min(15));
@@ -57,6 +70,25 @@ pub fn initial_alpha(ts: usize) -> Vec<f32> {
     }
     out
 }
+
+/// The initial alpha texture for side `ts`: `0.5·G` with `G` = [`alpha_asset`]`(ts)` (the
+/// 16×16 table / 255, resampled with align-corners bilinear interpolation for other sizes).
+/// Values in `[0, 0.5)`; texels that are exactly zero stay zero during training (see
+/// [`Model::alpha_mask`]). Scaling by 0.5 is exact in floating point, so this is bit for bit
+/// half of the asset.
+pub fn initial_alpha(ts: usize) -> Vec<f32> {
+    alpha_asset(ts).into_iter().map(|g| 0.5 * g).collect()
+}
+
+/// The per-texel alpha mask of side `ts`: `true` where the asset is non-zero. Texels outside
+/// the mask are held at alpha 0 (spec §1.1: 15 of 256 texels at TS = 16).
+pub fn standard_alpha_mask(ts: usize) -> Vec<bool> {
+    alpha_asset(ts).iter().map(|&g| g > 0.0).collect()
+}
+
+/// Billboards whose mean activated alpha is at most this are *dead* (spec §6,
+/// `dead_opacity`).
+pub const DEAD_ALPHA: f32 = 0.005;
 
 /// `ln(p / (1 − p))`.
 #[inline]
@@ -102,42 +134,53 @@ impl Model {
         self.positions.is_empty()
     }
 
+    /// Mean activated alpha of billboard `i` over all `TS²` texels: `sigmoid(logit)` on
+    /// unmasked texels, 0 on masked ones (they count in the mean), summed in f64 in texel
+    /// order. Panics if `i ≥ len()`.
+    ///
+    /// ```
+    /// use bbsplat::model::Model;
+    /// use glam::Vec3;
+    /// let m = Model::from_points(&[Vec3::ZERO, Vec3::X], &[[0.5; 3]; 2], 16, 0);
+    /// assert!((m.mean_alpha(0) - 0.0875).abs() < 1e-3); // the initial texture's mean
+    /// assert_eq!(m.alive_count(0.005), 2);
+    /// assert_eq!(m.alive_count(0.1), 0);
+    /// ```
+    pub fn mean_alpha(&self, i: usize) -> f32 {
+        let t = self.texture_size * self.texture_size;
+        assert!(i < self.len(), "billboard {i} of {}", self.len());
+        let row = &self.alpha_logits[i * t..(i + 1) * t];
+        let sum: f64 = row
+            .iter()
+            .zip(&self.alpha_mask)
+            .map(|(&l, &m)| if m { sigmoid(l) as f64 } else { 0.0 })
+            .sum();
+        (sum / t.max(1) as f64) as f32
+    }
+
+    /// Billboards whose [`mean_alpha`](Self::mean_alpha) is strictly above `threshold`. With
+    /// [`DEAD_ALPHA`] (0.005) this counts the billboards the reference would not relocate
+    /// (dead = mean alpha `≤ 0.005`).
+    pub fn alive_count(&self, threshold: f32) -> usize {
+        (0..self.len()).filter(|&i| self.mean_alpha(i) > threshold).count()
+    }
+
     /// Initialises one billboard per point (spec §1.1): alpha `0.5·G`, colour texture 0.1,
     /// SH DC `RGB2SH(colour) − 0.1`, higher SH 0, both log-scales
     /// `ln √max(d̄², 1e-7)` with `d̄²` the mean squared distance to the 3 nearest other points,
     /// rotation from 4 uniform `[0, 1)` numbers (seeded).
     ///
-    /// Nearest neighbours are found by brute force in parallel, `O(N²)`: fine for the tens of
-    /// thousands of points of the demo and tests.
+    /// `d̄²` comes from [`mean_sq_dist_3nn`] (k-d tree, `O(N log N)`, exact: equal bit for bit to
+    /// the brute-force oracle; a single point, or a non-finite one, gets the `1e-7` floor).
+    /// Deterministic for a given seed and independent of the number of threads.
     pub fn from_points(points: &[Vec3], colours: &[[f32; 3]], texture_size: usize, seed: u64) -> Self {
         assert_eq!(points.len(), colours.len(), "one colour per point");
         let n = points.len();
         let t = texture_size * texture_size;
         let alpha0 = initial_alpha(texture_size);
-        let alpha_mask: Vec<bool> = alpha0.iter().map(|&a| a > 0.0).collect();
+        let alpha_mask = standard_alpha_mask(texture_size);
         let alpha_row: Vec<f32> = alpha0.iter().map(|&a| if a > 0.0 { logit(a) } else { 0.0 }).collect();
-        let mean_sq_3nn: Vec<f32> = (0..n)
-            .into_par_iter()
-            .map(|i| {
-                let mut best = [f32::INFINITY; 3];
-                for (j, q) in points.iter().enumerate() {
-                    if j == i {
-                        continue;
-                    }
-                    let d = points[i].distance_squared(*q);
-                    if d < best[2] {
-                        best[2] = d;
-                        best.sort_by(f32::total_cmp);
-                    }
-                }
-                let found: Vec<f32> = best.into_iter().filter(|d| d.is_finite()).collect();
-                if found.is_empty() {
-                    1e-7
-                } else {
-                    found.iter().sum::<f32>() / found.len() as f32
-                }
-            })
-            .collect();
+        let mean_sq_3nn = mean_sq_dist_3nn(points);
         let mut rng = Rng::new(seed);
         let mut model = Model {
             positions: points.to_vec(),

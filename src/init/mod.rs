@@ -9,5 +9,8 @@
 //!
 //! Conventions and thresholds are collected in `docs/numerics-init-loss.md`.
 
+pub mod budget;
 pub mod fibonacci;
 pub mod fps;
+pub mod knn;
+pub mod scene_init;

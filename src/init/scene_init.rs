@@ -1,0 +1,283 @@
+//! The initial point set of a scene (spec §8, supplement §6.3): SfM points reduced by farthest
+//! point sampling plus a Fibonacci sky sphere, or uniform random points in a box when the
+//! scene has no points.
+//!
+//! # Rules
+//!
+//! - **With SfM points** (`m ≥ 1` finite points; non-finite ones are dropped and counted):
+//!   - sky points `s = sky_point_count(min(m, N))` (supplement: none below 10 000 points,
+//!     2 000 up to 20 000, else 10 000), where `min(m, N)` is the number of SfM points the run
+//!     would use without a sky;
+//!   - SfM points `min(m, N − s)`, chosen by [`farthest_point_sampling`] (start at index 0;
+//!     all of them when `m ≤ N − s`, in file order; so the total `min(m, N − s) + s` is below
+//!     `N` only when the cloud is small);
+//!   - sky on the sphere around the world origin of radius [`sky_radius`] of **all** finite SfM
+//!     points (before sampling: FPS picks outliers first, so the sampled set has a larger
+//!     outlier fraction). That radius is robust: `min(1.1 × the 99th percentile of the points'
+//!     L∞ norms, the largest L∞ norm)`, so up to 1 % far outliers do not blow the sky up
+//!     (the reference uses the largest L∞ norm, also reported);
+//!   - sky colour white `(1, 1, 1)`, SfM colours as read; sky points first (reference order).
+//! - **Without points** (NeRF-synthetic, instant-ngp): `N` points uniform in a box, colour
+//!   `0.5 + C0·U[0, 1/255]` per channel (the reference's `SH2RGB(U[0, 1/255])`, grey), seeded.
+//!   The box is `[−1.3, 1.3]³` for NeRF-synthetic scenes (spec §8). For other scenes it comes
+//!   from the training cameras ([`camera_box`]): the centre is the least-squares point nearest
+//!   to all optical axes (what the cameras look at), the half side is the median over cameras
+//!   of `distance to the centre × sin(half the smaller field of view)`: the cube around the
+//!   largest sphere the median camera sees whole. (On lego, 400×400 with fx = 555.6 px and
+//!   cameras 4.03 from the origin, this rule gives a half side of 1.37 around the origin, close
+//!   to the spec's 1.3.)
+
+use crate::init::fibonacci::{fibonacci_sphere, sky_point_count, sky_radius, sky_radius_reference};
+use crate::init::fps::farthest_point_sampling;
+use crate::model::Model;
+use crate::rng::Rng;
+use crate::scene::{Scene, SceneFormat};
+use crate::stages::sh::SH_C0;
+use glam::{DMat3, DVec3, Vec3};
+use thiserror::Error;
+
+/// Half side of the NeRF-synthetic random box (spec §8).
+pub const BLENDER_HALF_SIDE: f32 = 1.3;
+/// Colour of sky points.
+pub const SKY_COLOUR: [f32; 3] = [1.0, 1.0, 1.0];
+
+/// What [`init_points`] did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct InitReport {
+    /// The budget asked for.
+    pub budget: usize,
+    /// Finite SfM points in the scene (0 without a point cloud).
+    pub sfm_available: usize,
+    /// Non-finite SfM points dropped.
+    pub sfm_dropped: usize,
+    /// SfM points kept.
+    pub sfm: usize,
+    /// Sky points added.
+    pub sky: usize,
+    /// Random points added.
+    pub random: usize,
+    /// Sky radius used (robust rule), 0 without sky.
+    pub sky_radius: f32,
+    /// The reference's sky radius (largest L∞ norm) for comparison, 0 without sky.
+    pub sky_radius_reference: f32,
+    /// The box of the random points `(min, max)`, when random points were placed.
+    pub random_box: Option<(Vec3, Vec3)>,
+    /// How the box was chosen.
+    pub box_rule: String,
+}
+
+impl InitReport {
+    /// Total points.
+    pub fn total(&self) -> usize {
+        self.sfm + self.sky + self.random
+    }
+}
+
+impl std::fmt::Display for InitReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} points for a budget of {}: {} SfM (of {}), {} sky, {} random",
+            self.total(),
+            self.budget,
+            self.sfm,
+            self.sfm_available,
+            self.sky,
+            self.random
+        )?;
+        if self.sky > 0 {
+            write!(
+                f,
+                "; sky radius {:.3} (reference rule {:.3})",
+                self.sky_radius, self.sky_radius_reference
+            )?;
+        }
+        if let Some((lo, hi)) = self.random_box {
+            write!(f, "; box {lo:.3} to {hi:.3} ({})", self.box_rule)?;
+        }
+        Ok(())
+    }
+}
+
+/// Initial points, their colours and the report.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneInit {
+    /// Positions (sky first, then SfM; or the random points).
+    pub points: Vec<Vec3>,
+    /// RGB in `[0, 1]`, one per point.
+    pub colours: Vec<[f32; 3]>,
+    /// What was done.
+    pub report: InitReport,
+}
+
+/// Errors of [`init_points`].
+#[derive(Debug, Error, PartialEq)]
+pub enum InitError {
+    /// A budget of zero billboards.
+    #[error("the billboard budget is 0")]
+    ZeroBudget,
+}
+
+/// The initial points of `scene` for a budget of `budget` billboards (rules in the [module
+/// documentation](self)); `seed` drives the random points only (FPS and the sky are
+/// deterministic).
+///
+/// # Errors
+///
+/// [`InitError::ZeroBudget`] when `budget` is 0.
+pub fn init_points(scene: &Scene, budget: usize, seed: u64) -> Result<SceneInit, InitError> {
+    if budget == 0 {
+        return Err(InitError::ZeroBudget);
+    }
+    let (mut positions, mut colours, mut dropped) = (Vec::new(), Vec::new(), 0usize);
+    if let Some(cloud) = &scene.points {
+        for (p, c) in cloud.positions.iter().zip(&cloud.colours) {
+            if p.is_finite() {
+                positions.push(*p);
+                colours.push(*c);
+            } else {
+                dropped += 1;
+            }
+        }
+    }
+    let m = positions.len();
+    let mut report = InitReport {
+        budget,
+        sfm_available: m,
+        sfm_dropped: dropped,
+        sfm: 0,
+        sky: 0,
+        random: 0,
+        sky_radius: 0.0,
+        sky_radius_reference: 0.0,
+        random_box: None,
+        box_rule: String::new(),
+    };
+    if m == 0 {
+        let (lo, hi, rule) = match scene.format {
+            SceneFormat::NerfSynthetic => (
+                Vec3::splat(-BLENDER_HALF_SIDE),
+                Vec3::splat(BLENDER_HALF_SIDE),
+                "NeRF-synthetic [-1.3, 1.3]^3".to_string(),
+            ),
+            _ => {
+                let cams: Vec<_> = scene.train.iter().map(|v| v.camera).collect();
+                let (c, h) = camera_box(&cams);
+                (
+                    c - Vec3::splat(h),
+                    c + Vec3::splat(h),
+                    "from the training cameras (centre nearest the optical axes, half side median d*sin(fov/2))"
+                        .to_string(),
+                )
+            }
+        };
+        let (points, cols) = random_points(budget, lo, hi, seed);
+        report.random = budget;
+        report.random_box = Some((lo, hi));
+        report.box_rule = rule;
+        return Ok(SceneInit {
+            points,
+            colours: cols,
+            report,
+        });
+    }
+    let sky = sky_point_count(m.min(budget)).min(budget);
+    let keep_count = m.min(budget - sky);
+    let keep = farthest_point_sampling(&positions, keep_count).expect("non-finite points were dropped");
+    let radius = if sky > 0 { sky_radius(&positions) } else { 0.0 };
+    let mut points = fibonacci_sphere(sky, radius, Vec3::ZERO);
+    let mut cols = vec![SKY_COLOUR; sky];
+    points.extend(keep.iter().map(|&i| positions[i]));
+    cols.extend(keep.iter().map(|&i| colours[i]));
+    report.sfm = keep_count;
+    report.sky = sky;
+    if sky > 0 {
+        report.sky_radius = radius;
+        report.sky_radius_reference = sky_radius_reference(&positions);
+    }
+    Ok(SceneInit {
+        points,
+        colours: cols,
+        report,
+    })
+}
+
+/// [`init_points`] then [`Model::from_points`] with the same seed.
+///
+/// # Errors
+///
+/// As [`init_points`].
+pub fn init_model(
+    scene: &Scene,
+    budget: usize,
+    texture_size: usize,
+    seed: u64,
+) -> Result<(Model, InitReport), InitError> {
+    let init = init_points(scene, budget, seed)?;
+    Ok((
+        Model::from_points(&init.points, &init.colours, texture_size, seed),
+        init.report,
+    ))
+}
+
+/// `n` points uniform in the box `[lo, hi]` with the reference's near-grey colours.
+pub fn random_points(n: usize, lo: Vec3, hi: Vec3, seed: u64) -> (Vec<Vec3>, Vec<[f32; 3]>) {
+    let mut rng = Rng::new(seed);
+    let points = (0..n)
+        .map(|_| Vec3::new(rng.range(lo.x, hi.x), rng.range(lo.y, hi.y), rng.range(lo.z, hi.z)))
+        .collect();
+    let colours = (0..n)
+        .map(|_| std::array::from_fn(|_| 0.5 + SH_C0 * rng.range(0.0, 1.0 / 255.0)))
+        .collect();
+    (points, colours)
+}
+
+/// The box the cameras look at, as `(centre, half side)`: the centre is the least-squares
+/// point nearest to the optical axes (falls back to the mean camera centre when the axes are
+/// (nearly) parallel), the half side is `median_i(|o_i − c|·sin θ_i)` with `θ_i` half the
+/// smaller field of view of camera `i` (the cube around the largest sphere centred at `c` that
+/// the median camera sees whole). Empty input gives the unit box at the origin.
+pub fn camera_box(cameras: &[crate::camera::Camera]) -> (Vec3, f32) {
+    if cameras.is_empty() {
+        return (Vec3::ZERO, 1.0);
+    }
+    let mut a = DMat3::ZERO;
+    let mut b = DVec3::ZERO;
+    let mut mean = DVec3::ZERO;
+    for cam in cameras {
+        let o = cam.centre().as_dvec3();
+        let d = cam.rotation.row(2).as_dvec3().normalize_or_zero();
+        let proj = DMat3::IDENTITY - DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+        a += proj;
+        b += proj * o;
+        mean += o;
+    }
+    mean /= cameras.len() as f64;
+    // Well conditioned when the axes span at least two directions.
+    let centre = if a.determinant().abs() > 1e-6 * cameras.len().pow(3) as f64 {
+        a.inverse() * b
+    } else {
+        mean
+    };
+    let mut radii: Vec<f64> = cameras
+        .iter()
+        .map(|cam| {
+            let tan_half = (cam.width as f64 / (2.0 * cam.fx as f64)).min(cam.height as f64 / (2.0 * cam.fy as f64));
+            let sin_half = tan_half / (1.0 + tan_half * tan_half).sqrt();
+            (cam.centre().as_dvec3() - centre).length() * sin_half
+        })
+        .filter(|r| r.is_finite())
+        .collect();
+    radii.sort_by(f64::total_cmp);
+    let half = if radii.is_empty() {
+        1.0
+    } else {
+        radii[(radii.len() - 1) / 2]
+    };
+    let half = if half > 0.0 && half.is_finite() {
+        half as f32
+    } else {
+        1.0
+    };
+    (centre.as_vec3(), half)
+}
