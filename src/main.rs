@@ -46,6 +46,10 @@ enum Command {
     },
     /// Train a billboard model on a dataset (COLMAP, NeRF-synthetic or instant-ngp, detected).
     Train(cli::train::TrainArgs),
+    /// Render a saved model from a dataset's cameras to PNG files.
+    Render(cli::render::RenderArgs),
+    /// Evaluate a saved model on a dataset's views: per-view and mean PSNR/SSIM (8-bit images).
+    Eval(cli::render::EvalArgs),
 }
 
 fn main() -> Result<()> {
@@ -65,5 +69,7 @@ fn main() -> Result<()> {
             cli::demo::run(iterations, billboards, texture_size, resolution, seed, output, export)
         }
         Command::Train(args) => cli::train::run(args),
+        Command::Render(args) => cli::render::render(args),
+        Command::Eval(args) => cli::render::eval(args),
     }
 }

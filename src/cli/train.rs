@@ -3,12 +3,12 @@
 use super::common::{SceneArgs, start_threads, train_views, write_text_atomic};
 use anyhow::{Context, Result};
 use bbsplat::eval::{EvalView, evaluate_views};
-use bbsplat::init::fps::farthest_point_sampling;
-use bbsplat::model::Model;
-use bbsplat::raster::RenderSettings;
+use bbsplat::init::budget::{BudgetInputs, budget_for};
+use bbsplat::init::scene_init::init_model;
+use bbsplat::model::{Model, logit};
+use bbsplat::model_file::{ModelMeta, load_model, save_model};
+use bbsplat::raster::{BillboardSet, RenderSettings};
 use bbsplat::report::{CurvePoint, SUMMARY_VERSION, TrainSummary, peak_rss_bytes};
-use bbsplat::rng::Rng;
-use bbsplat::scene::Scene;
 use bbsplat::train::{AdamMode, TextureMode, TrainConfig, TrainView, Trainer};
 use clap::{Args, ValueEnum};
 use glam::Vec3;
@@ -100,28 +100,6 @@ pub enum AdamModeArg {
     Sparse,
 }
 
-/// Interim initialisation until the scene initialiser lands: farthest point sampling of the SfM
-/// points, or uniform random points in [−1.3, 1.3]³ (grey) without points.
-fn initial_model(scene: &Scene, budget: usize, texture_size: usize, seed: u64) -> Result<Model> {
-    let (points, colours): (Vec<Vec3>, Vec<[f32; 3]>) = match &scene.points {
-        Some(cloud) if !cloud.positions.is_empty() => {
-            let keep = farthest_point_sampling(&cloud.positions, budget).context("sampling the initial points")?;
-            (
-                keep.iter().map(|&i| cloud.positions[i]).collect(),
-                keep.iter().map(|&i| cloud.colours[i]).collect(),
-            )
-        }
-        _ => {
-            let mut rng = Rng::new(seed ^ 0x5eed);
-            let pts = (0..budget)
-                .map(|_| Vec3::new(rng.range(-1.3, 1.3), rng.range(-1.3, 1.3), rng.range(-1.3, 1.3)))
-                .collect();
-            (pts, vec![[0.5; 3]; budget])
-        }
-    };
-    Ok(Model::from_points(&points, &colours, texture_size, seed))
-}
-
 fn evenly_spaced<T>(items: &[T], at_most: usize) -> Vec<&T> {
     if items.len() <= at_most || at_most == 0 {
         return items.iter().collect();
@@ -129,9 +107,13 @@ fn evenly_spaced<T>(items: &[T], at_most: usize) -> Vec<&T> {
     (0..at_most).map(|k| &items[k * items.len() / at_most]).collect()
 }
 
-fn evaluate(trainer: &Trainer, views: &[(String, TrainView)], settings: &RenderSettings) -> Result<(f64, f64, f64)> {
+fn evaluate(
+    set: &BillboardSet<'_>,
+    views: &[(String, TrainView)],
+    settings: &RenderSettings,
+) -> Result<(f64, f64, f64)> {
     let report = evaluate_views(
-        &trainer.activated.as_set(),
+        set,
         views.iter().map(|(name, v)| EvalView {
             name,
             camera: &v.camera,
@@ -163,9 +145,35 @@ pub fn run(args: TrainArgs) -> Result<()> {
         .map(|v| v.name.clone())
         .zip(train_views(&scene.test))
         .collect();
-    let budget = args.billboards.unwrap_or(50_000);
-    anyhow::ensure!(budget >= 1, "--billboards must be at least 1");
-    let model = initial_model(&scene, budget, args.texture_size, args.seed)?;
+    let budget = match args.billboards {
+        Some(n) => {
+            anyhow::ensure!(n >= 1, "--billboards must be at least 1");
+            n
+        }
+        None => {
+            let b = budget_for(&BudgetInputs::from_scene(&scene, args.texture_size));
+            if !args.quiet {
+                println!("budget: {}", b.reason);
+            }
+            b.billboards
+        }
+    };
+    let (model, init) = init_model(&scene, budget, args.texture_size, args.seed)
+        .with_context(|| format!("initialising {} billboards", budget))?;
+    if !args.quiet {
+        println!(
+            "initial billboards: {} from SfM points, {} on the sky sphere (radius {:.2}), {} random{}",
+            init.sfm,
+            init.sky,
+            init.sky_radius,
+            init.random,
+            if init.random > 0 {
+                format!(" ({})", init.box_rule)
+            } else {
+                String::new()
+            }
+        );
+    }
     let background = Vec3::from_array(scene.background.rgb());
     let config = TrainConfig {
         iterations: args.iterations,
@@ -204,7 +212,6 @@ pub fn run(args: TrainArgs) -> Result<()> {
         start.elapsed().as_secs_f64()
     );
     std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
-
 
     let checkpoint = args.output.join("checkpoint.bin");
     let mut trainer = match &args.resume {
@@ -277,7 +284,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
                 .with_context(|| format!("saving {}", checkpoint.display()))?;
         }
         if args.eval_every > 0 && step % args.eval_every == 0 && step < args.iterations && !eval_subset.is_empty() {
-            let (psnr, ssim, _) = evaluate(&trainer, &eval_subset, &eval_settings)?;
+            let (psnr, ssim, _) = evaluate(&trainer.activated.as_set(), &eval_subset, &eval_settings)?;
             curve.push(CurvePoint {
                 step,
                 seconds: train_seconds,
@@ -295,10 +302,21 @@ pub fn run(args: TrainArgs) -> Result<()> {
         }
     }
     bar.finish_and_clear();
+    // The model is saved as the reference saves it (8-bit textures) and evaluated as re-loaded,
+    // as the reference's render.py does.
+    let model_dir = args.output.join("model");
+    let meta = ModelMeta::for_model(&trainer.model, args.sh_degree, background.to_array());
+    let model_bytes = save_model(&model_dir, &effective_model(&trainer), &meta)
+        .with_context(|| format!("saving the model to {}", model_dir.display()))?;
+    trainer
+        .save_checkpoint(&checkpoint)
+        .with_context(|| format!("saving {}", checkpoint.display()))?;
+    let (saved, _) = load_model(&model_dir).with_context(|| format!("re-loading {}", model_dir.display()))?;
+    let saved = saved.activate();
     let (test_psnr, test_ssim, render_ms) = if test.is_empty() {
         (f64::NAN, f64::NAN, f64::NAN)
     } else {
-        evaluate(&trainer, &test, &eval_settings)?
+        evaluate(&saved.as_set(), &test, &eval_settings)?
     };
     curve.push(CurvePoint {
         step: args.iterations,
@@ -320,7 +338,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         test_psnr,
         test_ssim,
         test_views: test.len(),
-        model_bytes: 0,
+        model_bytes,
         peak_rss_bytes: peak_rss_bytes(),
         seed: args.seed,
         threads,
@@ -328,7 +346,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
     };
     write_summary(&args.output, &summary)?;
     println!(
-        "trained {} steps in {:.1} s ({:.2} it/s): test PSNR {:.2} dB, SSIM {:.4} over {} views; {} billboards; peak memory {:.0} MB",
+        "trained {} steps in {:.1} s ({:.2} it/s): test PSNR {:.2} dB, SSIM {:.4} over {} views; {} billboards ({} alive); model {:.2} MB; peak memory {:.0} MB",
         args.iterations,
         train_seconds,
         args.iterations as f64 / train_seconds,
@@ -336,9 +354,29 @@ pub fn run(args: TrainArgs) -> Result<()> {
         test_ssim,
         test.len(),
         summary.billboards,
+        summary.alive,
+        model_bytes as f64 / (1024.0 * 1024.0),
         summary.peak_rss_bytes as f64 / 1e6
     );
     Ok(())
+}
+
+/// The model to save: the trainer's raw parameters, with the alpha logits taken from the textures
+/// the renderer actually used (in Gaussian mode those are opacity × the fixed shape, not the
+/// stored logits).
+fn effective_model(trainer: &Trainer) -> Model {
+    let mut model = trainer.model.clone();
+    if trainer.config().texture_mode == TextureMode::Gaussian {
+        let t = model.texture_size * model.texture_size;
+        for (i, &a) in trainer.activated.alpha.iter().enumerate() {
+            model.alpha_logits[i] = if model.alpha_mask[i % t] {
+                logit(a.clamp(1e-6, 1.0 - 1e-6))
+            } else {
+                0.0
+            };
+        }
+    }
+    model
 }
 
 fn write_summary(dir: &Path, summary: &TrainSummary) -> Result<()> {
