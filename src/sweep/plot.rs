@@ -32,18 +32,23 @@ fn padded_range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
 }
 
 /// A scatter of `(x, y)` per record with the Pareto front (low x, high y) as filled red markers
-/// joined by a line. Non-finite points are left out.
-fn scatter_with_front(points: &[(f64, f64)], title: &str, x_desc: &str) -> Result<String, Box<dyn std::error::Error>> {
+/// joined by a line and labelled. Non-finite points are left out.
+fn scatter_with_front(
+    points: &[(f64, f64)],
+    labels: &[String],
+    title: &str,
+    x_desc: &str,
+) -> Result<String, Box<dyn std::error::Error>> {
     let finite: Vec<(f64, f64)> = points
         .iter()
         .copied()
         .filter(|p| p.0.is_finite() && p.1.is_finite())
         .collect();
-    let front: Vec<(f64, f64)> = pareto_front(points)
+    let front_idx: Vec<usize> = pareto_front(points)
         .into_iter()
-        .map(|i| points[i])
-        .filter(|p| p.0.is_finite() && p.1.is_finite())
+        .filter(|&i| points[i].0.is_finite() && points[i].1.is_finite())
         .collect();
+    let front: Vec<(f64, f64)> = front_idx.iter().map(|&i| points[i]).collect();
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
@@ -67,6 +72,10 @@ fn scatter_with_front(points: &[(f64, f64)], title: &str, x_desc: &str) -> Resul
             .label("Pareto front")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
         chart.draw_series(front.iter().map(|&p| Circle::new(p, 5, RED.filled())))?;
+        // Labels to the lower right of the front markers.
+        chart.draw_series(front_idx.iter().map(|&i| {
+            EmptyElement::at(points[i]) + Text::new(labels[i].clone(), (6, 4), ("sans-serif", 11).into_font())
+        }))?;
         chart
             .configure_series_labels()
             .position(SeriesLabelPosition::LowerRight)
@@ -78,23 +87,27 @@ fn scatter_with_front(points: &[(f64, f64)], title: &str, x_desc: &str) -> Resul
     Ok(svg)
 }
 
-/// SVG of test PSNR (dB) against training time (s), one marker per run, the Pareto front in red.
+/// SVG of test PSNR (dB) against training time (s), one marker per run, the Pareto front in red
+/// with the slugs of its runs.
 pub fn plot_psnr_vs_time_svg(records: &[SweepRecord]) -> Result<String, SweepError> {
     let points: Vec<(f64, f64)> = records
         .iter()
         .map(|r| (r.summary.train_seconds, r.summary.test_psnr))
         .collect();
-    scatter_with_front(&points, "PSNR against training time", "training time (s)")
+    let labels: Vec<String> = records.iter().map(|r| r.setting.slug()).collect();
+    scatter_with_front(&points, &labels, "PSNR against training time", "training time (s)")
         .map_err(|e| plot_error("psnr_vs_time.svg", e))
 }
 
-/// SVG of test PSNR (dB) against model size on disk (MB = 10⁶ bytes), the Pareto front in red.
+/// SVG of test PSNR (dB) against model size on disk (MB = 10⁶ bytes), the Pareto front in red
+/// with the slugs of its runs.
 pub fn plot_psnr_vs_size_svg(records: &[SweepRecord]) -> Result<String, SweepError> {
     let points: Vec<(f64, f64)> = records
         .iter()
         .map(|r| (r.summary.model_bytes as f64 / 1e6, r.summary.test_psnr))
         .collect();
-    scatter_with_front(&points, "PSNR against model size", "model size (MB)")
+    let labels: Vec<String> = records.iter().map(|r| r.setting.slug()).collect();
+    scatter_with_front(&points, &labels, "PSNR against model size", "model size (MB)")
         .map_err(|e| plot_error("psnr_vs_size.svg", e))
 }
 
@@ -187,6 +200,16 @@ mod tests {
         // One hollow circle per run plus the legend's, one filled circle per front point.
         assert_eq!(svg.matches("<circle").count(), recs.len() + 1 + front);
         assert!(front >= 2 && front < recs.len());
+        // Front points are labelled with their slugs, the others are not.
+        for (i, r) in recs.iter().enumerate() {
+            let on = pareto_front(&points).contains(&i);
+            assert_eq!(
+                svg.contains(&format!("\n{}\n", r.setting.slug())),
+                on,
+                "{}",
+                r.setting.slug()
+            );
+        }
         let svg = plot_psnr_vs_size_svg(&recs).unwrap();
         assert!(svg.contains("model size (MB)"));
     }
