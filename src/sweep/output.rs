@@ -38,6 +38,12 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), SweepError> {
     })
 }
 
+/// Model size in bytes as a Pareto cost; 0 (the trainer saved no model) is unknown (NaN), so
+/// such a run is never on the size front.
+pub(crate) fn size_cost(bytes: u64) -> f64 {
+    if bytes == 0 { f64::NAN } else { bytes as f64 }
+}
+
 /// Pareto flags per record: (PSNR vs training time, PSNR vs model size).
 fn fronts(records: &[SweepRecord]) -> (Vec<bool>, Vec<bool>) {
     let flags = |points: Vec<(f64, f64)>| {
@@ -57,7 +63,7 @@ fn fronts(records: &[SweepRecord]) -> (Vec<bool>, Vec<bool>) {
         flags(
             records
                 .iter()
-                .map(|r| (r.summary.model_bytes as f64, r.summary.test_psnr))
+                .map(|r| (size_cost(r.summary.model_bytes), r.summary.test_psnr))
                 .collect(),
         ),
     )
@@ -113,6 +119,15 @@ pub fn csv_table(records: &[SweepRecord]) -> String {
     out
 }
 
+/// Bytes as MB (10⁶) with `decimals`, or `n/a` for 0 (unknown).
+fn mb(bytes: u64, decimals: usize) -> String {
+    if bytes == 0 {
+        "n/a".into()
+    } else {
+        format!("{:.*}", decimals, bytes as f64 / 1e6)
+    }
+}
+
 fn csv_field(f: &str) -> String {
     if f.contains([',', '"', '\n', '\r']) {
         format!("\"{}\"", f.replace('"', "\"\""))
@@ -123,7 +138,8 @@ fn csv_field(f: &str) -> String {
 
 /// The records as a markdown table, in order: budget, measured speed and quality, and a Pareto
 /// column naming the fronts the run is on (`time`: PSNR vs training time, `size`: PSNR vs model
-/// size). Model size and peak RSS in MB (10⁶ bytes).
+/// size). Model size and peak RSS in MB (10⁶ bytes); `n/a` where the summary has 0 (no model saved,
+/// or no peak-RSS reading on the platform), and such a run is on no size front.
 ///
 /// ```
 /// use bbsplat::sweep::markdown_table;
@@ -149,7 +165,7 @@ pub fn markdown_table(records: &[SweepRecord]) -> String {
         let or_default = |v: String| if v.is_empty() { "default".to_string() } else { v };
         let _ = writeln!(
             out,
-            "| {} | {} | {} | {} | {} | {} | {} | {}×{} | {:.1} | {:.2} | {:.2} | {:.4} | {:.2} | {:.0} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {}×{} | {:.1} | {:.2} | {:.2} | {:.4} | {} | {} | {} |",
             s.slug(),
             m.iterations,
             m.billboards,
@@ -163,8 +179,8 @@ pub fn markdown_table(records: &[SweepRecord]) -> String {
             m.render_ms_per_frame,
             m.test_psnr,
             m.test_ssim,
-            m.model_bytes as f64 / 1e6,
-            m.peak_rss_bytes as f64 / 1e6,
+            mb(m.model_bytes, 2),
+            mb(m.peak_rss_bytes, 0),
             pareto
         );
     }
@@ -321,6 +337,22 @@ mod tests {
         let r = get("it2000_bb3000_full");
         assert!(row("it2000_bb3000_full").contains(&format!("| {:.2} |", r.test_psnr)));
         assert!(row("it2000_bb3000_full").contains(&format!("| {:.2} |", r.model_bytes as f64 / 1e6)));
+    }
+
+    #[test]
+    fn unknown_model_size_is_on_no_size_front() {
+        let mut recs = records();
+        // The best run by PSNR saved no model.
+        let best = (0..recs.len())
+            .max_by(|&a, &b| recs[a].summary.test_psnr.total_cmp(&recs[b].summary.test_psnr))
+            .unwrap();
+        recs[best].summary.model_bytes = 0;
+        recs[best].summary.peak_rss_bytes = 0;
+        let (time, size) = fronts(&recs);
+        assert!(time[best] && !size[best]);
+        let table = markdown_table(&recs);
+        let row = table.lines().nth(best + 2).unwrap();
+        assert!(row.ends_with("| n/a | n/a | time |"), "{row}");
     }
 
     #[test]

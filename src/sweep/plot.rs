@@ -100,11 +100,16 @@ pub fn plot_psnr_vs_time_svg(records: &[SweepRecord]) -> Result<String, SweepErr
 }
 
 /// SVG of test PSNR (dB) against model size on disk (MB = 10⁶ bytes), the Pareto front in red
-/// with the slugs of its runs.
+/// with the slugs of its runs. Runs with `model_bytes == 0` (no model saved) are left out.
 pub fn plot_psnr_vs_size_svg(records: &[SweepRecord]) -> Result<String, SweepError> {
     let points: Vec<(f64, f64)> = records
         .iter()
-        .map(|r| (r.summary.model_bytes as f64 / 1e6, r.summary.test_psnr))
+        .map(|r| {
+            (
+                super::output::size_cost(r.summary.model_bytes) / 1e6,
+                r.summary.test_psnr,
+            )
+        })
         .collect();
     let labels: Vec<String> = records.iter().map(|r| r.setting.slug()).collect();
     scatter_with_front(&points, &labels, "PSNR against model size", "model size (MB)")
