@@ -29,4 +29,5 @@ pub mod rng;
 pub mod scene;
 pub mod stages;
 pub mod strategies;
+pub mod sweep;
 pub mod train;

@@ -1,0 +1,114 @@
+//! One whole training step (render, loss, backward, Adam, re-activation) on the demo scene, and
+//! the row-sparse Adam update on its own (the one stage no other bench covers).
+//!
+//! `cargo bench --bench train_step` (all), or e.g. `cargo bench --bench train_step -- 'step/96px'`.
+//!
+//! The step's cost depends on the schedule: textures train only from 1/64 of the run on and the
+//! SH degree rises every 1/32. Each timed batch of `iters` steps therefore starts from a fresh
+//! trainer on a run of `16·iters + 64` steps and first runs, untimed, the steps up to 3/32 of the
+//! run, so every timed step has textures on and SH degree 3 (as in most of a real run).
+use bbsplat::demo::{DemoConfig, generate};
+use bbsplat::init::fps::farthest_point_sampling;
+use bbsplat::model::Model;
+use bbsplat::train::adam::{AdamGroup, AdamParams};
+use bbsplat::train::{TrainConfig, TrainView, Trainer, scene_extent};
+use criterion::{BenchmarkId, Criterion, Throughput, black_box, criterion_group, criterion_main};
+use glam::Vec3;
+use std::time::{Duration, Instant};
+
+/// One step. If `Trainer::step` returns a `Result`, append `.expect("training step")` here.
+fn step(trainer: &mut Trainer, views: &[TrainView]) {
+    black_box(trainer.step(views));
+}
+
+struct Setup {
+    model: Model,
+    views: Vec<TrainView>,
+    config: TrainConfig,
+}
+
+/// The `bbsplat demo` scene at `resolution` with `billboards` billboards (FPS of the surface
+/// points), TS = 16, SH degree 3.
+fn demo_setup(resolution: u32, billboards: usize) -> Setup {
+    let scene = generate(&DemoConfig {
+        resolution,
+        points: billboards * 2,
+        ..DemoConfig::default()
+    });
+    let keep = farthest_point_sampling(&scene.points, billboards).expect("enough points");
+    let points: Vec<Vec3> = keep.iter().map(|&i| scene.points[i]).collect();
+    let colours: Vec<[f32; 3]> = keep.iter().map(|&i| scene.colours[i]).collect();
+    let model = Model::from_points(&points, &colours, 16, 0);
+    let views: Vec<TrainView> = scene
+        .train
+        .iter()
+        .map(|v| TrainView {
+            camera: v.camera,
+            rgb: v.rgb.clone(),
+        })
+        .collect();
+    let cameras: Vec<_> = views.iter().map(|v| v.camera).collect();
+    let config = TrainConfig {
+        iterations: 0,
+        sh_degree: 3,
+        background: Vec3::from_array(scene.background),
+        seed: 0,
+        extent: scene_extent(&cameras),
+    };
+    Setup { model, views, config }
+}
+
+fn train_step(c: &mut Criterion) {
+    let mut group = c.benchmark_group("step");
+    group
+        .sample_size(10)
+        .warm_up_time(Duration::from_secs(2))
+        .measurement_time(Duration::from_secs(8));
+    for (resolution, billboards) in [(96u32, 3_000usize), (192, 10_000)] {
+        let setup = demo_setup(resolution, billboards);
+        group.bench_function(BenchmarkId::new(format!("{resolution}px"), billboards), |b| {
+            b.iter_custom(|iters| {
+                let iters = iters as usize;
+                let config = TrainConfig {
+                    iterations: 16 * iters + 64,
+                    ..setup.config
+                };
+                let mut trainer = Trainer::new(setup.model.clone(), config);
+                for _ in 0..(3 * config.iterations).div_ceil(32) {
+                    step(&mut trainer, &setup.views);
+                }
+                let t = Instant::now();
+                for _ in 0..iters {
+                    step(&mut trainer, &setup.views);
+                }
+                t.elapsed()
+            })
+        });
+    }
+    group.finish();
+}
+
+fn adam(c: &mut Criterion) {
+    let mut group = c.benchmark_group("adam");
+    let rows = 1_000;
+    // Row lengths of the trainer's groups: position, SH rest, alpha TS=16, colour TS=16.
+    for row_len in [3usize, 45, 256, 768] {
+        let mut opt = AdamGroup::new(rows, row_len);
+        let mut params = vec![0.5f32; rows * row_len];
+        let grads: Vec<f32> = (0..rows * row_len).map(|i| ((i % 17) as f32 - 8.0) * 1e-3).collect();
+        let hp = AdamParams::default();
+        group.throughput(Throughput::Elements((rows * row_len) as u64));
+        group.bench_function(BenchmarkId::new("step_row_x1000", row_len), |b| {
+            b.iter(|| {
+                for r in 0..rows {
+                    let span = r * row_len..(r + 1) * row_len;
+                    opt.step_row(r, &mut params[span.clone()], &grads[span], 1e-3, &hp);
+                }
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, train_step, adam);
+criterion_main!(benches);

@@ -1,0 +1,293 @@
+//! Budget sweeps: train once per point of a grid of settings (billboards, texture size,
+//! iterations, resolution, texture threshold and mode, seed) and report speed against error.
+//!
+//! - [`SweepGrid`] lists values per axis and expands to [`Setting`]s in a stable order; it is
+//!   read from JSON ([`SweepGrid::from_json_file`]) or CLI lists ([`SweepGrid::set_axis`]).
+//! - [`run_grid`] calls a runner per setting and collects [`SweepRecord`]s; a failing run is
+//!   recorded and the sweep continues. [`SubprocessRunner`] runs `bbsplat train` as one child
+//!   process per setting (so the reported peak memory is that run's) and reads its
+//!   `summary.json` ([`crate::report::TrainSummary`]); settings whose `summary.json` exists are
+//!   not run again, so an interrupted sweep resumes.
+//! - [`write_outputs`] writes the CSV, JSON, markdown table and SVG plots; [`pareto_front`] is
+//!   the pure function behind the Pareto marks.
+//!
+//! Units: seconds (training wall clock), milliseconds (render time per frame), bytes (model size
+//! and peak RSS; the table and plots show MB = 10⁶ bytes), dB (PSNR on 8-bit images).
+//!
+//! ```
+//! use bbsplat::report::{SUMMARY_VERSION, TrainSummary};
+//! use bbsplat::sweep::{SweepGrid, run_grid};
+//!
+//! let mut grid = SweepGrid::default();
+//! grid.set_axis("billboards", "100,200").unwrap();
+//! // A stand-in for `bbsplat train`: more billboards, better and slower.
+//! let outcome = run_grid(&grid, |s| {
+//!     let n = s.billboards.unwrap();
+//!     Ok(TrainSummary {
+//!         version: SUMMARY_VERSION, scene: "fake".into(), iterations: 10, billboards: n, alive: n,
+//!         texture_size: 16, sh_degree: 3, resolution: [64, 64], train_seconds: n as f64 / 100.0,
+//!         render_ms_per_frame: 1.0, test_psnr: 20.0 + n as f64 / 100.0, test_ssim: 0.8,
+//!         test_views: 2, model_bytes: 1000 * n as u64, peak_rss_bytes: 0, seed: 0, threads: 1,
+//!         curve: vec![],
+//!     })
+//! })
+//! .unwrap();
+//! assert_eq!(outcome.records.len(), 2);
+//! assert!(outcome.failures.is_empty());
+//! ```
+
+mod grid;
+mod output;
+mod pareto;
+mod plot;
+mod runner;
+
+pub use grid::{AXES, Setting, SweepGrid, TextureMode, parse_list};
+pub use output::{CSV_HEADER, SweepFiles, csv_table, markdown_table, write_atomic, write_outputs};
+pub use pareto::pareto_front;
+pub use plot::{plot_curves_svg, plot_psnr_vs_size_svg, plot_psnr_vs_time_svg};
+pub use runner::{SubprocessRunner, subprocess_runner};
+
+use crate::report::TrainSummary;
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+/// Errors of the sweep tool; file errors name the file.
+#[derive(Debug, thiserror::Error)]
+pub enum SweepError {
+    /// A file could not be read, written or renamed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// A JSON file (grid or `summary.json`) could not be parsed or written.
+    #[error("{path}: {source}")]
+    Json {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: serde_json::Error,
+    },
+    /// A value of a grid axis is malformed or out of range.
+    #[error("axis `{axis}`: bad value `{value}`: {reason}")]
+    BadValue {
+        /// The axis.
+        axis: String,
+        /// The offending value as written.
+        value: String,
+        /// Why it was refused.
+        reason: String,
+    },
+    /// An axis name that is not one of [`AXES`].
+    #[error("unknown sweep axis `{0}` (expected one of: {axes})", axes = AXES.join(", "))]
+    UnknownAxis(String),
+    /// The trainer executable could not be started.
+    #[error("cannot start {exe}: {source}")]
+    Spawn {
+        /// The executable.
+        exe: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The trainer exited unsuccessfully.
+    #[error("run {slug} failed ({status}); see {log}")]
+    RunFailed {
+        /// The setting's slug.
+        slug: String,
+        /// The exit status.
+        status: String,
+        /// The file holding the run's stdout and stderr.
+        log: PathBuf,
+    },
+    /// The trainer exited successfully but wrote no summary.
+    #[error("{path}: missing after a successful run")]
+    MissingSummary {
+        /// The expected `summary.json`.
+        path: PathBuf,
+    },
+    /// A `summary.json` disagrees with the setting it should belong to (e.g. a stale folder).
+    #[error("{path}: {field} is {found}, the setting asks for {expected}")]
+    Mismatch {
+        /// The `summary.json`.
+        path: PathBuf,
+        /// The field.
+        field: &'static str,
+        /// The value of the setting.
+        expected: String,
+        /// The value in the file.
+        found: String,
+    },
+    /// A plot could not be drawn.
+    #[error("{path}: plotting failed: {message}")]
+    Plot {
+        /// The SVG file.
+        path: PathBuf,
+        /// The plotting library's message.
+        message: String,
+    },
+    /// Any other runner failure (for runners other than [`SubprocessRunner`]).
+    #[error("{0}")]
+    Other(String),
+}
+
+/// One finished run: its setting and what it produced.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SweepRecord {
+    /// The budget flags of the run.
+    pub setting: Setting,
+    /// The run's `summary.json`.
+    pub summary: TrainSummary,
+}
+
+/// A setting whose run failed.
+#[derive(Debug)]
+pub struct SweepFailure {
+    /// The setting.
+    pub setting: Setting,
+    /// What went wrong.
+    pub error: SweepError,
+}
+
+/// Everything [`run_grid`] collected, in grid order.
+#[derive(Debug, Default)]
+pub struct SweepOutcome {
+    /// Successful runs.
+    pub records: Vec<SweepRecord>,
+    /// Failed runs.
+    pub failures: Vec<SweepFailure>,
+}
+
+/// Calls `runner` once per setting of `grid`, in [`SweepGrid::settings`] order, and collects the
+/// summaries. A runner error is recorded in [`SweepOutcome::failures`] and the sweep goes on;
+/// only an invalid grid is an error.
+pub fn run_grid(
+    grid: &SweepGrid,
+    mut runner: impl FnMut(&Setting) -> Result<TrainSummary, SweepError>,
+) -> Result<SweepOutcome, SweepError> {
+    let mut outcome = SweepOutcome::default();
+    for setting in grid.settings()? {
+        match runner(&setting) {
+            Ok(summary) => outcome.records.push(SweepRecord { setting, summary }),
+            Err(error) => outcome.failures.push(SweepFailure { setting, error }),
+        }
+    }
+    Ok(outcome)
+}
+
+#[cfg(test)]
+pub(crate) mod fake {
+    //! A deterministic stand-in for `bbsplat train` used by the tests of this module.
+    use super::*;
+    use crate::report::{CurvePoint, SUMMARY_VERSION};
+
+    /// Rounds to 1e-6 so that values survive serde_json's (not exactly round-tripping) float
+    /// parser bit for bit.
+    fn r6(x: f64) -> f64 {
+        (x * 1e6).round() / 1e6
+    }
+
+    /// More billboards and iterations: slower, bigger and better, with diminishing returns;
+    /// `gaussian` mode is faster, smaller and 1.5 dB worse. Model size does not depend on the
+    /// iterations.
+    pub fn summary(s: &Setting) -> TrainSummary {
+        let it = s.iterations.unwrap_or(1000);
+        let bb = s.billboards.unwrap_or(1000);
+        let ts = s.texture_size.unwrap_or(16);
+        let gaussian = s.texture_mode == Some(TextureMode::Gaussian);
+        let texels = if gaussian { 0 } else { ts * ts * 4 };
+        let seconds = it as f64 * bb as f64 * (1.0 + texels as f64 / 256.0) * 1e-6;
+        let psnr = 25.0 + 2.0 * (bb as f64 / 500.0).log2() + 1.5 * (it as f64 / 250.0).log2()
+            - if gaussian { 1.5 } else { 0.0 }
+            + 0.01 * s.seed.unwrap_or(0) as f64;
+        let curve = (1..=4)
+            .map(|k| CurvePoint {
+                step: it * k / 4,
+                seconds: r6(seconds * k as f64 / 4.0),
+                psnr: r6(psnr - 4.0 / k as f64 + 1.0),
+                ssim: 0.5 + 0.1 * k as f64,
+            })
+            .collect();
+        TrainSummary {
+            version: SUMMARY_VERSION,
+            scene: "fake".into(),
+            iterations: it,
+            billboards: bb,
+            alive: bb * 9 / 10,
+            texture_size: ts,
+            sh_degree: 3,
+            resolution: [s.max_width.unwrap_or(200), s.max_width.unwrap_or(200) * 3 / 4],
+            train_seconds: r6(seconds),
+            render_ms_per_frame: bb as f64 * 1e-3,
+            test_psnr: r6(psnr),
+            test_ssim: 0.9,
+            test_views: 4,
+            model_bytes: (bb * (64 + 4 * (48 + texels))) as u64,
+            peak_rss_bytes: 100_000_000 + bb as u64 * 1000,
+            seed: s.seed.unwrap_or(0),
+            threads: 2,
+            curve,
+        }
+    }
+
+    /// A small grid of 2 × 2 × 2 settings.
+    pub fn grid() -> SweepGrid {
+        let mut g = SweepGrid::default();
+        g.set_axis("iterations", "500,2000").unwrap();
+        g.set_axis("billboards", "1000,3000").unwrap();
+        g.set_axis("texture-mode", "full,gaussian").unwrap();
+        g
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn run_grid_collects_in_order_and_keeps_going_after_failures() {
+        let grid = fake::grid();
+        let mut calls = Vec::new();
+        let outcome = run_grid(&grid, |s| {
+            calls.push(s.slug());
+            if s.billboards == Some(3000) && s.iterations == Some(2000) {
+                Err(SweepError::Other("out of memory".into()))
+            } else {
+                Ok(fake::summary(s))
+            }
+        })
+        .unwrap();
+        assert_eq!(calls.len(), 8);
+        assert_eq!(outcome.records.len(), 6);
+        assert_eq!(outcome.failures.len(), 2);
+        let expected: Vec<String> = grid
+            .settings()
+            .unwrap()
+            .iter()
+            .filter(|s| !(s.billboards == Some(3000) && s.iterations == Some(2000)))
+            .map(Setting::slug)
+            .collect();
+        let got: Vec<String> = outcome.records.iter().map(|r| r.setting.slug()).collect();
+        assert_eq!(got, expected);
+        assert_eq!(outcome.failures[0].error.to_string(), "out of memory");
+    }
+
+    #[test]
+    fn run_grid_refuses_an_invalid_grid_without_running() {
+        let grid = SweepGrid {
+            billboards: vec![0],
+            ..Default::default()
+        };
+        let mut ran = false;
+        assert!(
+            run_grid(&grid, |s| {
+                ran = true;
+                Ok(fake::summary(s))
+            })
+            .is_err()
+        );
+        assert!(!ran);
+    }
+}
