@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 
 /// One step. If `Trainer::step` returns a `Result`, append `.expect("training step")` here.
 fn step(trainer: &mut Trainer, views: &[TrainView]) {
-    black_box(trainer.step(views));
+    black_box(trainer.step(views).expect("the demo views match their cameras"));
 }
 
 struct Setup {
@@ -54,6 +54,7 @@ fn demo_setup(resolution: u32, billboards: usize) -> Setup {
         background: Vec3::from_array(scene.background),
         seed: 0,
         extent: scene_extent(&cameras),
+        ..TrainConfig::default()
     };
     Setup { model, views, config }
 }
