@@ -76,6 +76,10 @@ pub struct TrainArgs {
     /// Do not recycle dead billboards (mean alpha ≤ 0.005).
     #[arg(long)]
     pub no_relocate: bool,
+    /// Stop after this many steps (of `--iterations`) with a checkpoint, as Ctrl-C does: lets a
+    /// long run be done in slices with `--resume`.
+    #[arg(long)]
+    pub stop_after: Option<usize>,
     /// Continue from a checkpoint written by an earlier run (Ctrl-C or `--save-every`); the
     /// scene and flags should be those of that run. Continuing is bit-identical to not stopping.
     #[arg(long)]
@@ -145,35 +149,6 @@ pub fn run(args: TrainArgs) -> Result<()> {
         .map(|v| v.name.clone())
         .zip(train_views(&scene.test))
         .collect();
-    let budget = match args.billboards {
-        Some(n) => {
-            anyhow::ensure!(n >= 1, "--billboards must be at least 1");
-            n
-        }
-        None => {
-            let b = budget_for(&BudgetInputs::from_scene(&scene, args.texture_size));
-            if !args.quiet {
-                println!("budget: {}", b.reason);
-            }
-            b.billboards
-        }
-    };
-    let (model, init) = init_model(&scene, budget, args.texture_size, args.seed)
-        .with_context(|| format!("initialising {} billboards", budget))?;
-    if !args.quiet {
-        println!(
-            "initial billboards: {} from SfM points, {} on the sky sphere (radius {:.2}), {} random{}",
-            init.sfm,
-            init.sky,
-            init.sky_radius,
-            init.random,
-            if init.random > 0 {
-                format!(" ({})", init.box_rule)
-            } else {
-                String::new()
-            }
-        );
-    }
     let background = Vec3::from_array(scene.background.rgb());
     let config = TrainConfig {
         iterations: args.iterations,
@@ -193,26 +168,6 @@ pub fn run(args: TrainArgs) -> Result<()> {
         relocate: !args.no_relocate,
         ..TrainConfig::default()
     };
-    let cam0 = train[0].camera;
-    // From here on Ctrl-C saves a checkpoint instead of killing the process.
-    let interrupted = Arc::new(AtomicBool::new(false));
-    {
-        let flag = interrupted.clone();
-        ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
-    }
-    println!(
-        "{}: {} train / {} test views at {}x{}, {} billboards (TS {}), loaded in {:.1} s, {threads} threads",
-        args.scene.display(),
-        train.len(),
-        test.len(),
-        cam0.width,
-        cam0.height,
-        model.len(),
-        args.texture_size,
-        start.elapsed().as_secs_f64()
-    );
-    std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
-
     let checkpoint = args.output.join("checkpoint.bin");
     let mut trainer = match &args.resume {
         Some(path) => {
@@ -227,8 +182,59 @@ pub fn run(args: TrainArgs) -> Result<()> {
             println!("resuming at step {} from {}", t.step_index(), path.display());
             t
         }
-        None => Trainer::new(model, config),
+        None => {
+        let budget = match args.billboards {
+            Some(n) => {
+                anyhow::ensure!(n >= 1, "--billboards must be at least 1");
+                n
+            }
+            None => {
+                let b = budget_for(&BudgetInputs::from_scene(&scene, args.texture_size));
+                if !args.quiet {
+                    println!("budget: {}", b.reason);
+                }
+                b.billboards
+            }
+        };
+        let (model, init) = init_model(&scene, budget, args.texture_size, args.seed)
+            .with_context(|| format!("initialising {} billboards", budget))?;
+        if !args.quiet {
+            println!(
+                "initial billboards: {} from SfM points, {} on the sky sphere (radius {:.2}), {} random{}",
+                init.sfm,
+                init.sky,
+                init.sky_radius,
+                init.random,
+                if init.random > 0 {
+                    format!(" ({})", init.box_rule)
+                } else {
+                    String::new()
+                }
+            );
+        }
+            Trainer::new(model, config)
+        }
     };
+    let cam0 = train[0].camera;
+    // From here on Ctrl-C saves a checkpoint instead of killing the process.
+    let interrupted = Arc::new(AtomicBool::new(false));
+    {
+        let flag = interrupted.clone();
+        ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
+    }
+    println!(
+        "{}: {} train / {} test views at {}x{}, {} billboards (TS {}), loaded in {:.1} s, {threads} threads",
+        args.scene.display(),
+        train.len(),
+        test.len(),
+        cam0.width,
+        cam0.height,
+        trainer.model.len(),
+        trainer.model.texture_size,
+        start.elapsed().as_secs_f64()
+    );
+    std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
+
     let eval_settings = RenderSettings {
         background,
         sh_degree: args.sh_degree,
@@ -250,17 +256,22 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let mut running_psnr = f64::NAN;
     let mut relocated = 0usize;
     while trainer.step_index() < args.iterations {
-        if interrupted.load(Ordering::SeqCst) {
+        let stop_requested = args.stop_after.is_some_and(|n| trainer.step_index() >= n);
+        if stop_requested || interrupted.load(Ordering::SeqCst) {
             bar.abandon();
             trainer
                 .save_checkpoint(&checkpoint)
                 .with_context(|| format!("saving {}", checkpoint.display()))?;
             eprintln!(
-                "interrupted at step {}: saved {}; continue with the same command and --resume {}",
+                "{} at step {}: saved {}; continue with the same command and --resume {}",
+                if stop_requested { "stopped" } else { "interrupted" },
                 trainer.step_index(),
                 checkpoint.display(),
                 checkpoint.display()
             );
+            if stop_requested {
+                return Ok(());
+            }
             std::process::exit(130);
         }
         let t0 = Instant::now();
