@@ -135,6 +135,110 @@ struct Scratch {
     /// taken in a fixed order. Its size is proportional to the tile's pairs, not to its entries
     /// times the texture size.
     log: Vec<(u32, u32, [f32; 4])>,
+    merge: MergeScratch,
+}
+
+/// Scratch of [`merge_texture_log`], reused across the tiles of a task.
+#[derive(Default)]
+struct MergeScratch {
+    /// Log positions grouped by slot (a stable counting sort: pixel order within a slot).
+    order: Vec<u32>,
+    cursor: Vec<u32>,
+    /// Dense per-texel sums of the slot being merged, and whether the texel has been seen.
+    sums: Vec<[f32; 4]>,
+    seen: Vec<bool>,
+    touched: Vec<u32>,
+}
+
+/// Groups a tile's texture-gradient log by entry slot and sums the contributions of each
+/// (slot, texel) in log (pixel) order, starting from the first one: the same sums, added in the
+/// same order, as a stable sort by (slot, texel) followed by a merge of equal keys
+/// ([`merge_texture_log_reference`]), in `O(log + texels)` instead of a comparison sort. Within
+/// a slot the texels come out in first-touch order (the per-billboard reduction adds each of
+/// them once, so their order does not change any sum).
+///
+/// Returns `(offsets, texels)`: the texels of slot `k` are `texels[offsets[k]..offsets[k + 1]]`.
+fn merge_texture_log(
+    log: &[(u32, u32, [f32; 4])],
+    slots: usize,
+    texels: usize,
+    m: &mut MergeScratch,
+) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
+    m.cursor.clear();
+    m.cursor.resize(slots + 1, 0);
+    for &(slot, _, _) in log {
+        m.cursor[slot as usize + 1] += 1;
+    }
+    for k in 0..slots {
+        m.cursor[k + 1] += m.cursor[k];
+    }
+    m.order.clear();
+    m.order.resize(log.len(), 0);
+    for (pos, &(slot, _, _)) in log.iter().enumerate() {
+        let c = &mut m.cursor[slot as usize];
+        m.order[*c as usize] = pos as u32;
+        *c += 1;
+    }
+    if m.seen.len() < texels {
+        m.seen.resize(texels, false);
+        m.sums.resize(texels, [0.0; 4]);
+    }
+    let mut offsets = vec![0u32; slots + 1];
+    let mut out: Vec<(u32, [f32; 4])> = Vec::with_capacity(log.len());
+    // After the scatter, cursor[k] is the end of slot k, hence the start of slot k + 1.
+    for k in 0..slots {
+        m.touched.clear();
+        let start = if k == 0 { 0 } else { m.cursor[k - 1] as usize };
+        for &pos in &m.order[start..m.cursor[k] as usize] {
+            let (_, texel, g) = log[pos as usize];
+            let t = texel as usize;
+            if m.seen[t] {
+                let s = &mut m.sums[t];
+                for c in 0..4 {
+                    s[c] += g[c];
+                }
+            } else {
+                m.seen[t] = true;
+                m.sums[t] = g;
+                m.touched.push(texel);
+            }
+        }
+        for &texel in &m.touched {
+            let t = texel as usize;
+            out.push((texel, m.sums[t]));
+            m.seen[t] = false;
+        }
+        offsets[k + 1] = out.len() as u32;
+    }
+    (offsets, out)
+}
+
+/// Plain reference of [`merge_texture_log`]: stable sort by (slot, texel), then each run of
+/// equal keys summed in order. Texels come out sorted within a slot.
+#[cfg(test)]
+fn merge_texture_log_reference(log: &[(u32, u32, [f32; 4])], slots: usize) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
+    let mut log = log.to_vec();
+    log.sort_by_key(|&(slot, texel, _)| (slot, texel));
+    let mut counts = vec![0u32; slots + 1];
+    let mut out: Vec<(u32, [f32; 4])> = Vec::with_capacity(log.len());
+    let mut run = 0;
+    while run < log.len() {
+        let (slot, texel, mut sum) = log[run];
+        let mut next = run + 1;
+        while next < log.len() && log[next].0 == slot && log[next].1 == texel {
+            for c in 0..4 {
+                sum[c] += log[next].2[c];
+            }
+            next += 1;
+        }
+        out.push((texel, sum));
+        counts[slot as usize + 1] += 1;
+        run = next;
+    }
+    for k in 0..slots {
+        counts[k + 1] += counts[k];
+    }
+    (counts, out)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -256,31 +360,10 @@ fn backward_tile(
             }
         }
     }
-    // Sparse texture gradients grouped by entry: the stable sort keeps pixel order among equal
-    // keys, then each (slot, texel) run is summed in that order.
-    scratch.log.sort_by_key(|&(slot, texel, _)| (slot, texel));
-    let mut counts = vec![0u32; list.len() + 1];
-    let mut texels_out: Vec<(u32, [f32; 4])> = Vec::with_capacity(scratch.log.len());
-    let mut run = 0;
-    while run < scratch.log.len() {
-        let (slot, texel, mut sum) = scratch.log[run];
-        let mut next = run + 1;
-        while next < scratch.log.len() && scratch.log[next].0 == slot && scratch.log[next].1 == texel {
-            for c in 0..4 {
-                sum[c] += scratch.log[next].2[c];
-            }
-            next += 1;
-        }
-        texels_out.push((texel, sum));
-        counts[slot as usize + 1] += 1;
-        run = next;
-    }
-    for k in 0..list.len() {
-        counts[k + 1] += counts[k];
-    }
+    let (tex_offsets, texels_out) = merge_texture_log(&scratch.log, list.len(), ts * ts, &mut scratch.merge);
     TileGrads {
         geometry,
-        tex_offsets: counts,
+        tex_offsets,
         texels: texels_out,
         background,
     }
@@ -402,4 +485,42 @@ pub fn render_backward(
         .filter(|(_, t)| **t)
         .map(|(b, _)| b as u32)
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The counting-sort merge gives, slot by slot, the same (texel, sum) set as the sort-based
+    /// reference, bit for bit.
+    #[test]
+    fn merge_texture_log_matches_the_sorting_reference() {
+        let mut state = 0x2545f4914f6cdd1du64;
+        let mut next = |m: u64| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state % m
+        };
+        let mut scratch = MergeScratch::default();
+        for &(slots, texels, len) in &[(1usize, 4usize, 0usize), (3, 4, 50), (17, 256, 400), (40, 16, 2000)] {
+            let log: Vec<(u32, u32, [f32; 4])> = (0..len)
+                .map(|_| {
+                    let g = [0; 4].map(|_| (next(2001) as f32 - 1000.0) * 1.37e-3);
+                    (next(slots as u64) as u32, next(texels as u64) as u32, g)
+                })
+                .collect();
+            let (offsets, out) = merge_texture_log(&log, slots, texels, &mut scratch);
+            let (ref_offsets, ref_out) = merge_texture_log_reference(&log, slots);
+            assert_eq!(offsets, ref_offsets);
+            for k in 0..slots {
+                let r = offsets[k] as usize..offsets[k + 1] as usize;
+                let mut got: Vec<(u32, [u32; 4])> =
+                    out[r.clone()].iter().map(|&(t, g)| (t, g.map(f32::to_bits))).collect();
+                got.sort_by_key(|e| e.0);
+                let want: Vec<(u32, [u32; 4])> = ref_out[r].iter().map(|&(t, g)| (t, g.map(f32::to_bits))).collect();
+                assert_eq!(got, want, "slot {k}");
+            }
+        }
+    }
 }
