@@ -3,7 +3,8 @@
 //! `cargo run --release --example raster_stats -- 256 50000`
 //!
 //! `raster_stats 256 50000 loop 20` only runs 20 forward+backward calls after one warm-up and
-//! prints their mean (a steady harness for `perf record` and `valgrind`).
+//! prints their mean (a steady harness for `perf record` and `valgrind`); `loopf` the same for
+//! the forward alone.
 use bbsplat::billboards::{RandomSceneConfig, random_scene, random_scene_camera};
 use bbsplat::raster::backward::ImageGradients;
 use bbsplat::raster::binning::bin;
@@ -19,6 +20,18 @@ fn main() {
     let cam = random_scene_camera(size, size);
     let settings = RenderSettings::default();
     let set = scene.as_set();
+    if args.get(3).map(String::as_str) == Some("loopf") {
+        let calls: usize = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(20);
+        let mut out = render(&set, &cam, &settings);
+        let t = Instant::now();
+        for _ in 0..calls {
+            out = render(&set, &cam, &settings);
+        }
+        let ms = t.elapsed().as_secs_f64() * 1e3 / calls.max(1) as f64;
+        let blended = out.stats.blended_pairs;
+        println!("{size}x{size}, N = {n}: {calls} fwd calls, {ms:.2} ms each, {blended} blended pairs");
+        return;
+    }
     if args.get(3).map(String::as_str) == Some("loop") {
         let calls: usize = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(20);
         let d_rgb = vec![1e-3f32; (size * size * 3) as usize];
