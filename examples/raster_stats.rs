@@ -12,6 +12,19 @@ use bbsplat::raster::preprocess::preprocess;
 use bbsplat::raster::{RenderGradients, RenderSettings, render, render_backward};
 use std::time::Instant;
 
+/// CPU time of all threads of this process so far, in ms (Linux `schedstat`; 0 elsewhere):
+/// on a shared machine it excludes the time the threads waited for a core.
+fn cpu_ms() -> f64 {
+    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else {
+        return 0.0;
+    };
+    tasks
+        .filter_map(|t| std::fs::read_to_string(t.ok()?.path().join("schedstat")).ok())
+        .filter_map(|s| s.split_whitespace().next()?.parse::<f64>().ok())
+        .sum::<f64>()
+        / 1e6
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let size: u32 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(256);
@@ -23,13 +36,16 @@ fn main() {
     if args.get(3).map(String::as_str) == Some("loopf") {
         let calls: usize = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(20);
         let mut out = render(&set, &cam, &settings);
-        let t = Instant::now();
+        let (t, c) = (Instant::now(), cpu_ms());
         for _ in 0..calls {
             out = render(&set, &cam, &settings);
         }
         let ms = t.elapsed().as_secs_f64() * 1e3 / calls.max(1) as f64;
+        let cpu = (cpu_ms() - c) / calls.max(1) as f64;
         let blended = out.stats.blended_pairs;
-        println!("{size}x{size}, N = {n}: {calls} fwd calls, {ms:.2} ms each, {blended} blended pairs");
+        println!(
+            "{size}x{size}, N = {n}: {calls} fwd calls, {ms:.2} ms each, cpu {cpu:.2} ms each, {blended} blended pairs"
+        );
         return;
     }
     if args.get(3).map(String::as_str) == Some("loop") {
@@ -71,12 +87,15 @@ fn main() {
         mix(&g1.positions.iter().flat_map(|p| p.to_array()).collect::<Vec<_>>());
         mix(&g1.quaternions.concat());
         println!("checksum {h:016x}");
-        let t = Instant::now();
+        let (t, c) = (Instant::now(), cpu_ms());
         for _ in 0..calls {
             once();
         }
         let ms = t.elapsed().as_secs_f64() * 1e3 / calls.max(1) as f64;
-        println!("{size}x{size}, N = {n}: {calls} fwd+bwd calls, {ms:.2} ms each, {touched} billboards touched");
+        let cpu = (cpu_ms() - c) / calls.max(1) as f64;
+        println!(
+            "{size}x{size}, N = {n}: {calls} fwd+bwd calls, {ms:.2} ms each, cpu {cpu:.2} ms each, {touched} billboards touched"
+        );
         return;
     }
     let reps = 10;

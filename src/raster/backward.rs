@@ -11,12 +11,12 @@
 //! depend on how rayon schedules tiles. Texture gradients are kept sparse per entry (only the
 //! texels some pixel of the tile touched).
 
-use super::forward::{PixelLists, RenderOutput, local_boxes, split_by_lengths, tile_pixels};
+use super::forward::{PixelLists, RenderOutput, TileCandidates, local_boxes, split_by_lengths, tile_pixels};
 use super::preprocess::Prepared;
 use super::{BillboardSet, SH_FLOATS};
-use crate::stages::bilinear::{self, BilinearTaps};
+use crate::stages::bilinear::BilinearTaps;
 use crate::stages::composite::ClampGradient;
-use crate::stages::ray_plane::{PlaneHit, intersect, intersect_vjp};
+use crate::stages::ray_plane::intersect_vjp;
 use crate::stages::sh::sh_colour_vjp;
 use crate::stages::splat_transform::{SplatTransform, project_splat_vjp};
 use glam::{Vec2, Vec3};
@@ -92,7 +92,7 @@ struct Blended {
     alpha: f32,
     clamped: bool,
     t: f32,
-    hit: PlaneHit,
+    depth: f32,
     taps: BilinearTaps,
     colour: Vec3,
 }
@@ -136,6 +136,7 @@ struct Scratch {
     /// times the texture size.
     log: Vec<(u32, u32, [f32; 4])>,
     merge: MergeScratch,
+    candidates: TileCandidates,
 }
 
 /// Scratch of [`merge_texture_log`], reused across the tiles of a task.
@@ -269,11 +270,18 @@ fn backward_tile(
     let mut background = Vec3::ZERO;
     let mut lists = PixelLists::default();
     lists.build(&local_boxes(prepared, list, i0, j0));
+    // Hits and taps of the walked entries of every pixel, their texels prefetched.
+    let candidates = &mut scratch.candidates;
+    candidates.build(set, prepared, list, &lists, (i0, j0, i1, j1), |i, j| {
+        state.walked[(j * width + i) as usize] as usize
+    });
+    let candidates = &scratch.candidates;
     scratch.log.clear();
     let bg = settings.background;
     for j in j0..j1 {
         for i in i0..i1 {
             let p = (j * width + i) as usize;
+            let q = ((j - j0) * (i1 - i0) + (i - i0)) as usize;
             let g_rgb = Vec3::from_slice(&grads_in.rgb[3 * p..3 * p + 3]);
             let g_alpha = grads_in.alpha.map_or(0.0, |a| a[p]);
             let g_depth = grads_in.depth.map_or(0.0, |d| d[p]);
@@ -288,26 +296,16 @@ fn backward_tile(
             scratch.blended.clear();
             let mut t = 1.0f32;
             let mut colour = [0.0f32; 3];
-            for &k in lists.of(i - i0, j - j0) {
-                let k = k as usize;
-                if k >= walked {
-                    break;
-                }
+            for cand in candidates.of(q) {
+                let k = cand.slot as usize;
                 let b = list[k];
-                let Some(pr) = prepared[b as usize].as_ref() else {
-                    continue;
-                };
-                let Some(hit) = intersect(&pr.transform, px, py) else {
-                    continue;
-                };
-                let Some(taps) = bilinear::taps(hit.u, hit.v, ts) else {
-                    continue;
-                };
+                let taps = cand.taps;
                 let a = taps.sample_one(set.alpha_of(b as usize));
                 let alpha = a.min(params.max_alpha);
                 if alpha < params.min_alpha {
                     continue;
                 }
+                let pr = prepared[b as usize].as_ref().expect("binned billboards are prepared");
                 taps.sample(set.colour_of(b as usize), 3, &mut colour);
                 scratch.blended.push(Blended {
                     slot: k as u32,
@@ -315,7 +313,7 @@ fn backward_tile(
                     alpha,
                     clamped: a > params.max_alpha,
                     t,
-                    hit,
+                    depth: cand.depth,
                     taps,
                     colour: Vec3::from_array(colour) + pr.rgb,
                 });
@@ -331,10 +329,10 @@ fn backward_tile(
                 let d_alpha = bl.t
                     * ((bl.colour - behind_rgb).dot(g_rgb)
                         + (1.0 - behind_alpha) * g_alpha
-                        + (bl.hit.depth - behind_depth) * g_depth);
+                        + (bl.depth - behind_depth) * g_depth);
                 behind_rgb = bl.colour * bl.alpha + behind_rgb * (1.0 - bl.alpha);
                 behind_alpha = bl.alpha + behind_alpha * (1.0 - bl.alpha);
-                behind_depth = bl.hit.depth * bl.alpha + behind_depth * (1.0 - bl.alpha);
+                behind_depth = bl.depth * bl.alpha + behind_depth * (1.0 - bl.alpha);
                 // The clamp min(max_alpha, a): exact derivative (0 where active) or the
                 // reference's pass-through, as the compositing parameters say.
                 let d_tex_alpha = match (bl.clamped, params.clamp_gradient) {
