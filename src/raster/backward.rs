@@ -11,7 +11,9 @@
 //! depend on how rayon schedules tiles. Texture gradients are kept sparse per entry (only the
 //! texels some pixel of the tile touched).
 
-use super::forward::{PixelLists, RenderOutput, TileCandidates, local_boxes, split_by_lengths, tile_pixels};
+use super::forward::{
+    PixelLists, RenderOutput, TileCandidates, local_boxes, prefetch, prefetch_ref, split_by_lengths, tile_pixels,
+};
 use super::preprocess::Prepared;
 use super::{BillboardSet, SH_FLOATS};
 use crate::stages::bilinear::BilinearTaps;
@@ -420,69 +422,117 @@ pub fn render_backward(
     let camera = &state.camera;
     let centre = camera.centre();
     let degree = state.settings.sh_degree;
-    let touched: Vec<bool> = (
-        grads.positions.par_iter_mut(),
-        grads.quaternions.par_iter_mut(),
-        grads.log_scales.par_iter_mut(),
-        grads.sh.par_chunks_mut(SH_FLOATS),
-        grads.alpha.par_chunks_mut(texels),
-        grads.colour.par_chunks_mut(3 * texels),
+    // Where the entries of billboard `b` left their tile results.
+    let entry_results = |b: usize| {
+        let r = bins.billboard_offsets[b] as usize..bins.billboard_offsets[b + 1] as usize;
+        bins.billboard_entries[r].iter().map(|&e| {
+            let t = entry_tile[e as usize] as usize;
+            (&tiles[t], e as usize - bins.tile_offsets[t] as usize)
+        })
+    };
+    // Billboards are reduced in chunks, each chunk in index order by one task. The tile results
+    // and gradient rows a billboard reads are scattered (billboards are not in screen order), so
+    // each step prefetches them a few billboards ahead: the tile records 12 ahead, the texel lists
+    // 8 ahead, the gradient rows and SH coefficients 4 ahead. Prefetches change no value.
+    const CHUNK: usize = 256;
+    let touched: Vec<Vec<u32>> = (
+        grads.positions.par_chunks_mut(CHUNK),
+        grads.quaternions.par_chunks_mut(CHUNK),
+        grads.log_scales.par_chunks_mut(CHUNK),
+        grads.sh.par_chunks_mut(CHUNK * SH_FLOATS),
+        grads.alpha.par_chunks_mut(CHUNK * texels),
+        grads.colour.par_chunks_mut(CHUNK * 3 * texels),
     )
         .into_par_iter()
         .enumerate()
-        .map(|(b, (d_pos, d_quat, d_scale, d_sh, d_alpha, d_colour))| {
-            let r = bins.billboard_offsets[b] as usize..bins.billboard_offsets[b + 1] as usize;
-            if r.is_empty() {
-                return false;
-            }
-            let mut d_t = ZERO_TRANSFORM;
-            let mut d_rgb = Vec3::ZERO;
-            let mut any = false;
-            for &e in &bins.billboard_entries[r] {
-                let t = entry_tile[e as usize] as usize;
-                let k = e as usize - bins.tile_offsets[t] as usize;
-                let tg = &tiles[t];
-                let tex = &tg.texels[tg.tex_offsets[k] as usize..tg.tex_offsets[k + 1] as usize];
-                if tex.is_empty() {
+        .map(|(c, (d_pos, d_quat, d_scale, d_sh, d_alpha, d_colour))| {
+            let b0 = c * CHUNK;
+            let len = d_pos.len();
+            let mut touched = Vec::new();
+            for lb in 0..len {
+                if lb + 12 < len {
+                    for (tg, k) in entry_results(b0 + lb + 12) {
+                        prefetch_ref(&tg.geometry[k]);
+                        prefetch_ref(&tg.tex_offsets[k]);
+                    }
+                }
+                if lb + 8 < len {
+                    for (tg, k) in entry_results(b0 + lb + 8) {
+                        let start = tg.tex_offsets[k] as usize;
+                        if start < tg.tex_offsets[k + 1] as usize {
+                            prefetch_ref(&tg.texels[start]);
+                        }
+                    }
+                }
+                if lb + 4 < len {
+                    let la = lb + 4;
+                    let mut any = false;
+                    for (tg, k) in entry_results(b0 + la) {
+                        for &(idx, _) in &tg.texels[tg.tex_offsets[k] as usize..tg.tex_offsets[k + 1] as usize] {
+                            let (idx, colour_row) = (idx as usize, 3 * la * texels);
+                            prefetch(d_alpha, la * texels + idx);
+                            prefetch(d_colour, colour_row + idx);
+                            prefetch(d_colour, colour_row + texels + idx);
+                            prefetch(d_colour, colour_row + 2 * texels + idx);
+                            any = true;
+                        }
+                    }
+                    if any {
+                        let sh = set.sh_of(b0 + la);
+                        prefetch(sh, 0);
+                        prefetch(sh, SH_FLOATS - 1);
+                        prefetch(d_sh, la * SH_FLOATS);
+                        prefetch(d_sh, (la + 1) * SH_FLOATS - 1);
+                    }
+                }
+                let b = b0 + lb;
+                let (d_alpha, d_colour) = (
+                    &mut d_alpha[lb * texels..(lb + 1) * texels],
+                    &mut d_colour[3 * lb * texels..3 * (lb + 1) * texels],
+                );
+                let mut d_t = ZERO_TRANSFORM;
+                let mut d_rgb = Vec3::ZERO;
+                let mut any = false;
+                for (tg, k) in entry_results(b) {
+                    let tex = &tg.texels[tg.tex_offsets[k] as usize..tg.tex_offsets[k + 1] as usize];
+                    if tex.is_empty() {
+                        continue;
+                    }
+                    any = true;
+                    add_transform(&mut d_t, &tg.geometry[k].transform);
+                    d_rgb += tg.geometry[k].rgb;
+                    for &(idx, v) in tex {
+                        let idx = idx as usize;
+                        d_alpha[idx] += v[0];
+                        d_colour[idx] += v[1];
+                        d_colour[texels + idx] += v[2];
+                        d_colour[2 * texels + idx] += v[3];
+                    }
+                }
+                if !any {
                     continue;
                 }
-                any = true;
-                add_transform(&mut d_t, &tg.geometry[k].transform);
-                d_rgb += tg.geometry[k].rgb;
-                for &(idx, v) in tex {
-                    let idx = idx as usize;
-                    d_alpha[idx] += v[0];
-                    d_colour[idx] += v[1];
-                    d_colour[texels + idx] += v[2];
-                    d_colour[2 * texels + idx] += v[3];
+                let sg = project_splat_vjp(
+                    set.positions[b],
+                    set.log_scales[b],
+                    set.quaternions[b],
+                    camera,
+                    &d_t,
+                    Vec3::ZERO,
+                );
+                let d_sh = &mut d_sh[lb * SH_FLOATS..(lb + 1) * SH_FLOATS];
+                let d_pos_sh = sh_colour_vjp(degree, set.sh_of(b), set.positions[b], centre, d_rgb, d_sh);
+                d_pos[lb] += sg.d_position + d_pos_sh;
+                d_scale[lb] += sg.d_log_scales;
+                for (q, dq) in d_quat[lb].iter_mut().zip(sg.d_quaternion) {
+                    *q += dq;
                 }
+                touched.push(b as u32);
             }
-            if !any {
-                return false;
-            }
-            let sg = project_splat_vjp(
-                set.positions[b],
-                set.log_scales[b],
-                set.quaternions[b],
-                camera,
-                &d_t,
-                Vec3::ZERO,
-            );
-            let d_pos_sh = sh_colour_vjp(degree, set.sh_of(b), set.positions[b], centre, d_rgb, d_sh);
-            *d_pos += sg.d_position + d_pos_sh;
-            *d_scale += sg.d_log_scales;
-            for (q, dq) in d_quat.iter_mut().zip(sg.d_quaternion) {
-                *q += dq;
-            }
-            true
+            touched
         })
         .collect();
-    touched
-        .iter()
-        .enumerate()
-        .filter(|(_, t)| **t)
-        .map(|(b, _)| b as u32)
-        .collect()
+    touched.concat()
 }
 
 #[cfg(test)]

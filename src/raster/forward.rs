@@ -140,8 +140,14 @@ fn shade_pixel(
 
 /// Hints the CPU to fetch the cache line holding `data[i]` (no effect on results).
 #[inline(always)]
-pub(crate) fn prefetch(data: &[f32], i: usize) {
-    let p: *const f32 = &data[i];
+pub(crate) fn prefetch<T>(data: &[T], i: usize) {
+    prefetch_ref(&data[i]);
+}
+
+/// Hints the CPU to fetch the cache line holding `*r` (no effect on results).
+#[inline(always)]
+pub(crate) fn prefetch_ref<T>(r: &T) {
+    let p: *const T = r;
     #[cfg(target_arch = "x86_64")]
     // SAFETY: a prefetch is only a hint; it never faults and `p` points into `data` anyway.
     unsafe {
