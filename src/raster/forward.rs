@@ -144,12 +144,29 @@ pub(crate) fn prefetch<T>(data: &[T], i: usize) {
     prefetch_ref(&data[i]);
 }
 
+/// Hints the CPU to fetch the cache lines holding the first and the last byte of `*r`.
+#[inline(always)]
+pub(crate) fn prefetch_record<T>(r: &T) {
+    prefetch_ptr(std::ptr::from_ref(r).cast::<u8>());
+    prefetch_ptr(
+        std::ptr::from_ref(r)
+            .cast::<u8>()
+            .wrapping_add(size_of::<T>().saturating_sub(1)),
+    );
+}
+
 /// Hints the CPU to fetch the cache line holding `*r` (no effect on results).
 #[inline(always)]
 pub(crate) fn prefetch_ref<T>(r: &T) {
-    let p: *const T = r;
+    prefetch_ptr(std::ptr::from_ref(r).cast::<u8>());
+}
+
+/// Hints the CPU to fetch the cache line holding address `p`; `p` is never dereferenced.
+#[inline(always)]
+fn prefetch_ptr(p: *const u8) {
     #[cfg(target_arch = "x86_64")]
-    // SAFETY: a prefetch is only a hint; it never faults and `p` points into `data` anyway.
+    // SAFETY: a prefetch is only a hint: it never faults, whatever the address, and reads nothing
+    // the program can observe.
     unsafe {
         std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(p.cast::<i8>());
     }
@@ -246,7 +263,12 @@ impl TileCandidates {
 pub(crate) fn local_boxes(prepared: &[Option<Prepared>], list: &[u32], i0: u32, j0: u32) -> Vec<[u8; 4]> {
     let last = TILE_SIZE - 1;
     list.iter()
-        .map(|&b| {
+        .enumerate()
+        .map(|(k, &b)| {
+            // The records are scattered over the prepared array: fetch a few entries ahead.
+            if let Some(&ahead) = list.get(k + 8) {
+                prefetch_record(&prepared[ahead as usize]);
+            }
             let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
             let lo = |v: u32, o: u32| v.saturating_sub(o).min(last) as u8;
             let hi = |v: u32, o: u32| if v < o { 0 } else { (v - o).min(last) as u8 };
