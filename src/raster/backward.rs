@@ -133,8 +133,8 @@ struct TileGrads {
 struct Scratch {
     blended: Vec<Blended>,
     /// Texture-gradient contributions `(entry slot, texel, [∂alpha, ∂r, ∂g, ∂b])` in pixel
-    /// order; sorted stably by (slot, texel) and merged at the end of the tile, so the sums are
-    /// taken in a fixed order. Its size is proportional to the tile's pairs, not to its entries
+    /// order; grouped by slot and summed per (slot, texel) in pixel order at the end of the tile
+    /// ([`merge_texture_log`]), so the sums are taken in a fixed order. Its size is proportional to the tile's pairs, not to its entries
     /// times the texture size.
     log: Vec<(u32, u32, [f32; 4])>,
     merge: MergeScratch,
