@@ -1,12 +1,29 @@
 //! Work statistics and phase timings of the rasterizer on the standard benchmark scene.
 //!
 //! `cargo run --release --example raster_stats -- 256 50000`
+//!
+//! `raster_stats 256 50000 loop 20` only runs 20 forward+backward calls after one warm-up and
+//! prints their mean (a steady harness for `perf record` and `valgrind`); `loopf` the same for
+//! the forward alone.
 use bbsplat::billboards::{RandomSceneConfig, random_scene, random_scene_camera};
 use bbsplat::raster::backward::ImageGradients;
 use bbsplat::raster::binning::bin;
 use bbsplat::raster::preprocess::preprocess;
 use bbsplat::raster::{RenderGradients, RenderSettings, render, render_backward};
 use std::time::Instant;
+
+/// CPU time of all threads of this process so far, in ms (Linux `schedstat`; 0 elsewhere):
+/// on a shared machine it excludes the time the threads waited for a core.
+fn cpu_ms() -> f64 {
+    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else {
+        return 0.0;
+    };
+    tasks
+        .filter_map(|t| std::fs::read_to_string(t.ok()?.path().join("schedstat")).ok())
+        .filter_map(|s| s.split_whitespace().next()?.parse::<f64>().ok())
+        .sum::<f64>()
+        / 1e6
+}
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -16,6 +33,71 @@ fn main() {
     let cam = random_scene_camera(size, size);
     let settings = RenderSettings::default();
     let set = scene.as_set();
+    if args.get(3).map(String::as_str) == Some("loopf") {
+        let calls: usize = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(20);
+        let mut out = render(&set, &cam, &settings);
+        let (t, c) = (Instant::now(), cpu_ms());
+        for _ in 0..calls {
+            out = render(&set, &cam, &settings);
+        }
+        let ms = t.elapsed().as_secs_f64() * 1e3 / calls.max(1) as f64;
+        let cpu = (cpu_ms() - c) / calls.max(1) as f64;
+        let blended = out.stats.blended_pairs;
+        println!(
+            "{size}x{size}, N = {n}: {calls} fwd calls, {ms:.2} ms each, cpu {cpu:.2} ms each, {blended} blended pairs"
+        );
+        return;
+    }
+    if args.get(3).map(String::as_str) == Some("loop") {
+        let calls: usize = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(20);
+        let d_rgb = vec![1e-3f32; (size * size * 3) as usize];
+        let mut grads = RenderGradients::zeros(n, 16);
+        let mut once = || {
+            let out = render(&set, &cam, &settings);
+            let ig = ImageGradients {
+                rgb: &d_rgb,
+                alpha: None,
+                depth: None,
+            };
+            render_backward(&set, &out, &ig, &mut grads).len()
+        };
+        let touched = once();
+        // Checksum of the first call's images and gradients, to confirm bit-identical changes.
+        let out = render(&set, &cam, &settings);
+        let mut g1 = RenderGradients::zeros(n, 16);
+        let ig = ImageGradients {
+            rgb: &d_rgb,
+            alpha: None,
+            depth: None,
+        };
+        render_backward(&set, &out, &ig, &mut g1);
+        let mut h = 0xcbf29ce484222325u64;
+        let mut mix = |v: &[f32]| {
+            for x in v {
+                h = (h ^ x.to_bits() as u64).wrapping_mul(0x100000001b3);
+            }
+        };
+        mix(&out.rgb);
+        mix(&out.alpha);
+        mix(&out.depth);
+        mix(&out.impact);
+        mix(&g1.sh);
+        mix(&g1.alpha);
+        mix(&g1.colour);
+        mix(&g1.positions.iter().flat_map(|p| p.to_array()).collect::<Vec<_>>());
+        mix(&g1.quaternions.concat());
+        println!("checksum {h:016x}");
+        let (t, c) = (Instant::now(), cpu_ms());
+        for _ in 0..calls {
+            once();
+        }
+        let ms = t.elapsed().as_secs_f64() * 1e3 / calls.max(1) as f64;
+        let cpu = (cpu_ms() - c) / calls.max(1) as f64;
+        println!(
+            "{size}x{size}, N = {n}: {calls} fwd+bwd calls, {ms:.2} ms each, cpu {cpu:.2} ms each, {touched} billboards touched"
+        );
+        return;
+    }
     let reps = 10;
     let time = |f: &mut dyn FnMut()| {
         f();

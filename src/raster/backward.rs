@@ -11,12 +11,14 @@
 //! depend on how rayon schedules tiles. Texture gradients are kept sparse per entry (only the
 //! texels some pixel of the tile touched).
 
-use super::forward::{PixelLists, RenderOutput, local_boxes, split_by_lengths, tile_pixels};
+use super::forward::{
+    PixelLists, RenderOutput, TileCandidates, local_boxes, prefetch, prefetch_ref, split_by_lengths, tile_pixels,
+};
 use super::preprocess::Prepared;
 use super::{BillboardSet, SH_FLOATS};
-use crate::stages::bilinear::{self, BilinearTaps};
+use crate::stages::bilinear::BilinearTaps;
 use crate::stages::composite::ClampGradient;
-use crate::stages::ray_plane::{PlaneHit, intersect, intersect_vjp};
+use crate::stages::ray_plane::intersect_vjp;
 use crate::stages::sh::sh_colour_vjp;
 use crate::stages::splat_transform::{SplatTransform, project_splat_vjp};
 use glam::{Vec2, Vec3};
@@ -92,7 +94,7 @@ struct Blended {
     alpha: f32,
     clamped: bool,
     t: f32,
-    hit: PlaneHit,
+    depth: f32,
     taps: BilinearTaps,
     colour: Vec3,
 }
@@ -131,10 +133,115 @@ struct TileGrads {
 struct Scratch {
     blended: Vec<Blended>,
     /// Texture-gradient contributions `(entry slot, texel, [∂alpha, ∂r, ∂g, ∂b])` in pixel
-    /// order; sorted stably by (slot, texel) and merged at the end of the tile, so the sums are
-    /// taken in a fixed order. Its size is proportional to the tile's pairs, not to its entries
+    /// order; grouped by slot and summed per (slot, texel) in pixel order at the end of the tile
+    /// ([`merge_texture_log`]), so the sums are taken in a fixed order. Its size is proportional to the tile's pairs, not to its entries
     /// times the texture size.
     log: Vec<(u32, u32, [f32; 4])>,
+    merge: MergeScratch,
+    candidates: TileCandidates,
+}
+
+/// Scratch of [`merge_texture_log`], reused across the tiles of a task.
+#[derive(Default)]
+struct MergeScratch {
+    /// Log positions grouped by slot (a stable counting sort: pixel order within a slot).
+    order: Vec<u32>,
+    cursor: Vec<u32>,
+    /// Dense per-texel sums of the slot being merged, and whether the texel has been seen.
+    sums: Vec<[f32; 4]>,
+    seen: Vec<bool>,
+    touched: Vec<u32>,
+}
+
+/// Groups a tile's texture-gradient log by entry slot and sums the contributions of each
+/// (slot, texel) in log (pixel) order, starting from the first one: the same sums, added in the
+/// same order, as a stable sort by (slot, texel) followed by a merge of equal keys
+/// ([`merge_texture_log_reference`]), in `O(log + texels)` instead of a comparison sort. Within
+/// a slot the texels come out in first-touch order (the per-billboard reduction adds each of
+/// them once, so their order does not change any sum).
+///
+/// Returns `(offsets, texels)`: the texels of slot `k` are `texels[offsets[k]..offsets[k + 1]]`.
+fn merge_texture_log(
+    log: &[(u32, u32, [f32; 4])],
+    slots: usize,
+    texels: usize,
+    m: &mut MergeScratch,
+) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
+    m.cursor.clear();
+    m.cursor.resize(slots + 1, 0);
+    for &(slot, _, _) in log {
+        m.cursor[slot as usize + 1] += 1;
+    }
+    for k in 0..slots {
+        m.cursor[k + 1] += m.cursor[k];
+    }
+    m.order.clear();
+    m.order.resize(log.len(), 0);
+    for (pos, &(slot, _, _)) in log.iter().enumerate() {
+        let c = &mut m.cursor[slot as usize];
+        m.order[*c as usize] = pos as u32;
+        *c += 1;
+    }
+    if m.seen.len() < texels {
+        m.seen.resize(texels, false);
+        m.sums.resize(texels, [0.0; 4]);
+    }
+    let mut offsets = vec![0u32; slots + 1];
+    let mut out: Vec<(u32, [f32; 4])> = Vec::with_capacity(log.len());
+    // After the scatter, cursor[k] is the end of slot k, hence the start of slot k + 1.
+    for k in 0..slots {
+        m.touched.clear();
+        let start = if k == 0 { 0 } else { m.cursor[k - 1] as usize };
+        for &pos in &m.order[start..m.cursor[k] as usize] {
+            let (_, texel, g) = log[pos as usize];
+            let t = texel as usize;
+            if m.seen[t] {
+                let s = &mut m.sums[t];
+                for c in 0..4 {
+                    s[c] += g[c];
+                }
+            } else {
+                m.seen[t] = true;
+                m.sums[t] = g;
+                m.touched.push(texel);
+            }
+        }
+        for &texel in &m.touched {
+            let t = texel as usize;
+            out.push((texel, m.sums[t]));
+            m.seen[t] = false;
+        }
+        offsets[k + 1] = out.len() as u32;
+    }
+    (offsets, out)
+}
+
+/// Plain reference of [`merge_texture_log`]: stable sort by (slot, texel), then each run of
+/// equal keys summed in order. Texels come out sorted within a slot.
+#[cfg(test)]
+fn merge_texture_log_reference(log: &[(u32, u32, [f32; 4])], slots: usize) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
+    let mut log = log.to_vec();
+    log.sort_by_key(|&(slot, texel, _)| (slot, texel));
+    let mut counts = vec![0u32; slots + 1];
+    let mut out: Vec<(u32, [f32; 4])> = Vec::with_capacity(log.len());
+    let mut run = 0;
+    while run < log.len() {
+        let (slot, texel, mut sum) = log[run];
+        let mut next = run + 1;
+        while next < log.len() && log[next].0 == slot && log[next].1 == texel {
+            for c in 0..4 {
+                sum[c] += log[next].2[c];
+            }
+            next += 1;
+        }
+        out.push((texel, sum));
+        counts[slot as usize + 1] += 1;
+        run = next;
+    }
+    for k in 0..slots {
+        counts[k + 1] += counts[k];
+    }
+    (counts, out)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -165,11 +272,18 @@ fn backward_tile(
     let mut background = Vec3::ZERO;
     let mut lists = PixelLists::default();
     lists.build(&local_boxes(prepared, list, i0, j0));
+    // Hits and taps of the walked entries of every pixel, their texels prefetched.
+    let candidates = &mut scratch.candidates;
+    candidates.build(set, prepared, list, &lists, (i0, j0, i1, j1), |i, j| {
+        state.walked[(j * width + i) as usize] as usize
+    });
+    let candidates = &scratch.candidates;
     scratch.log.clear();
     let bg = settings.background;
     for j in j0..j1 {
         for i in i0..i1 {
             let p = (j * width + i) as usize;
+            let q = ((j - j0) * (i1 - i0) + (i - i0)) as usize;
             let g_rgb = Vec3::from_slice(&grads_in.rgb[3 * p..3 * p + 3]);
             let g_alpha = grads_in.alpha.map_or(0.0, |a| a[p]);
             let g_depth = grads_in.depth.map_or(0.0, |d| d[p]);
@@ -184,26 +298,16 @@ fn backward_tile(
             scratch.blended.clear();
             let mut t = 1.0f32;
             let mut colour = [0.0f32; 3];
-            for &k in lists.of(i - i0, j - j0) {
-                let k = k as usize;
-                if k >= walked {
-                    break;
-                }
+            for cand in candidates.of(q) {
+                let k = cand.slot as usize;
                 let b = list[k];
-                let Some(pr) = prepared[b as usize].as_ref() else {
-                    continue;
-                };
-                let Some(hit) = intersect(&pr.transform, px, py) else {
-                    continue;
-                };
-                let Some(taps) = bilinear::taps(hit.u, hit.v, ts) else {
-                    continue;
-                };
+                let taps = cand.taps;
                 let a = taps.sample_one(set.alpha_of(b as usize));
                 let alpha = a.min(params.max_alpha);
                 if alpha < params.min_alpha {
                     continue;
                 }
+                let pr = prepared[b as usize].as_ref().expect("binned billboards are prepared");
                 taps.sample(set.colour_of(b as usize), 3, &mut colour);
                 scratch.blended.push(Blended {
                     slot: k as u32,
@@ -211,7 +315,7 @@ fn backward_tile(
                     alpha,
                     clamped: a > params.max_alpha,
                     t,
-                    hit,
+                    depth: cand.depth,
                     taps,
                     colour: Vec3::from_array(colour) + pr.rgb,
                 });
@@ -227,10 +331,10 @@ fn backward_tile(
                 let d_alpha = bl.t
                     * ((bl.colour - behind_rgb).dot(g_rgb)
                         + (1.0 - behind_alpha) * g_alpha
-                        + (bl.hit.depth - behind_depth) * g_depth);
+                        + (bl.depth - behind_depth) * g_depth);
                 behind_rgb = bl.colour * bl.alpha + behind_rgb * (1.0 - bl.alpha);
                 behind_alpha = bl.alpha + behind_alpha * (1.0 - bl.alpha);
-                behind_depth = bl.hit.depth * bl.alpha + behind_depth * (1.0 - bl.alpha);
+                behind_depth = bl.depth * bl.alpha + behind_depth * (1.0 - bl.alpha);
                 // The clamp min(max_alpha, a): exact derivative (0 where active) or the
                 // reference's pass-through, as the compositing parameters say.
                 let d_tex_alpha = match (bl.clamped, params.clamp_gradient) {
@@ -256,31 +360,10 @@ fn backward_tile(
             }
         }
     }
-    // Sparse texture gradients grouped by entry: the stable sort keeps pixel order among equal
-    // keys, then each (slot, texel) run is summed in that order.
-    scratch.log.sort_by_key(|&(slot, texel, _)| (slot, texel));
-    let mut counts = vec![0u32; list.len() + 1];
-    let mut texels_out: Vec<(u32, [f32; 4])> = Vec::with_capacity(scratch.log.len());
-    let mut run = 0;
-    while run < scratch.log.len() {
-        let (slot, texel, mut sum) = scratch.log[run];
-        let mut next = run + 1;
-        while next < scratch.log.len() && scratch.log[next].0 == slot && scratch.log[next].1 == texel {
-            for c in 0..4 {
-                sum[c] += scratch.log[next].2[c];
-            }
-            next += 1;
-        }
-        texels_out.push((texel, sum));
-        counts[slot as usize + 1] += 1;
-        run = next;
-    }
-    for k in 0..list.len() {
-        counts[k + 1] += counts[k];
-    }
+    let (tex_offsets, texels_out) = merge_texture_log(&scratch.log, list.len(), ts * ts, &mut scratch.merge);
     TileGrads {
         geometry,
-        tex_offsets: counts,
+        tex_offsets,
         texels: texels_out,
         background,
     }
@@ -339,67 +422,153 @@ pub fn render_backward(
     let camera = &state.camera;
     let centre = camera.centre();
     let degree = state.settings.sh_degree;
-    let touched: Vec<bool> = (
-        grads.positions.par_iter_mut(),
-        grads.quaternions.par_iter_mut(),
-        grads.log_scales.par_iter_mut(),
-        grads.sh.par_chunks_mut(SH_FLOATS),
-        grads.alpha.par_chunks_mut(texels),
-        grads.colour.par_chunks_mut(3 * texels),
+    // Where the entries of billboard `b` left their tile results.
+    let entry_results = |b: usize| {
+        let r = bins.billboard_offsets[b] as usize..bins.billboard_offsets[b + 1] as usize;
+        bins.billboard_entries[r].iter().map(|&e| {
+            let t = entry_tile[e as usize] as usize;
+            (&tiles[t], e as usize - bins.tile_offsets[t] as usize)
+        })
+    };
+    // Billboards are reduced in chunks, each chunk in index order by one task. The tile results
+    // and gradient rows a billboard reads are scattered (billboards are not in screen order), so
+    // each step prefetches them a few billboards ahead: the tile records 12 ahead, the texel lists
+    // 8 ahead, the gradient rows and SH coefficients 4 ahead. Prefetches change no value.
+    const CHUNK: usize = 256;
+    let touched: Vec<Vec<u32>> = (
+        grads.positions.par_chunks_mut(CHUNK),
+        grads.quaternions.par_chunks_mut(CHUNK),
+        grads.log_scales.par_chunks_mut(CHUNK),
+        grads.sh.par_chunks_mut(CHUNK * SH_FLOATS),
+        grads.alpha.par_chunks_mut(CHUNK * texels),
+        grads.colour.par_chunks_mut(CHUNK * 3 * texels),
     )
         .into_par_iter()
         .enumerate()
-        .map(|(b, (d_pos, d_quat, d_scale, d_sh, d_alpha, d_colour))| {
-            let r = bins.billboard_offsets[b] as usize..bins.billboard_offsets[b + 1] as usize;
-            if r.is_empty() {
-                return false;
-            }
-            let mut d_t = ZERO_TRANSFORM;
-            let mut d_rgb = Vec3::ZERO;
-            let mut any = false;
-            for &e in &bins.billboard_entries[r] {
-                let t = entry_tile[e as usize] as usize;
-                let k = e as usize - bins.tile_offsets[t] as usize;
-                let tg = &tiles[t];
-                let tex = &tg.texels[tg.tex_offsets[k] as usize..tg.tex_offsets[k + 1] as usize];
-                if tex.is_empty() {
+        .map(|(c, (d_pos, d_quat, d_scale, d_sh, d_alpha, d_colour))| {
+            let b0 = c * CHUNK;
+            let len = d_pos.len();
+            let mut touched = Vec::new();
+            for lb in 0..len {
+                if lb + 12 < len {
+                    for (tg, k) in entry_results(b0 + lb + 12) {
+                        prefetch_ref(&tg.geometry[k]);
+                        prefetch_ref(&tg.tex_offsets[k]);
+                    }
+                }
+                if lb + 8 < len {
+                    for (tg, k) in entry_results(b0 + lb + 8) {
+                        let start = tg.tex_offsets[k] as usize;
+                        if start < tg.tex_offsets[k + 1] as usize {
+                            prefetch_ref(&tg.texels[start]);
+                        }
+                    }
+                }
+                if lb + 4 < len {
+                    let la = lb + 4;
+                    let mut any = false;
+                    for (tg, k) in entry_results(b0 + la) {
+                        for &(idx, _) in &tg.texels[tg.tex_offsets[k] as usize..tg.tex_offsets[k + 1] as usize] {
+                            let (idx, colour_row) = (idx as usize, 3 * la * texels);
+                            prefetch(d_alpha, la * texels + idx);
+                            prefetch(d_colour, colour_row + idx);
+                            prefetch(d_colour, colour_row + texels + idx);
+                            prefetch(d_colour, colour_row + 2 * texels + idx);
+                            any = true;
+                        }
+                    }
+                    if any {
+                        let sh = set.sh_of(b0 + la);
+                        prefetch(sh, 0);
+                        prefetch(sh, SH_FLOATS - 1);
+                        prefetch(d_sh, la * SH_FLOATS);
+                        prefetch(d_sh, (la + 1) * SH_FLOATS - 1);
+                    }
+                }
+                let b = b0 + lb;
+                let (d_alpha, d_colour) = (
+                    &mut d_alpha[lb * texels..(lb + 1) * texels],
+                    &mut d_colour[3 * lb * texels..3 * (lb + 1) * texels],
+                );
+                let mut d_t = ZERO_TRANSFORM;
+                let mut d_rgb = Vec3::ZERO;
+                let mut any = false;
+                for (tg, k) in entry_results(b) {
+                    let tex = &tg.texels[tg.tex_offsets[k] as usize..tg.tex_offsets[k + 1] as usize];
+                    if tex.is_empty() {
+                        continue;
+                    }
+                    any = true;
+                    add_transform(&mut d_t, &tg.geometry[k].transform);
+                    d_rgb += tg.geometry[k].rgb;
+                    for &(idx, v) in tex {
+                        let idx = idx as usize;
+                        d_alpha[idx] += v[0];
+                        d_colour[idx] += v[1];
+                        d_colour[texels + idx] += v[2];
+                        d_colour[2 * texels + idx] += v[3];
+                    }
+                }
+                if !any {
                     continue;
                 }
-                any = true;
-                add_transform(&mut d_t, &tg.geometry[k].transform);
-                d_rgb += tg.geometry[k].rgb;
-                for &(idx, v) in tex {
-                    let idx = idx as usize;
-                    d_alpha[idx] += v[0];
-                    d_colour[idx] += v[1];
-                    d_colour[texels + idx] += v[2];
-                    d_colour[2 * texels + idx] += v[3];
+                let sg = project_splat_vjp(
+                    set.positions[b],
+                    set.log_scales[b],
+                    set.quaternions[b],
+                    camera,
+                    &d_t,
+                    Vec3::ZERO,
+                );
+                let d_sh = &mut d_sh[lb * SH_FLOATS..(lb + 1) * SH_FLOATS];
+                let d_pos_sh = sh_colour_vjp(degree, set.sh_of(b), set.positions[b], centre, d_rgb, d_sh);
+                d_pos[lb] += sg.d_position + d_pos_sh;
+                d_scale[lb] += sg.d_log_scales;
+                for (q, dq) in d_quat[lb].iter_mut().zip(sg.d_quaternion) {
+                    *q += dq;
                 }
+                touched.push(b as u32);
             }
-            if !any {
-                return false;
-            }
-            let sg = project_splat_vjp(
-                set.positions[b],
-                set.log_scales[b],
-                set.quaternions[b],
-                camera,
-                &d_t,
-                Vec3::ZERO,
-            );
-            let d_pos_sh = sh_colour_vjp(degree, set.sh_of(b), set.positions[b], centre, d_rgb, d_sh);
-            *d_pos += sg.d_position + d_pos_sh;
-            *d_scale += sg.d_log_scales;
-            for (q, dq) in d_quat.iter_mut().zip(sg.d_quaternion) {
-                *q += dq;
-            }
-            true
+            touched
         })
         .collect();
-    touched
-        .iter()
-        .enumerate()
-        .filter(|(_, t)| **t)
-        .map(|(b, _)| b as u32)
-        .collect()
+    touched.concat()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The counting-sort merge gives, slot by slot, the same (texel, sum) set as the sort-based
+    /// reference, bit for bit.
+    #[test]
+    fn merge_texture_log_matches_the_sorting_reference() {
+        let mut state = 0x2545f4914f6cdd1du64;
+        let mut next = |m: u64| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state % m
+        };
+        let mut scratch = MergeScratch::default();
+        for &(slots, texels, len) in &[(1usize, 4usize, 0usize), (3, 4, 50), (17, 256, 400), (40, 16, 2000)] {
+            let log: Vec<(u32, u32, [f32; 4])> = (0..len)
+                .map(|_| {
+                    let g = [0; 4].map(|_| (next(2001) as f32 - 1000.0) * 1.37e-3);
+                    (next(slots as u64) as u32, next(texels as u64) as u32, g)
+                })
+                .collect();
+            let (offsets, out) = merge_texture_log(&log, slots, texels, &mut scratch);
+            let (ref_offsets, ref_out) = merge_texture_log_reference(&log, slots);
+            assert_eq!(offsets, ref_offsets);
+            for k in 0..slots {
+                let r = offsets[k] as usize..offsets[k + 1] as usize;
+                let mut got: Vec<(u32, [u32; 4])> =
+                    out[r.clone()].iter().map(|&(t, g)| (t, g.map(f32::to_bits))).collect();
+                got.sort_by_key(|e| e.0);
+                let want: Vec<(u32, [u32; 4])> = ref_out[r].iter().map(|&(t, g)| (t, g.map(f32::to_bits))).collect();
+                assert_eq!(got, want, "slot {k}");
+            }
+        }
+    }
 }

@@ -4,7 +4,7 @@ use super::binning::{TileBins, bin};
 use super::preprocess::{Prepared, preprocess};
 use super::{BillboardSet, RenderSettings, TILE_SIZE};
 use crate::camera::Camera;
-use crate::stages::bilinear;
+use crate::stages::bilinear::{self, BilinearTaps};
 use crate::stages::ray_plane::intersect;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -82,59 +82,51 @@ struct PixelOut {
     blended: u32,
 }
 
-/// Composites one pixel of a tile; adds `α·T` of each blended entry to `impact`.
+/// Composites one pixel of a tile over its candidates (see [`TileCandidates`]); adds `α·T` of
+/// each blended entry to `impact`. `own` is the pixel's entry list (for the work counters).
 #[inline]
-#[allow(clippy::too_many_arguments)]
 fn shade_pixel(
     set: &BillboardSet<'_>,
     settings: &RenderSettings,
     prepared: &[Option<Prepared>],
     list: &[u32],
-    pixel_list: &[u32],
+    own: &[u32],
+    candidates: &[Candidate],
     impact: &mut [f32],
-    i: u32,
-    j: u32,
 ) -> PixelOut {
     let params = &settings.composite;
-    let (px, py) = (i as f32 + 0.5, j as f32 + 0.5);
-    let ts = set.texture_size;
     let mut t = 1.0f32;
     let mut out = PixelOut {
         median: 0.0,
+        evaluated: own.len() as u32,
         ..Default::default()
     };
     let mut colour = [0.0f32; 3];
-    for &k in pixel_list {
-        let k = k as usize;
-        let b = list[k];
-        let Some(p) = prepared[b as usize].as_ref() else {
-            continue;
-        };
-        out.evaluated += 1;
-        let Some(hit) = intersect(&p.transform, px, py) else {
-            continue;
-        };
-        let Some(taps) = bilinear::taps(hit.u, hit.v, ts) else {
-            continue;
-        };
-        let a = taps.sample_one(set.alpha_of(b as usize));
+    for cand in candidates {
+        let k = cand.slot as usize;
+        let b = list[k] as usize;
+        let taps = &cand.taps;
+        let a = taps.sample_one(set.alpha_of(b));
         let alpha = a.min(params.max_alpha);
         if alpha < params.min_alpha {
             continue;
         }
         let next_t = t * (1.0 - alpha);
         if next_t < params.min_transmittance {
+            // The entries up to and including this one were evaluated.
+            out.evaluated = own.partition_point(|&x| x as usize <= k) as u32;
             break;
         }
+        let p = prepared[b].as_ref().expect("binned billboards are prepared");
         let w = alpha * t;
-        taps.sample(set.colour_of(b as usize), 3, &mut colour);
+        taps.sample(set.colour_of(b), 3, &mut colour);
         let c = Vec3::from_array(colour) + p.rgb;
         out.rgb += c * w;
         out.alpha += w;
-        out.depth += hit.depth * w;
+        out.depth += cand.depth * w;
         out.normal += p.normal * w;
         if t > 0.5 && alpha > 0.05 {
-            out.median = hit.depth;
+            out.median = cand.depth;
         }
         impact[k] += w;
         out.blended += 1;
@@ -146,13 +138,137 @@ fn shade_pixel(
     out
 }
 
+/// Hints the CPU to fetch the cache line holding `data[i]` (no effect on results).
+#[inline(always)]
+pub(crate) fn prefetch<T>(data: &[T], i: usize) {
+    prefetch_ref(&data[i]);
+}
+
+/// Hints the CPU to fetch the cache lines holding the first and the last byte of `*r`.
+#[inline(always)]
+pub(crate) fn prefetch_record<T>(r: &T) {
+    prefetch_ptr(std::ptr::from_ref(r).cast::<u8>());
+    prefetch_ptr(
+        std::ptr::from_ref(r)
+            .cast::<u8>()
+            .wrapping_add(size_of::<T>().saturating_sub(1)),
+    );
+}
+
+/// Hints the CPU to fetch the cache line holding `*r` (no effect on results).
+#[inline(always)]
+pub(crate) fn prefetch_ref<T>(r: &T) {
+    prefetch_ptr(std::ptr::from_ref(r).cast::<u8>());
+}
+
+/// Hints the CPU to fetch the cache line holding address `p`; `p` is never dereferenced.
+#[inline(always)]
+fn prefetch_ptr(p: *const u8) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch is only a hint: it never faults, whatever the address, and reads nothing
+    // the program can observe.
+    unsafe {
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(p.cast::<i8>());
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = p;
+}
+
+/// One (pixel, entry) pair of a tile whose ray hits the billboard's texture support: the entry's
+/// slot in the tile list, the view depth of the hit and the bilinear taps.
+#[derive(Clone, Copy)]
+pub(crate) struct Candidate {
+    pub(crate) slot: u32,
+    pub(crate) depth: f32,
+    pub(crate) taps: BilinearTaps,
+}
+
+/// The candidates of every pixel of a tile, computed before any compositing so that the texels
+/// they read can be prefetched: the texture reads are scattered over the whole texture arrays
+/// (one random cache line per tap row and channel), and issuing them all up front lets the
+/// misses overlap instead of stalling the compositing loop one at a time. The candidates of
+/// tile-local pixel `q` (row-major over the tile's own width) are `items[offsets[q]..offsets[q + 1]]`,
+/// in list (depth) order. Same arithmetic as evaluating them inside the compositing loop.
+#[derive(Default)]
+pub(crate) struct TileCandidates {
+    offsets: Vec<u32>,
+    items: Vec<Candidate>,
+}
+
+impl TileCandidates {
+    /// Fills the candidates of the tile `(i0, j0, i1, j1)`; pixel `(i, j)` considers the entries of
+    /// its pixel list with a slot below `limit(i, j)`.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn build(
+        &mut self,
+        set: &BillboardSet<'_>,
+        prepared: &[Option<Prepared>],
+        list: &[u32],
+        lists: &PixelLists,
+        (i0, j0, i1, j1): (u32, u32, u32, u32),
+        limit: impl Fn(u32, u32) -> usize,
+    ) {
+        let ts = set.texture_size;
+        let plane = set.texels();
+        self.offsets.clear();
+        self.items.clear();
+        self.offsets.push(0);
+        for j in j0..j1 {
+            for i in i0..i1 {
+                let (px, py) = (i as f32 + 0.5, j as f32 + 0.5);
+                let end = limit(i, j);
+                for &k in lists.of(i - i0, j - j0) {
+                    if k as usize >= end {
+                        break;
+                    }
+                    let b = list[k as usize] as usize;
+                    let Some(p) = prepared[b].as_ref() else {
+                        continue;
+                    };
+                    let Some(hit) = intersect(&p.transform, px, py) else {
+                        continue;
+                    };
+                    let Some(taps) = bilinear::taps(hit.u, hit.v, ts) else {
+                        continue;
+                    };
+                    let (alpha, colour) = (set.alpha_of(b), set.colour_of(b));
+                    for &ix in taps.indices() {
+                        let ix = ix as usize;
+                        prefetch(alpha, ix);
+                        prefetch(colour, ix);
+                        prefetch(colour, plane + ix);
+                        prefetch(colour, 2 * plane + ix);
+                    }
+                    self.items.push(Candidate {
+                        slot: k,
+                        depth: hit.depth,
+                        taps,
+                    });
+                }
+                self.offsets.push(self.items.len() as u32);
+            }
+        }
+    }
+
+    /// The candidates of tile-local pixel `q`.
+    #[inline]
+    pub(crate) fn of(&self, q: usize) -> &[Candidate] {
+        &self.items[self.offsets[q] as usize..self.offsets[q + 1] as usize]
+    }
+}
+
 /// Tile-local pixel boxes `[x0, y0, x1, y1]` (inclusive, clamped to the tile) of a tile's
 /// entries: the per-pixel reject test reads these 4 contiguous bytes instead of the whole
 /// prepared record of each billboard.
 pub(crate) fn local_boxes(prepared: &[Option<Prepared>], list: &[u32], i0: u32, j0: u32) -> Vec<[u8; 4]> {
     let last = TILE_SIZE - 1;
     list.iter()
-        .map(|&b| {
+        .enumerate()
+        .map(|(k, &b)| {
+            // The records are scattered over the prepared array: fetch a few entries ahead.
+            if let Some(&ahead) = list.get(k + 8) {
+                prefetch_record(&prepared[ahead as usize]);
+            }
             let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
             let lo = |v: u32, o: u32| v.saturating_sub(o).min(last) as u8;
             let hi = |v: u32, o: u32| if v < o { 0 } else { (v - o).min(last) as u8 };
@@ -256,11 +372,22 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
             let (i0, j0, i1, j1) = tile_pixels(&bins, t, w, h);
             let mut lists = PixelLists::default();
             lists.build(&local_boxes(&prepared, list, i0, j0));
+            let mut candidates = TileCandidates::default();
+            candidates.build(set, &prepared, list, &lists, (i0, j0, i1, j1), |_, _| usize::MAX);
             let mut pixels = Vec::with_capacity(((i1 - i0) * (j1 - j0)) as usize);
             for j in j0..j1 {
                 for i in i0..i1 {
                     let own = lists.of(i - i0, j - j0);
-                    pixels.push(shade_pixel(set, settings, &prepared, list, own, impact, i, j));
+                    let q = pixels.len();
+                    pixels.push(shade_pixel(
+                        set,
+                        settings,
+                        &prepared,
+                        list,
+                        own,
+                        candidates.of(q),
+                        impact,
+                    ));
                 }
             }
             pixels
