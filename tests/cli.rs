@@ -174,3 +174,132 @@ fn eval_names_an_unreadable_model() {
     assert!(err.contains("point_cloud.ply") || err.contains("bbsplat.json"), "{err}");
     std::fs::remove_dir_all(&root).ok();
 }
+
+fn tiny_train_args<'a>(data: &'a str, out: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
+    let mut args = vec![
+        "train",
+        data,
+        "-o",
+        out,
+        "--iterations",
+        "40",
+        "--billboards",
+        "120",
+        "--texture-size",
+        "4",
+        "--eval-every",
+        "0",
+        "--quiet",
+    ];
+    args.extend_from_slice(extra);
+    args
+}
+
+/// `--stop-after 20` then `--resume` ends with exactly the files of an uninterrupted run.
+#[test]
+fn a_stopped_and_resumed_run_equals_an_uninterrupted_one_bit_for_bit() {
+    let root = temp("resume");
+    let data = root.join("data");
+    run_ok(&[
+        "demo",
+        "--export",
+        data.to_str().unwrap(),
+        "--resolution",
+        "24",
+        "--billboards",
+        "100",
+    ]);
+    let (d, a, b) = (
+        data.to_str().unwrap(),
+        root.join("a").to_str().unwrap().to_string(),
+        root.join("b").to_str().unwrap().to_string(),
+    );
+    run_ok(&tiny_train_args(d, &a, &[]));
+    let printed = run_ok(&tiny_train_args(d, &b, &["--stop-after", "20"]));
+    assert!(!printed.contains("trained 40 steps"), "{printed}");
+    assert!(
+        !root.join("b/summary.json").exists(),
+        "a stopped run has no summary yet"
+    );
+    let checkpoint = root.join("b/checkpoint.bin");
+    assert_eq!(
+        bbsplat::train::Trainer::load_checkpoint(&checkpoint)
+            .unwrap()
+            .step_index(),
+        20
+    );
+    run_ok(&tiny_train_args(d, &b, &["--resume", checkpoint.to_str().unwrap()]));
+    for file in [
+        "checkpoint.bin",
+        "model/point_cloud.ply",
+        "model/texture_alpha.npz",
+        "model/texture_color.npz",
+        "model/bbsplat.json",
+    ] {
+        let (x, y) = (
+            std::fs::read(root.join("a").join(file)).unwrap(),
+            std::fs::read(root.join("b").join(file)).unwrap(),
+        );
+        assert!(x == y, "{file} differs between the uninterrupted and the resumed run");
+    }
+    std::fs::remove_dir_all(&root).ok();
+}
+
+/// Ctrl-C (SIGINT) saves a loadable checkpoint, leaves no temporary file and exits with 130.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_saves_a_checkpoint_and_exits_cleanly() {
+    use std::io::BufRead;
+    let root = temp("sigint");
+    let data = root.join("data");
+    run_ok(&[
+        "demo",
+        "--export",
+        data.to_str().unwrap(),
+        "--resolution",
+        "24",
+        "--billboards",
+        "100",
+    ]);
+    let out = root.join("out");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_bbsplat"))
+        .args([
+            "train",
+            data.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--iterations",
+            "1000000",
+            "--billboards",
+            "120",
+            "--texture-size",
+            "4",
+            "--eval-every",
+            "0",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The handler is installed before the line naming the views is printed.
+    let mut lines = std::io::BufReader::new(child.stdout.take().unwrap()).lines();
+    assert!(lines.any(|l| l.unwrap().contains("views at")));
+    std::thread::sleep(std::time::Duration::from_millis(700));
+    let killed = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let output = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("interrupted at step"), "{stderr}");
+    let trainer = bbsplat::train::Trainer::load_checkpoint(out.join("checkpoint.bin")).unwrap();
+    assert!(trainer.step_index() > 0);
+    assert!(
+        std::fs::read_dir(&out)
+            .unwrap()
+            .all(|e| !e.unwrap().file_name().to_string_lossy().contains("tmp"))
+    );
+    std::fs::remove_dir_all(&root).ok();
+}

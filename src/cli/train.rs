@@ -183,35 +183,35 @@ pub fn run(args: TrainArgs) -> Result<()> {
             t
         }
         None => {
-        let budget = match args.billboards {
-            Some(n) => {
-                anyhow::ensure!(n >= 1, "--billboards must be at least 1");
-                n
-            }
-            None => {
-                let b = budget_for(&BudgetInputs::from_scene(&scene, args.texture_size));
-                if !args.quiet {
-                    println!("budget: {}", b.reason);
+            let budget = match args.billboards {
+                Some(n) => {
+                    anyhow::ensure!(n >= 1, "--billboards must be at least 1");
+                    n
                 }
-                b.billboards
-            }
-        };
-        let (model, init) = init_model(&scene, budget, args.texture_size, args.seed)
-            .with_context(|| format!("initialising {} billboards", budget))?;
-        if !args.quiet {
-            println!(
-                "initial billboards: {} from SfM points, {} on the sky sphere (radius {:.2}), {} random{}",
-                init.sfm,
-                init.sky,
-                init.sky_radius,
-                init.random,
-                if init.random > 0 {
-                    format!(" ({})", init.box_rule)
-                } else {
-                    String::new()
+                None => {
+                    let b = budget_for(&BudgetInputs::from_scene(&scene, args.texture_size));
+                    if !args.quiet {
+                        println!("budget: {}", b.reason);
+                    }
+                    b.billboards
                 }
-            );
-        }
+            };
+            let (model, init) = init_model(&scene, budget, args.texture_size, args.seed)
+                .with_context(|| format!("initialising {} billboards", budget))?;
+            if !args.quiet {
+                println!(
+                    "initial billboards: {} from SfM points, {} on the sky sphere (radius {:.2}), {} random{}",
+                    init.sfm,
+                    init.sky,
+                    init.sky_radius,
+                    init.random,
+                    if init.random > 0 {
+                        format!(" ({})", init.box_rule)
+                    } else {
+                        String::new()
+                    }
+                );
+            }
             Trainer::new(model, config)
         }
     };
