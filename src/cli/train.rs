@@ -366,7 +366,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         test.len(),
         summary.billboards,
         summary.alive,
-        model_bytes as f64 / (1024.0 * 1024.0),
+        model_bytes as f64 / 1e6,
         summary.peak_rss_bytes as f64 / 1e6
     );
     Ok(())
