@@ -1,34 +1,58 @@
 //! Work counters of a trained model on a scene's test views: how many (pixel, billboard) pairs
-//! the rasterizer evaluates and blends per pixel, and the forward time per view. These explain
-//! why a training step on a real scene costs far more than the random benchmark scene of
-//! `benches/raster.rs` (see `docs/quality.md`).
+//! the rasterizer evaluates and blends per pixel, and the forward and forward+backward times per
+//! view. These explain why a training step on a real scene costs far more than the random
+//! benchmark scene of `benches/raster.rs` (see `docs/quality.md`), and give a realistic A/B
+//! harness for rasterizer changes (the printed checksum covers the images and every gradient).
 //!
 //! ```text
-//! cargo run --release --example model_stats -- MODEL_DIR SCENE_DIR [white|black] [VIEWS]
+//! cargo run --release --example model_stats -- MODEL SCENE_DIR [white|black] [VIEWS] [REPEATS]
 //! ```
 //!
-//! The background defaults to the one stored in the model; `VIEWS` (default 5) test views are
-//! rendered, the first one also as a warm-up.
+//! `MODEL` is a model folder written by `bbsplat train` or a checkpoint file
+//! (`checkpoint.bin`, e.g. from `--stop-after`). The background defaults to the one stored in
+//! the model; `VIEWS` (default 5) test views are rendered `REPEATS` times each (default 1), after
+//! one warm-up render. The backward pass is fed the gradient of `½‖render − image‖²`.
+use bbsplat::model::Model;
 use bbsplat::model_file::load_model;
-use bbsplat::raster::{RenderSettings, render};
+use bbsplat::raster::backward::ImageGradients;
+use bbsplat::raster::{RenderGradients, RenderSettings, render, render_backward};
 use bbsplat::scene::{Background, LoadOptions, load};
+use bbsplat::train::Trainer;
 use glam::Vec3;
+use std::hash::{DefaultHasher, Hash, Hasher};
 use std::path::Path;
 use std::time::Instant;
+
+/// The model, its SH degree and its background, from a model folder or a checkpoint.
+fn load_any(path: &Path) -> Result<(Model, u32, [f32; 3]), Box<dyn std::error::Error>> {
+    if path.is_dir() {
+        let (model, meta) = load_model(path)?;
+        Ok((model, meta.sh_degree, meta.background))
+    } else {
+        let trainer = Trainer::load_checkpoint(path)?;
+        let settings = trainer.settings();
+        Ok((
+            trainer.model.clone(),
+            settings.sh_degree,
+            settings.background.to_array(),
+        ))
+    }
+}
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     if args.len() < 3 {
-        return Err("usage: model_stats MODEL_DIR SCENE_DIR [white|black] [VIEWS]".into());
+        return Err("usage: model_stats MODEL SCENE_DIR [white|black] [VIEWS] [REPEATS]".into());
     }
-    let (model, meta) = load_model(Path::new(&args[1]))?;
+    let (model, sh_degree, stored_background) = load_any(Path::new(&args[1]))?;
     let background = match args.get(3).map(String::as_str) {
         Some("white") => Background::White,
         Some("black") => Background::Black,
-        _ if meta.background == [1.0, 1.0, 1.0] => Background::White,
+        _ if stored_background == [1.0, 1.0, 1.0] => Background::White,
         _ => Background::Black,
     };
     let views: usize = args.get(4).map(|s| s.parse()).transpose()?.unwrap_or(5);
+    let repeats: usize = args.get(5).map(|s| s.parse()).transpose()?.unwrap_or(1).max(1);
     let options = LoadOptions {
         background,
         ..LoadOptions::default()
@@ -38,30 +62,85 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let set = activated.as_set();
     let settings = RenderSettings {
         background: Vec3::from_array(background.rgb()),
-        sh_degree: meta.sh_degree,
+        sh_degree,
         ..RenderSettings::default()
     };
-    let test = if scene.test.is_empty() { &scene.train } else { &scene.test };
+    let test = if scene.test.is_empty() {
+        &scene.train
+    } else {
+        &scene.test
+    };
     if let Some(first) = test.first() {
         render(&set, &first.camera, &settings);
     }
-    println!("{} billboards, TS {}, SH degree {}", set.len(), set.texture_size, meta.sh_degree);
-    println!("| view | pixels | tile entries | evaluated pairs / px | blended pairs / px | forward ms |");
-    println!("|---|--:|--:|--:|--:|--:|");
+    println!(
+        "{} billboards, TS {}, SH degree {sh_degree}",
+        set.len(),
+        set.texture_size
+    );
+    println!(
+        "| view | pixels | tile entries | evaluated pairs / px | blended pairs / px | forward ms | forward+backward ms |"
+    );
+    println!("|---|--:|--:|--:|--:|--:|--:|");
+    let mut grads = RenderGradients::zeros(set.len(), set.texture_size);
+    let mut hasher = DefaultHasher::new();
+    let (mut sum_fwd, mut sum_both, mut count) = (0.0, 0.0, 0usize);
     for view in test.iter().take(views) {
-        let start = Instant::now();
-        let out = render(&set, &view.camera, &settings);
-        let ms = start.elapsed().as_secs_f64() * 1e3;
+        let target = view.image.to_f32_rgb();
+        let (mut fwd_ms, mut both_ms) = (0.0, 0.0);
+        let mut stats = None;
+        for _ in 0..repeats {
+            let start = Instant::now();
+            let out = render(&set, &view.camera, &settings);
+            fwd_ms += start.elapsed().as_secs_f64() * 1e3;
+            let d_rgb: Vec<f32> = out.rgb.iter().zip(&target).map(|(r, t)| r - t).collect();
+            let ig = ImageGradients {
+                rgb: &d_rgb,
+                alpha: None,
+                depth: None,
+            };
+            let touched = render_backward(&set, &out, &ig, &mut grads);
+            both_ms += start.elapsed().as_secs_f64() * 1e3;
+            out.rgb.iter().for_each(|v| v.to_bits().hash(&mut hasher));
+            touched.hash(&mut hasher);
+            grads
+                .alpha
+                .iter()
+                .chain(&grads.colour)
+                .chain(&grads.sh)
+                .for_each(|v| v.to_bits().hash(&mut hasher));
+            for b in touched {
+                grads.positions[b as usize]
+                    .to_array()
+                    .map(f32::to_bits)
+                    .hash(&mut hasher);
+                grads.clear_row(b as usize);
+            }
+            stats = Some(out.stats);
+        }
+        let stats = stats.expect("at least one repeat");
+        let (fwd_ms, both_ms) = (fwd_ms / repeats as f64, both_ms / repeats as f64);
+        sum_fwd += fwd_ms;
+        sum_both += both_ms;
+        count += 1;
         let pixels = f64::from(view.camera.width) * f64::from(view.camera.height);
         println!(
-            "| {} | {} | {} | {:.1} | {:.1} | {:.1} |",
+            "| {} | {} | {} | {:.1} | {:.1} | {:.1} | {:.1} |",
             view.name,
             pixels,
-            out.stats.tile_entries,
-            out.stats.evaluated_pairs as f64 / pixels,
-            out.stats.blended_pairs as f64 / pixels,
-            ms
+            stats.tile_entries,
+            stats.evaluated_pairs as f64 / pixels,
+            stats.blended_pairs as f64 / pixels,
+            fwd_ms,
+            both_ms
         );
     }
+    let n = count.max(1) as f64;
+    println!(
+        "mean: forward {:.1} ms, forward+backward {:.1} ms; checksum {:016x}",
+        sum_fwd / n,
+        sum_both / n,
+        hasher.finish()
+    );
     Ok(())
 }

@@ -1,8 +1,8 @@
 //! Tiled backward pass.
 //!
-//! Per pixel the tile list is walked front to back again (up to the last blended entry, known
-//! from the forward pass) to rebuild each blended entry's alpha, transmittance `T_i`, hit and
-//! colour. A back-to-front pass then applies the compositing recursion without ever dividing
+//! Per pixel the entries the forward pass blended (their tile-list slots are kept in
+//! [`super::ForwardState`]) are evaluated again, front to back, to rebuild each one's alpha,
+//! transmittance `T_i`, hit and colour; entries that were only tested are not revisited. A back-to-front pass then applies the compositing recursion without ever dividing
 //! by `1 − α`: with `B` the normalised colour behind entry `i` (starting at the background),
 //! `∂L/∂α_i = T_i · Σ_ch g_ch (f_i,ch − B_ch)` and `B ← α_i f_i + (1 − α_i) B`.
 //!
@@ -11,9 +11,7 @@
 //! depend on how rayon schedules tiles. Texture gradients are kept sparse per entry (only the
 //! texels some pixel of the tile touched).
 
-use super::forward::{
-    PixelLists, RenderOutput, TileCandidates, local_boxes, prefetch, prefetch_ref, split_by_lengths, tile_pixels,
-};
+use super::forward::{RenderOutput, TileCandidates, prefetch, prefetch_ref, split_by_lengths, tile_pixels};
 use super::preprocess::Prepared;
 use super::{BillboardSet, SH_FLOATS};
 use crate::stages::bilinear::BilinearTaps;
@@ -270,27 +268,26 @@ fn backward_tile(
         list.len()
     ];
     let mut background = Vec3::ZERO;
-    let mut lists = PixelLists::default();
-    lists.build(&local_boxes(prepared, list, i0, j0));
-    // Hits and taps of the walked entries of every pixel, their texels prefetched.
-    let candidates = &mut scratch.candidates;
-    candidates.build(set, prepared, list, &lists, (i0, j0, i1, j1), |i, j| {
-        state.walked[(j * width + i) as usize] as usize
-    });
-    let candidates = &scratch.candidates;
     scratch.log.clear();
     let bg = settings.background;
-    for j in j0..j1 {
-        for i in i0..i1 {
+    let rect = (i0, j0, i1, j1);
+    let tw = (i1 - i0) as usize;
+    let n_q = tw * (j1 - j0) as usize;
+    let blended_of = |q: usize| state.blended_of(tile, q);
+    let mut first = 0;
+    while first < n_q {
+        // Hits and taps of the blended entries of a run of pixels, their texels prefetched.
+        let end = scratch.candidates.build(set, prepared, list, rect, first, blended_of);
+        for q in first..end {
+            let (i, j) = (i0 + (q % tw) as u32, j0 + (q / tw) as u32);
             let p = (j * width + i) as usize;
-            let q = ((j - j0) * (i1 - i0) + (i - i0)) as usize;
             let g_rgb = Vec3::from_slice(&grads_in.rgb[3 * p..3 * p + 3]);
             let g_alpha = grads_in.alpha.map_or(0.0, |a| a[p]);
             let g_depth = grads_in.depth.map_or(0.0, |d| d[p]);
-            let walked = state.walked[p] as usize;
             let final_t = state.final_transmittance[p];
             background += g_rgb * final_t;
-            if walked == 0 {
+            let candidates = scratch.candidates.of(q);
+            if candidates.is_empty() {
                 continue;
             }
             // Front to back: rebuild the blended entries and their transmittances.
@@ -298,7 +295,7 @@ fn backward_tile(
             scratch.blended.clear();
             let mut t = 1.0f32;
             let mut colour = [0.0f32; 3];
-            for cand in candidates.of(q) {
+            for cand in candidates {
                 let k = cand.slot as usize;
                 let b = list[k];
                 let taps = cand.taps;
@@ -359,6 +356,7 @@ fn backward_tile(
                 eg.rgb += d_colour;
             }
         }
+        first = end;
     }
     let (tex_offsets, texels_out) = merge_texture_log(&scratch.log, list.len(), ts * ts, &mut scratch.merge);
     TileGrads {

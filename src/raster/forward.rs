@@ -22,9 +22,25 @@ pub struct ForwardState {
     pub bins: TileBins,
     /// Per pixel: transmittance left after the last blended billboard.
     pub final_transmittance: Vec<f32>,
-    /// Per pixel: number of entries of its tile list walked up to and including the last
-    /// blended one (0 when nothing was blended).
-    pub walked: Vec<u32>,
+    /// Tile-list slots of the blended entries of every pixel, front to back, tile by tile and
+    /// within a tile in tile-local row-major pixel order; see [`ForwardState::blended_of`].
+    pub blended_slots: Vec<u32>,
+    /// `blended_slots[blended_offsets[r]..blended_offsets[r + 1]]` are the blended slots of the
+    /// pixel with tile-major rank `r = tile_pixel_base[t] + q` (`q` tile-local, row-major).
+    pub blended_offsets: Vec<u32>,
+    /// Per tile: the tile-major rank of its first pixel (the pixel counts of the tiles before it).
+    pub tile_pixel_base: Vec<u32>,
+}
+
+impl ForwardState {
+    /// The tile-list slots of the entries blended at tile-local pixel `q` of tile `t`, front to
+    /// back (slots index `bins.entries[bins.tile_range(t)]`). The backward pass rebuilds exactly
+    /// these, instead of re-testing every entry of the pixel's list.
+    #[inline]
+    pub fn blended_of(&self, t: usize, q: usize) -> &[u32] {
+        let r = self.tile_pixel_base[t] as usize + q;
+        &self.blended_slots[self.blended_offsets[r] as usize..self.blended_offsets[r + 1] as usize]
+    }
 }
 
 /// The images and per-billboard statistics of a render.
@@ -77,14 +93,15 @@ struct PixelOut {
     median: f32,
     normal: Vec3,
     final_t: f32,
-    walked: u32,
     evaluated: u32,
     blended: u32,
 }
 
 /// Composites one pixel of a tile over its candidates (see [`TileCandidates`]); adds `α·T` of
-/// each blended entry to `impact`. `own` is the pixel's entry list (for the work counters).
+/// each blended entry to `impact` and appends its slot to `blended_slots`. `own` is the pixel's
+/// entry list (for the work counters).
 #[inline]
+#[allow(clippy::too_many_arguments)]
 fn shade_pixel(
     set: &BillboardSet<'_>,
     settings: &RenderSettings,
@@ -93,6 +110,7 @@ fn shade_pixel(
     own: &[u32],
     candidates: &[Candidate],
     impact: &mut [f32],
+    blended_slots: &mut Vec<u32>,
 ) -> PixelOut {
     let params = &settings.composite;
     let mut t = 1.0f32;
@@ -130,8 +148,8 @@ fn shade_pixel(
         }
         impact[k] += w;
         out.blended += 1;
+        blended_slots.push(k as u32);
         t = next_t;
-        out.walked = k as u32 + 1;
     }
     out.rgb += settings.background * t;
     out.final_t = t;
@@ -183,77 +201,87 @@ pub(crate) struct Candidate {
     pub(crate) taps: BilinearTaps,
 }
 
-/// The candidates of every pixel of a tile, computed before any compositing so that the texels
-/// they read can be prefetched: the texture reads are scattered over the whole texture arrays
-/// (one random cache line per tap row and channel), and issuing them all up front lets the
-/// misses overlap instead of stalling the compositing loop one at a time. The candidates of
-/// tile-local pixel `q` (row-major over the tile's own width) are `items[offsets[q]..offsets[q + 1]]`,
+/// The candidates of a run of pixels of a tile, computed before they are composited so that
+/// the texels they read can be prefetched: the texture reads are scattered over the whole texture
+/// arrays (one random cache line per tap row and channel), and issuing them up front lets the
+/// misses overlap instead of stalling the compositing loop one at a time. A run is cut once it
+/// holds [`CANDIDATE_CHUNK`] candidates, so that the prefetched lines are still in cache when
+/// they are read, whatever the overlap per pixel. The candidates of tile-local pixel `q`
+/// (row-major over the tile's own width) are `items[offsets[q - first]..offsets[q - first + 1]]`,
 /// in list (depth) order. Same arithmetic as evaluating them inside the compositing loop.
 #[derive(Default)]
 pub(crate) struct TileCandidates {
+    first: usize,
     offsets: Vec<u32>,
     items: Vec<Candidate>,
 }
 
+/// Candidates per run of [`TileCandidates`]: 256 candidates prefetch at most 4096 lines
+/// (256 KiB), which stay in a 512 KiB L2 until they are composited.
+pub(crate) const CANDIDATE_CHUNK: usize = 256;
+
 impl TileCandidates {
-    /// Fills the candidates of the tile `(i0, j0, i1, j1)`; pixel `(i, j)` considers the entries of
-    /// its pixel list with a slot below `limit(i, j)`.
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn build(
+    /// Fills the candidates of the tile-local pixels `first..` of the tile `(i0, j0, i1, j1)`,
+    /// stopping after the pixel that brings the run to [`CANDIDATE_CHUNK`] candidates or at the
+    /// tile's end; returns the end of the run (exclusive). Pixel `q` considers the tile-list
+    /// slots `slots(q)`, in order.
+    pub(crate) fn build<'a>(
         &mut self,
         set: &BillboardSet<'_>,
         prepared: &[Option<Prepared>],
         list: &[u32],
-        lists: &PixelLists,
         (i0, j0, i1, j1): (u32, u32, u32, u32),
-        limit: impl Fn(u32, u32) -> usize,
-    ) {
+        first: usize,
+        slots: impl Fn(usize) -> &'a [u32],
+    ) -> usize {
         let ts = set.texture_size;
         let plane = set.texels();
+        let tw = (i1 - i0) as usize;
+        let n = tw * (j1 - j0) as usize;
+        self.first = first;
         self.offsets.clear();
         self.items.clear();
         self.offsets.push(0);
-        for j in j0..j1 {
-            for i in i0..i1 {
-                let (px, py) = (i as f32 + 0.5, j as f32 + 0.5);
-                let end = limit(i, j);
-                for &k in lists.of(i - i0, j - j0) {
-                    if k as usize >= end {
-                        break;
-                    }
-                    let b = list[k as usize] as usize;
-                    let Some(p) = prepared[b].as_ref() else {
-                        continue;
-                    };
-                    let Some(hit) = intersect(&p.transform, px, py) else {
-                        continue;
-                    };
-                    let Some(taps) = bilinear::taps(hit.u, hit.v, ts) else {
-                        continue;
-                    };
-                    let (alpha, colour) = (set.alpha_of(b), set.colour_of(b));
-                    for &ix in taps.indices() {
-                        let ix = ix as usize;
-                        prefetch(alpha, ix);
-                        prefetch(colour, ix);
-                        prefetch(colour, plane + ix);
-                        prefetch(colour, 2 * plane + ix);
-                    }
-                    self.items.push(Candidate {
-                        slot: k,
-                        depth: hit.depth,
-                        taps,
-                    });
+        let mut q = first;
+        while q < n && self.items.len() < CANDIDATE_CHUNK {
+            let (i, j) = (i0 + (q % tw) as u32, j0 + (q / tw) as u32);
+            let (px, py) = (i as f32 + 0.5, j as f32 + 0.5);
+            for &k in slots(q) {
+                let b = list[k as usize] as usize;
+                let Some(p) = prepared[b].as_ref() else {
+                    continue;
+                };
+                let Some(hit) = intersect(&p.transform, px, py) else {
+                    continue;
+                };
+                let Some(taps) = bilinear::taps(hit.u, hit.v, ts) else {
+                    continue;
+                };
+                let (alpha, colour) = (set.alpha_of(b), set.colour_of(b));
+                for &ix in taps.indices() {
+                    let ix = ix as usize;
+                    prefetch(alpha, ix);
+                    prefetch(colour, ix);
+                    prefetch(colour, plane + ix);
+                    prefetch(colour, 2 * plane + ix);
                 }
-                self.offsets.push(self.items.len() as u32);
+                self.items.push(Candidate {
+                    slot: k,
+                    depth: hit.depth,
+                    taps,
+                });
             }
+            self.offsets.push(self.items.len() as u32);
+            q += 1;
         }
+        q
     }
 
-    /// The candidates of tile-local pixel `q`.
+    /// The candidates of tile-local pixel `q` (within the last run built).
     #[inline]
     pub(crate) fn of(&self, q: usize) -> &[Candidate] {
-        &self.items[self.offsets[q] as usize..self.offsets[q + 1] as usize]
+        let r = q - self.first;
+        &self.items[self.offsets[r] as usize..self.offsets[r + 1] as usize]
     }
 }
 
@@ -364,33 +392,38 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
     let n_tiles = bins.tile_count();
     let mut entry_impact = vec![0.0f32; bins.entries.len()];
     let impact_chunks = split_by_lengths(&mut entry_impact, (0..n_tiles).map(|t| bins.tile_range(t).len()));
-    let tiles: Vec<Vec<PixelOut>> = impact_chunks
+    let tiles: Vec<(Vec<PixelOut>, Vec<u32>)> = impact_chunks
         .into_par_iter()
         .enumerate()
         .map(|(t, impact)| {
             let list = &bins.entries[bins.tile_range(t)];
-            let (i0, j0, i1, j1) = tile_pixels(&bins, t, w, h);
+            let rect @ (i0, j0, i1, j1) = tile_pixels(&bins, t, w, h);
+            let tw = (i1 - i0) as usize;
+            let n_q = tw * (j1 - j0) as usize;
             let mut lists = PixelLists::default();
             lists.build(&local_boxes(&prepared, list, i0, j0));
+            let own = |q: usize| lists.of((q % tw) as u32, (q / tw) as u32);
             let mut candidates = TileCandidates::default();
-            candidates.build(set, &prepared, list, &lists, (i0, j0, i1, j1), |_, _| usize::MAX);
-            let mut pixels = Vec::with_capacity(((i1 - i0) * (j1 - j0)) as usize);
-            for j in j0..j1 {
-                for i in i0..i1 {
-                    let own = lists.of(i - i0, j - j0);
-                    let q = pixels.len();
+            let mut pixels = Vec::with_capacity(n_q);
+            let mut blended_slots = Vec::new();
+            let mut first = 0;
+            while first < n_q {
+                let end = candidates.build(set, &prepared, list, rect, first, own);
+                for q in first..end {
                     pixels.push(shade_pixel(
                         set,
                         settings,
                         &prepared,
                         list,
-                        own,
+                        own(q),
                         candidates.of(q),
                         impact,
+                        &mut blended_slots,
                     ));
                 }
+                first = end;
             }
-            pixels
+            (pixels, blended_slots)
         })
         .collect();
     let mut out = RenderOutput {
@@ -413,10 +446,17 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
             prepared: Vec::new(),
             bins: TileBins::default(),
             final_transmittance: vec![1.0; n_pix],
-            walked: vec![0; n_pix],
+            blended_slots: Vec::with_capacity(tiles.iter().map(|(_, s)| s.len()).sum()),
+            blended_offsets: Vec::with_capacity(n_pix + 1),
+            tile_pixel_base: Vec::with_capacity(n_tiles),
         },
     };
-    for (t, pixels) in tiles.iter().enumerate() {
+    out.state.blended_offsets.push(0);
+    for (t, (pixels, slots)) in tiles.iter().enumerate() {
+        out.state
+            .tile_pixel_base
+            .push(out.state.blended_offsets.len() as u32 - 1);
+        out.state.blended_slots.extend_from_slice(slots);
         let (i0, j0, i1, _) = tile_pixels(&bins, t, w, h);
         let tw = (i1 - i0) as usize;
         for (k, px) in pixels.iter().enumerate() {
@@ -427,7 +467,8 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
             out.median_depth[p] = px.median;
             out.normal[3 * p..3 * p + 3].copy_from_slice(&px.normal.to_array());
             out.state.final_transmittance[p] = px.final_t;
-            out.state.walked[p] = px.walked;
+            let end = out.state.blended_offsets.last().copied().unwrap_or(0) + px.blended;
+            out.state.blended_offsets.push(end);
             out.stats.evaluated_pairs += px.evaluated as u64;
             out.stats.blended_pairs += px.blended as u64;
         }

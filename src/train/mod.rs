@@ -25,6 +25,7 @@ pub mod checkpoint;
 pub mod error;
 pub mod regularise;
 pub mod relocate;
+pub mod texture_step;
 
 use crate::billboards::Billboards;
 use crate::camera::Camera;
@@ -38,7 +39,7 @@ use adam::{AdamGroup, AdamParams};
 pub use checkpoint::CheckpointError;
 pub use error::TrainError;
 use glam::Vec3;
-use regularise::{chain_sigmoid, gaussian_opacity_grad, mean_alpha, opacity_regulariser, texture_regulariser};
+use regularise::{gaussian_opacity_grad, mean_alpha, opacity_regulariser, texture_regulariser};
 use relocate::{DEAD_OPACITY, apply_relocation, plan_relocation, split_alpha_logit};
 
 /// A posed image: camera and interleaved RGB values in `[0, 1]`.
@@ -482,9 +483,12 @@ impl Trainer {
                 touched.len()
             }
         };
-        // Regulariser gradients may have landed on rows the sparse mode did not consume.
-        self.grads.alpha.fill(0.0);
-        self.grads.colour.fill(0.0);
+        // Regulariser gradients may have landed on rows the sparse mode did not consume (the
+        // texture step zeroes every row in full-texture mode).
+        if self.config.texture_mode == TextureMode::Gaussian {
+            self.grads.alpha.fill(0.0);
+            self.grads.colour.fill(0.0);
+        }
         self.grads.background = Vec3::ZERO;
         let relocated =
             if self.config.relocate && relocation_due(self.step, self.config.iterations, self.config.relocate_every) {
@@ -536,12 +540,12 @@ impl Trainer {
         // Texture moments accumulate before the texture window (lr 0, as the reference); after
         // the late freeze the textures never move again, so their groups are skipped.
         let textures_live = !past_milestone(self.step, self.config.iterations, 30_000);
-        let mut d_logit = vec![0.0f32; 3 * t];
+        // Geometry, SH and (Gaussian mode) opacity: 57 floats a row, stepped row by row.
         for &b in rows {
             let b = b as usize;
             let m = &mut self.model;
             let g = &self.grads;
-            let [a_pos, a_rot, a_scale, a_sh_dc, a_sh_rest, a_alpha, a_colour, a_opacity] = &mut self.adam;
+            let [a_pos, a_rot, a_scale, a_sh_dc, a_sh_rest, _, _, a_opacity] = &mut self.adam;
             let step = |group: &mut AdamGroup, params: &mut [f32], grads: &[f32], lr: f32| {
                 if dense {
                     let t = group.global_step;
@@ -567,34 +571,56 @@ impl Trainer {
                     let d = gaussian_opacity_grad(w[0], &g.alpha[b * t..(b + 1) * t], &self.shape);
                     step(a_opacity, w, &[d], lr.opacity);
                 }
-            } else if textures_live {
-                chain_sigmoid(
-                    &self.activated.alpha[b * t..(b + 1) * t],
-                    &g.alpha[b * t..(b + 1) * t],
-                    Some(&m.alpha_mask),
-                    &mut d_logit[..t],
-                );
-                step(
-                    a_alpha,
-                    &mut m.alpha_logits[b * t..(b + 1) * t],
-                    &d_logit[..t],
-                    lr.alpha,
-                );
-                chain_sigmoid(
-                    &self.activated.colour[b * 3 * t..(b + 1) * 3 * t],
-                    &g.colour[b * 3 * t..(b + 1) * 3 * t],
-                    None,
-                    &mut d_logit,
-                );
-                step(
-                    a_colour,
-                    &mut m.colour_logits[b * 3 * t..(b + 1) * 3 * t],
-                    &d_logit,
-                    lr.colour,
-                );
+                self.refresh_row(b);
+                self.grads.clear_row(b);
+            } else {
+                let a = &mut self.activated;
+                a.positions[b] = m.positions[b];
+                a.quaternions[b] = m.quaternions[b];
+                a.log_scales[b] = m.log_scales[b];
+                a.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS].copy_from_slice(&m.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS]);
+                let gm = &mut self.grads;
+                gm.positions[b] = Vec3::ZERO;
+                gm.quaternions[b] = [0.0; 4];
+                gm.log_scales[b] = glam::Vec2::ZERO;
+                gm.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS].fill(0.0);
             }
-            self.refresh_row(b);
-            self.grads.clear_row(b);
+        }
+        if !gaussian {
+            // Textures: parallel over rows, bit-identical to a serial loop; consumes (zeroes)
+            // every texture gradient row, including regulariser gradients on unselected rows.
+            let selected: Vec<bool>;
+            let selection = if dense {
+                texture_step::RowSelection::Dense
+            } else {
+                let mut s = vec![false; self.model.len()];
+                rows.iter().for_each(|&b| s[b as usize] = true);
+                selected = s;
+                texture_step::RowSelection::Sparse(&selected)
+            };
+            let [.., a_alpha, a_colour, _] = &mut self.adam;
+            texture_step::step_texture_group(
+                a_alpha,
+                &mut self.model.alpha_logits,
+                &mut self.activated.alpha,
+                &mut self.grads.alpha,
+                Some(&self.model.alpha_mask),
+                selection,
+                lr.alpha,
+                &hp,
+                textures_live,
+            );
+            texture_step::step_texture_group(
+                a_colour,
+                &mut self.model.colour_logits,
+                &mut self.activated.colour,
+                &mut self.grads.colour,
+                None,
+                selection,
+                lr.colour,
+                &hp,
+                textures_live,
+            );
         }
     }
 
