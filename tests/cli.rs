@@ -303,3 +303,62 @@ fn ctrl_c_saves_a_checkpoint_and_exits_cleanly() {
     );
     std::fs::remove_dir_all(&root).ok();
 }
+
+/// Writes a tiny NeRF-synthetic scene: 6 train and 2 test views of a disc-shaped object on a ring
+/// of cameras, as RGBA PNGs (`alpha = true`) or RGB PNGs.
+fn write_tiny_blender_scene(dir: &std::path::Path, alpha: bool) {
+    let size = 24u32;
+    for split in ["train", "test"] {
+        std::fs::create_dir_all(dir.join(split)).unwrap();
+        let count = if split == "train" { 6 } else { 2 };
+        let mut frames = Vec::new();
+        for i in 0..count {
+            let a = (i as f32 + if split == "test" { 0.5 } else { 0.0 }) * std::f32::consts::TAU / count as f32;
+            let eye = glam::Vec3::new(3.0 * a.cos(), 3.0 * a.sin(), 1.0);
+            let z = eye.normalize(); // OpenGL: the camera looks along -z
+            let x = glam::Vec3::Z.cross(z).normalize();
+            let y = z.cross(x);
+            let m = [
+                [x.x, y.x, z.x, eye.x],
+                [x.y, y.y, z.y, eye.y],
+                [x.z, y.z, z.z, eye.z],
+                [0.0, 0.0, 0.0, 1.0],
+            ];
+            let name = format!("{split}/r_{i}");
+            let mut img = image::RgbaImage::new(size, size);
+            for (px, py, p) in img.enumerate_pixels_mut() {
+                let (dx, dy) = (px as f32 + 0.5 - 12.0, py as f32 + 0.5 - 12.0);
+                let inside = dx * dx + dy * dy < 36.0;
+                *p = image::Rgba([200, 60, 40, if inside { 255 } else { 0 }]);
+            }
+            let path = dir.join(format!("{name}.png"));
+            if alpha {
+                img.save(&path).unwrap();
+            } else {
+                image::DynamicImage::ImageRgba8(img).to_rgb8().save(&path).unwrap();
+            }
+            frames.push(serde_json::json!({ "file_path": format!("./{name}"), "transform_matrix": m }));
+        }
+        let json = serde_json::json!({ "camera_angle_x": 0.6, "frames": frames });
+        std::fs::write(dir.join(format!("transforms_{split}.json")), json.to_string()).unwrap();
+    }
+}
+
+/// `--init hull` places the billboards on the visual hull of RGBA views, and refuses, naming
+/// the reason, a scene whose images have no alpha channel.
+#[test]
+fn hull_initialisation_needs_alpha_masks() {
+    let root = temp("hull");
+    let (rgba, rgb, out) = (root.join("rgba"), root.join("rgb"), root.join("out"));
+    write_tiny_blender_scene(&rgba, true);
+    write_tiny_blender_scene(&rgb, false);
+    let (rgba_s, rgb_s, out_s) = (rgba.to_str().unwrap(), rgb.to_str().unwrap(), out.to_str().unwrap());
+    let mut args = tiny_train_args(rgba_s, out_s, &["--init", "hull", "--hull-resolution", "32"]);
+    args.retain(|a| *a != "--quiet");
+    let printed = run_ok(&args);
+    assert!(printed.contains("120 on the visual hull"), "{printed}");
+    let (ok, err) = run(&tiny_train_args(rgb_s, out_s, &["--init", "hull"]));
+    assert!(!ok);
+    assert!(err.contains("alpha mask"), "{err}");
+    std::fs::remove_dir_all(&root).ok();
+}

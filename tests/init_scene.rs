@@ -30,6 +30,7 @@ fn scene(format: SceneFormat, cameras: Vec<Camera>, points: Option<PointCloud>) 
             path: PathBuf::from(format!("{i}.png")),
             camera,
             image: Image::new(1, 1, vec![0; 3]).unwrap(),
+            coverage: None,
         })
         .collect();
     Scene {

@@ -34,6 +34,15 @@ fn lego_loads_with_nerf_synthetic_conventions() {
     assert_eq!(scene.format, SceneFormat::NerfSynthetic);
     assert_eq!((scene.train.len(), scene.test.len()), (100, 200));
     assert!(scene.points.is_none());
+    // The RGBA renders keep their alpha as coverage (for the visual-hull initialisation); the
+    // object covers part of each view, the corners are background.
+    for v in &scene.train {
+        let cov = v.coverage.as_ref().expect("RGBA views keep their coverage");
+        assert_eq!(cov.len(), 400 * 400);
+        let object = cov.iter().filter(|&&a| a >= 128).count();
+        assert!(object > 2_000 && object < 120_000, "{}: {object} object pixels", v.name);
+        assert_eq!(cov[0], 0, "{}", v.name);
+    }
     let radii: Vec<f32> = scene
         .train
         .iter()
@@ -216,6 +225,10 @@ fn fox_loads_and_is_resampled_through_its_stated_model() {
     let Some(dir) = data("fox") else { return };
     let t = Instant::now();
     let scene = load(&dir, &LoadOptions::default()).unwrap();
+    assert!(
+        scene.train.iter().all(|v| v.coverage.is_none()),
+        "JPEG views have no alpha"
+    );
     println!(
         "fox: loaded {} + {} views in {:?}",
         scene.train.len(),

@@ -4,7 +4,8 @@ use super::common::{SceneArgs, start_threads, train_views, write_text_atomic};
 use anyhow::{Context, Result};
 use bbsplat::eval::{EvalView, evaluate_views};
 use bbsplat::init::budget::{BudgetInputs, budget_for};
-use bbsplat::init::scene_init::init_model;
+use bbsplat::init::hull::HullConfig;
+use bbsplat::init::scene_init::{PointlessInit, init_model_with};
 use bbsplat::model::{Model, logit};
 use bbsplat::model_file::{ModelMeta, load_model, save_model};
 use bbsplat::raster::{BillboardSet, RenderSettings};
@@ -84,6 +85,23 @@ pub struct TrainArgs {
     /// scene and flags should be those of that run. Continuing is bit-identical to not stopping.
     #[arg(long)]
     pub resume: Option<PathBuf>,
+    /// Initialisation of scenes without SfM points: `random` points in the scene box (the
+    /// reference), or `hull`: points on the visual hull carved from the images' alpha masks
+    /// (RGBA images such as NeRF-synthetic; see docs/training.md).
+    #[arg(long, value_enum, default_value_t = InitArg::Random)]
+    pub init: InitArg,
+    /// Voxels per side of the `--init hull` grid.
+    #[arg(long, default_value_t = 128)]
+    pub hull_resolution: usize,
+}
+
+/// `--init`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum InitArg {
+    /// Uniform random points in the scene box.
+    Random,
+    /// Points on the surface of the visual hull of the alpha masks.
+    Hull,
 }
 
 /// `--texture-mode`.
@@ -196,14 +214,28 @@ pub fn run(args: TrainArgs) -> Result<()> {
                     b.billboards
                 }
             };
-            let (model, init) = init_model(&scene, budget, args.texture_size, args.seed)
+            let pointless = match args.init {
+                InitArg::Random => PointlessInit::Random,
+                InitArg::Hull => PointlessInit::Hull(HullConfig {
+                    resolution: args.hull_resolution,
+                    ..HullConfig::default()
+                }),
+            };
+            let (model, init) = init_model_with(&scene, budget, args.texture_size, args.seed, &pointless)
                 .with_context(|| format!("initialising {} billboards", budget))?;
+            if args.init == InitArg::Hull && init.hull == 0 {
+                eprintln!(
+                    "note: --init hull applies to scenes without SfM points; this one has them and they were used"
+                );
+            }
             if !args.quiet {
                 println!(
-                    "initial billboards: {} from SfM points, {} on the sky sphere (radius {:.2}), {} random{}",
+                    "initial billboards: {} from SfM points, {} on the sky sphere (radius {:.2}), {} on the visual hull (of {} surface voxels), {} random{}",
                     init.sfm,
                     init.sky,
                     init.sky_radius,
+                    init.hull,
+                    init.hull_candidates,
                     init.random,
                     if init.random > 0 {
                         format!(" ({})", init.box_rule)

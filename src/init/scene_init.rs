@@ -29,6 +29,7 @@
 
 use crate::init::fibonacci::{fibonacci_sphere, sky_point_count, sky_radius, sky_radius_reference};
 use crate::init::fps::farthest_point_sampling;
+use crate::init::hull::{HullConfig, HullError, visual_hull_points};
 use crate::model::Model;
 use crate::rng::Rng;
 use crate::scene::{Scene, SceneFormat};
@@ -56,6 +57,10 @@ pub struct InitReport {
     pub sky: usize,
     /// Random points added.
     pub random: usize,
+    /// Points on the visual hull's surface ([`PointlessInit::Hull`]).
+    pub hull: usize,
+    /// Surface voxels the hull points were sampled from (0 without a hull).
+    pub hull_candidates: usize,
     /// Sky radius used (robust rule), 0 without sky.
     pub sky_radius: f32,
     /// The reference's sky radius (largest L∞ norm) for comparison, 0 without sky.
@@ -69,7 +74,7 @@ pub struct InitReport {
 impl InitReport {
     /// Total points.
     pub fn total(&self) -> usize {
-        self.sfm + self.sky + self.random
+        self.sfm + self.sky + self.random + self.hull
     }
 }
 
@@ -85,6 +90,13 @@ impl std::fmt::Display for InitReport {
             self.sky,
             self.random
         )?;
+        if self.hull > 0 {
+            write!(
+                f,
+                ", {} on the visual hull (farthest points of {} surface voxels)",
+                self.hull, self.hull_candidates
+            )?;
+        }
         if self.sky > 0 {
             write!(
                 f,
@@ -116,6 +128,21 @@ pub enum InitError {
     /// A budget of zero billboards.
     #[error("the billboard budget is 0")]
     ZeroBudget,
+    /// The visual hull could not be built.
+    #[error("visual-hull initialisation: {0}")]
+    Hull(#[from] HullError),
+}
+
+/// Where billboards go in a scene without SfM points.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub enum PointlessInit {
+    /// Uniform random points in the scene box (the reference, spec §8).
+    #[default]
+    Random,
+    /// Farthest points of the surface of the visual hull carved from the training views'
+    /// alpha masks, in the scene box ([`crate::init::hull`]); needs RGBA images. Topped up with
+    /// random points when the surface has fewer voxels than the budget.
+    Hull(HullConfig),
 }
 
 /// The initial points of `scene` for a budget of `budget` billboards (rules in the [module
@@ -126,6 +153,21 @@ pub enum InitError {
 ///
 /// [`InitError::ZeroBudget`] when `budget` is 0.
 pub fn init_points(scene: &Scene, budget: usize, seed: u64) -> Result<SceneInit, InitError> {
+    init_points_with(scene, budget, seed, &PointlessInit::Random)
+}
+
+/// [`init_points`], with `pointless` choosing what happens when the scene has no SfM points.
+///
+/// # Errors
+///
+/// [`InitError::ZeroBudget`] when `budget` is 0; [`InitError::Hull`] when the visual hull was
+/// asked for and cannot be built (no masks, empty hull).
+pub fn init_points_with(
+    scene: &Scene,
+    budget: usize,
+    seed: u64,
+    pointless: &PointlessInit,
+) -> Result<SceneInit, InitError> {
     if budget == 0 {
         return Err(InitError::ZeroBudget);
     }
@@ -148,6 +190,8 @@ pub fn init_points(scene: &Scene, budget: usize, seed: u64) -> Result<SceneInit,
         sfm: 0,
         sky: 0,
         random: 0,
+        hull: 0,
+        hull_candidates: 0,
         sky_radius: 0.0,
         sky_radius_reference: 0.0,
         random_box: None,
@@ -171,10 +215,27 @@ pub fn init_points(scene: &Scene, budget: usize, seed: u64) -> Result<SceneInit,
                 )
             }
         };
-        let (points, cols) = random_points(budget, lo, hi, seed);
-        report.random = budget;
         report.random_box = Some((lo, hi));
         report.box_rule = rule;
+        if let PointlessInit::Hull(config) = pointless {
+            let (surface, surface_colours) = visual_hull_points(&scene.train, lo, hi, config, seed)?;
+            let keep = farthest_point_sampling(&surface, budget.min(surface.len())).expect("hull points are finite");
+            let mut points: Vec<Vec3> = keep.iter().map(|&i| surface[i]).collect();
+            let mut cols: Vec<[f32; 3]> = keep.iter().map(|&i| surface_colours[i]).collect();
+            report.hull = points.len();
+            report.hull_candidates = surface.len();
+            let (extra, extra_cols) = random_points(budget - points.len(), lo, hi, seed);
+            report.random = extra.len();
+            points.extend(extra);
+            cols.extend(extra_cols);
+            return Ok(SceneInit {
+                points,
+                colours: cols,
+                report,
+            });
+        }
+        let (points, cols) = random_points(budget, lo, hi, seed);
+        report.random = budget;
         return Ok(SceneInit {
             points,
             colours: cols,
@@ -213,7 +274,22 @@ pub fn init_model(
     texture_size: usize,
     seed: u64,
 ) -> Result<(Model, InitReport), InitError> {
-    let init = init_points(scene, budget, seed)?;
+    init_model_with(scene, budget, texture_size, seed, &PointlessInit::Random)
+}
+
+/// [`init_points_with`] then [`Model::from_points`] with the same seed.
+///
+/// # Errors
+///
+/// As [`init_points_with`].
+pub fn init_model_with(
+    scene: &Scene,
+    budget: usize,
+    texture_size: usize,
+    seed: u64,
+    pointless: &PointlessInit,
+) -> Result<(Model, InitReport), InitError> {
+    let init = init_points_with(scene, budget, seed, pointless)?;
     Ok((
         Model::from_points(&init.points, &init.colours, texture_size, seed),
         init.report,

@@ -8,16 +8,17 @@ use super::error::{Location, SceneError};
 use std::path::Path;
 
 /// Decodes an image file into 8-bit RGB, compositing any alpha channel onto `background`
-/// (values in `[0, 1]`): `c = c_rgb·a + background·(1 − a)`, rounded to 8 bits. 16-bit
-/// images are reduced to 8 bits. The format is guessed from the file contents.
-pub(crate) fn decode(
+/// (values in `[0, 1]`): `c = c_rgb·a + background·(1 − a)`, rounded to 8 bits, and returns the
+/// alpha channel (8 bits, row-major) of an image that has one. 16-bit images are reduced to 8
+/// bits. The format is guessed from the file contents.
+pub(crate) fn decode_with_alpha(
     image_path: &Path,
     referenced_by: &Path,
     location: &Location,
     background: [f32; 3],
-) -> Result<Image, SceneError> {
+) -> Result<(Image, Option<Vec<u8>>), SceneError> {
     let bytes = std::fs::read(image_path).map_err(|e| SceneError::io(image_path, e))?;
-    decode_bytes(&bytes, background).map_err(|message| SceneError::ImageDecode {
+    decode_bytes_with_alpha(&bytes, background).map_err(|message| SceneError::ImageDecode {
         image: image_path.to_path_buf(),
         file: referenced_by.to_path_buf(),
         location: location.clone(),
@@ -25,27 +26,42 @@ pub(crate) fn decode(
     })
 }
 
-/// Decodes image bytes (PNG or JPEG); see [`decode`].
-pub(crate) fn decode_bytes(bytes: &[u8], background: [f32; 3]) -> Result<Image, String> {
+/// Decodes image bytes (PNG or JPEG); see [`decode_with_alpha`].
+pub(crate) fn decode_bytes_with_alpha(bytes: &[u8], background: [f32; 3]) -> Result<(Image, Option<Vec<u8>>), String> {
     let dynamic = image::load_from_memory(bytes).map_err(|e| e.to_string())?;
     let (width, height) = (dynamic.width(), dynamic.height());
     if width == 0 || height == 0 {
         return Err(format!("image has zero size {width}x{height}"));
     }
     if !dynamic.color().has_alpha() {
-        return Ok(Image::from_raw(width, height, dynamic.into_rgb8().into_raw()));
+        return Ok((Image::from_raw(width, height, dynamic.into_rgb8().into_raw()), None));
     }
     let rgba = dynamic.into_rgba8();
     let bg = background.map(|b| b.clamp(0.0, 1.0) * 255.0);
     let mut data = Vec::with_capacity(width as usize * height as usize * 3);
+    let mut alpha = Vec::with_capacity(width as usize * height as usize);
     for px in rgba.as_raw().chunks_exact(4) {
         let a = px[3] as f32 / 255.0;
         for c in 0..3 {
             let v = px[c] as f32 * a + bg[c] * (1.0 - a);
             data.push(v.round().clamp(0.0, 255.0) as u8);
         }
+        alpha.push(px[3]);
     }
-    Ok(Image::from_raw(width, height, data))
+    Ok((Image::from_raw(width, height, data), Some(alpha)))
+}
+
+/// Area-downscales an 8-bit single-channel map (an alpha channel) from `w × h` to `nw × nh`
+/// with the same box filter as the images, rounding to 8 bits.
+pub(crate) fn resize_area_u8(src: &[u8], w: usize, h: usize, nw: usize, nh: usize) -> Vec<u8> {
+    if (w, h) == (nw, nh) {
+        return src.to_vec();
+    }
+    let rgb: Vec<f32> = src.iter().flat_map(|&a| [a as f32; 3]).collect();
+    resize_area(&rgb, w, h, nw, nh)
+        .chunks_exact(3)
+        .map(|px| px[0].round().clamp(0.0, 255.0) as u8)
+        .collect()
 }
 
 /// Quantises interleaved RGB values in `[0, 1]` to 8 bits (rounding).

@@ -128,6 +128,11 @@ pub struct View {
     pub camera: Camera,
     /// The undistorted, downscaled, background-composited image (`camera.width × camera.height`).
     pub image: Image,
+    /// The image's own alpha channel at the final resolution (`camera.width × camera.height`
+    /// values, row-major, 0 = background), when the file had one and needed no undistortion
+    /// (e.g. NeRF-synthetic renders). Used by the visual-hull initialisation
+    /// ([`crate::init::hull`]); never by the loss.
+    pub coverage: Option<Vec<u8>>,
 }
 
 /// A point cloud (for initialisation), world coordinates.

@@ -64,7 +64,7 @@ pub(crate) fn load_all(sources: Vec<ViewSource>, options: &LoadOptions) -> Resul
 
 fn load_view(s: ViewSource, options: &LoadOptions) -> Result<View, SceneError> {
     let background = options.background.rgb();
-    let image = image_io::decode(&s.image_path, &s.file, &s.location, background)?;
+    let (image, alpha) = image_io::decode_with_alpha(&s.image_path, &s.file, &s.location, background)?;
     let (iw, ih) = (image.width(), image.height());
     let perr = |m: String| SceneError::parse(&s.file, s.location.clone(), m);
     let (intrinsics, cw, ch) = match &s.camera {
@@ -89,6 +89,10 @@ fn load_view(s: ViewSource, options: &LoadOptions) -> Result<View, SceneError> {
     }
     let plan = undistort::plan(&intrinsics, iw, ih, options.undistort).map_err(perr)?;
     let (nw, nh) = image_io::target_size(plan.width, plan.height, options.downscale, options.max_width);
+    // Coverage is kept for images that need no undistortion (RGBA renders such as NeRF-synthetic).
+    let coverage = alpha
+        .filter(|_| !undistort::needs_undistortion(&intrinsics.distortion))
+        .map(|a| image_io::resize_area_u8(&a, iw as usize, ih as usize, nw as usize, nh as usize));
     let image = if !undistort::needs_undistortion(&intrinsics.distortion) {
         if (nw, nh) == (iw, ih) {
             image
@@ -128,5 +132,6 @@ fn load_view(s: ViewSource, options: &LoadOptions) -> Result<View, SceneError> {
         path: s.image_path,
         camera,
         image,
+        coverage,
     })
 }
