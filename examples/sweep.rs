@@ -41,6 +41,10 @@ struct Args {
     /// Texture sides, comma-separated.
     #[arg(long)]
     texture_size: Option<String>,
+    /// Texel budgets per channel, comma-separated: each run gets `texels / TS²` billboards for
+    /// its texture size (the supplement's Table 7); exclusive with `--billboards`.
+    #[arg(long)]
+    texels: Option<String>,
     /// Largest training image widths in pixels, comma-separated.
     #[arg(long)]
     max_width: Option<String>,
@@ -92,6 +96,7 @@ fn main() -> Result<()> {
         ("iterations", &args.iterations),
         ("billboards", &args.billboards),
         ("texture-size", &args.texture_size),
+        ("texels", &args.texels),
         ("max-width", &args.max_width),
         ("texture-threshold", &args.texture_threshold),
         ("texture-mode", &args.texture_mode),

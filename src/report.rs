@@ -50,6 +50,10 @@ pub struct TrainSummary {
     pub threads: usize,
     /// Test PSNR/SSIM at each evaluation during training: `(step, seconds, psnr, ssim)`.
     pub curve: Vec<CurvePoint>,
+    /// The command line of the run (program name first), for reproducing it; empty in
+    /// summaries written before it was recorded.
+    #[serde(default)]
+    pub command: Vec<String>,
 }
 
 /// One evaluation during training.
@@ -108,6 +112,7 @@ mod tests {
                 psnr: 20.0,
                 ssim: 0.8,
             }],
+            command: vec!["bbsplat".into(), "train".into()],
         };
         let text = serde_json::to_string(&s).unwrap();
         assert_eq!(serde_json::from_str::<TrainSummary>(&text).unwrap(), s);

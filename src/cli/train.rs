@@ -10,6 +10,7 @@ use bbsplat::model::{Model, logit};
 use bbsplat::model_file::{ModelMeta, load_model, save_model};
 use bbsplat::raster::{BillboardSet, RenderSettings};
 use bbsplat::report::{CurvePoint, SUMMARY_VERSION, TrainSummary, peak_rss_bytes};
+use bbsplat::train::resolution::{ResolutionSchedule, downscale_view};
 use bbsplat::train::{AdamMode, TextureMode, TrainConfig, TrainView, Trainer};
 use clap::{Args, ValueEnum};
 use glam::Vec3;
@@ -93,6 +94,13 @@ pub struct TrainArgs {
     /// Voxels per side of the `--init hull` grid.
     #[arg(long, default_value_t = 128)]
     pub hull_resolution: usize,
+    /// Coarse-to-fine: train the first `--coarse-until` of the run on images downscaled by this
+    /// factor (1: off, the reference). A coarse step costs about 1/factor² of a full one.
+    #[arg(long, default_value_t = 1)]
+    pub coarse_factor: u32,
+    /// Fraction of the run (0-1) trained on the coarse images when `--coarse-factor` > 1.
+    #[arg(long, default_value_t = 0.5)]
+    pub coarse_until: f64,
 }
 
 /// `--init`.
@@ -152,6 +160,15 @@ pub fn run(args: TrainArgs) -> Result<()> {
     anyhow::ensure!(args.texture_size >= 2, "--texture-size must be at least 2");
     anyhow::ensure!(args.sh_degree <= 3, "--sh-degree must be 0, 1, 2 or 3");
     anyhow::ensure!(args.iterations >= 1, "--iterations must be at least 1");
+    anyhow::ensure!(args.coarse_factor >= 1, "--coarse-factor must be at least 1");
+    anyhow::ensure!(
+        (0.0..=1.0).contains(&args.coarse_until),
+        "--coarse-until must be a fraction between 0 and 1"
+    );
+    let resolution = ResolutionSchedule {
+        factor: args.coarse_factor,
+        until: args.coarse_until,
+    };
     let threads = start_threads(args.threads)?;
     let start = Instant::now();
     let scene = args.scene_args.load(&args.scene, args.quiet)?;
@@ -161,6 +178,11 @@ pub fn run(args: TrainArgs) -> Result<()> {
         "{}: the scene has no training view",
         args.scene.display()
     );
+    let coarse: Vec<TrainView> = if args.coarse_factor > 1 {
+        train.iter().map(|v| downscale_view(v, args.coarse_factor)).collect()
+    } else {
+        Vec::new()
+    };
     let test: Vec<(String, TrainView)> = scene
         .test
         .iter()
@@ -307,7 +329,12 @@ pub fn run(args: TrainArgs) -> Result<()> {
             std::process::exit(130);
         }
         let t0 = Instant::now();
-        let log = trainer.step(&train)?;
+        let views = if resolution.is_coarse(trainer.step_index(), args.iterations) {
+            &coarse
+        } else {
+            &train
+        };
+        let log = trainer.step(views)?;
         train_seconds += t0.elapsed().as_secs_f64();
         running_psnr = if running_psnr.is_nan() {
             log.psnr
@@ -386,6 +413,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         seed: args.seed,
         threads,
         curve,
+        command: std::env::args().collect(),
     };
     write_summary(&args.output, &summary)?;
     println!(

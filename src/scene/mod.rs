@@ -31,7 +31,7 @@ pub mod colmap_text;
 pub mod distortion;
 mod error;
 pub mod fuzz;
-mod image_io;
+pub(crate) mod image_io;
 mod json_scene;
 pub mod nerf_json;
 pub mod ply;

@@ -141,6 +141,10 @@ pub struct SweepGrid {
     pub iterations: Vec<usize>,
     /// Billboard budgets.
     pub billboards: Vec<usize>,
+    /// Fixed texel budgets per texture channel (the supplement's Table 7): each run gets
+    /// `⌊texels / TS²⌋` billboards for its texture size `TS` (16 when the texture-size axis is
+    /// empty), so texture size and billboard count move together. Exclusive with `billboards`.
+    pub texels: Vec<u64>,
     /// Texture sides in texels (each ≥ 2).
     pub texture_size: Vec<usize>,
     /// Largest training image widths in pixels (each ≥ 1).
@@ -155,9 +159,10 @@ pub struct SweepGrid {
 
 /// The axis names accepted by [`SweepGrid::set_axis`] (they match the CLI flags; `seed` is an
 /// alias of `seeds`).
-pub const AXES: [&str; 7] = [
+pub const AXES: [&str; 8] = [
     "iterations",
     "billboards",
+    "texels",
     "texture-size",
     "max-width",
     "texture-threshold",
@@ -225,6 +230,7 @@ impl SweepGrid {
         match axis {
             "iterations" => next.iterations = parse_list(axis, list)?,
             "billboards" => next.billboards = parse_list(axis, list)?,
+            "texels" => next.texels = parse_list(axis, list)?,
             "texture-size" | "texture_size" => next.texture_size = parse_list(axis, list)?,
             "max-width" | "max_width" => next.max_width = parse_list(axis, list)?,
             "texture-threshold" | "texture_threshold" => next.texture_threshold = parse_list(axis, list)?,
@@ -257,6 +263,25 @@ impl SweepGrid {
         }
         unique("iterations", &self.iterations)?;
         unique("billboards", &self.billboards)?;
+        unique("texels", &self.texels)?;
+        if !self.texels.is_empty() && !self.billboards.is_empty() {
+            return Err(bad(
+                "texels",
+                self.texels[0],
+                "fixes the billboard count per texture size: do not also list billboards",
+            ));
+        }
+        for &texels in &self.texels {
+            for ts in self.texture_sizes() {
+                if texels < (ts * ts) as u64 {
+                    return Err(bad(
+                        "texels",
+                        texels,
+                        &format!("gives no billboard at texture size {ts}"),
+                    ));
+                }
+            }
+        }
         unique("texture-size", &self.texture_size)?;
         unique("max-width", &self.max_width)?;
         unique("texture-threshold", &self.texture_threshold)?;
@@ -280,11 +305,21 @@ impl SweepGrid {
         Ok(())
     }
 
-    /// Number of settings: the product of the axis lengths, an empty axis counting as one.
+    /// The texture sizes the runs use: the axis, or the trainer's default 16 when it is empty.
+    fn texture_sizes(&self) -> Vec<usize> {
+        if self.texture_size.is_empty() {
+            vec![16]
+        } else {
+            self.texture_size.clone()
+        }
+    }
+
+    /// Number of settings: the product of the axis lengths, an empty axis counting as one
+    /// (`texels` takes the place of `billboards`).
     pub fn len(&self) -> usize {
         [
             self.iterations.len(),
-            self.billboards.len(),
+            self.billboards.len().max(self.texels.len()),
             self.texture_size.len(),
             self.max_width.len(),
             self.texture_threshold.len(),
@@ -314,9 +349,22 @@ impl SweepGrid {
             }
         }
         let mut out = Vec::with_capacity(self.len());
+        // The billboard axis: the listed counts, or one entry per texel budget resolved below.
+        let budgets: Vec<(Option<usize>, Option<u64>)> = if self.texels.is_empty() {
+            axis(&self.billboards).into_iter().map(|b| (b, None)).collect()
+        } else {
+            self.texels.iter().map(|&t| (None, Some(t))).collect()
+        };
         for &iterations in &axis(&self.iterations) {
-            for &billboards in &axis(&self.billboards) {
+            for &(listed, texels) in &budgets {
                 for &texture_size in &axis(&self.texture_size) {
+                    let billboards = match texels {
+                        Some(t) => {
+                            let ts = texture_size.unwrap_or(16) as u64;
+                            Some((t / (ts * ts)) as usize)
+                        }
+                        None => listed,
+                    };
                     for &max_width in &axis(&self.max_width) {
                         for &texture_threshold in &axis(&self.texture_threshold) {
                             for &texture_mode in &axis(&self.texture_mode) {
@@ -368,6 +416,27 @@ mod tests {
                 "it2000_bb3000_s1"
             ]
         );
+    }
+
+    #[test]
+    fn a_texel_budget_pairs_texture_size_and_billboard_count() {
+        let mut g = SweepGrid::default();
+        g.set_axis("texels", "2560000").unwrap();
+        g.set_axis("texture-size", "8,16,32,64").unwrap();
+        let s = g.settings().unwrap();
+        assert_eq!(g.len(), 4);
+        let pairs: Vec<(usize, usize)> = s
+            .iter()
+            .map(|s| (s.texture_size.unwrap(), s.billboards.unwrap()))
+            .collect();
+        assert_eq!(pairs, [(8, 40_000), (16, 10_000), (32, 2_500), (64, 625)]);
+        // Exclusive with billboards; a budget below one texture is refused.
+        assert!(g.set_axis("billboards", "10").is_err());
+        let err = g.set_axis("texels", "100").unwrap_err().to_string();
+        assert!(err.contains("texture size 16"), "{err}");
+        let mut d = SweepGrid::default();
+        d.set_axis("texels", "2560").unwrap();
+        assert_eq!(d.settings().unwrap()[0].billboards, Some(10), "TS 16 by default");
     }
 
     #[test]

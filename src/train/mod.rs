@@ -25,6 +25,7 @@ pub mod checkpoint;
 pub mod error;
 pub mod regularise;
 pub mod relocate;
+pub mod resolution;
 pub mod texture_step;
 
 use crate::billboards::Billboards;
