@@ -362,3 +362,45 @@ fn hull_initialisation_needs_alpha_masks() {
     assert!(err.contains("alpha mask"), "{err}");
     std::fs::remove_dir_all(&root).ok();
 }
+
+/// Coarse-to-fine: the flag changes the result, and a run stopped inside the coarse phase and
+/// resumed (switching to full size after the stop) equals an uninterrupted one bit for bit.
+#[test]
+fn coarse_to_fine_resumes_across_the_switch_bit_for_bit() {
+    let root = temp("coarse");
+    let data = root.join("data");
+    run_ok(&[
+        "demo",
+        "--export",
+        data.to_str().unwrap(),
+        "--resolution",
+        "24",
+        "--billboards",
+        "100",
+    ]);
+    let d = data.to_str().unwrap();
+    let out = |name: &str| root.join(name).to_str().unwrap().to_string();
+    let (plain, a, b) = (out("plain"), out("a"), out("b"));
+    let coarse = ["--coarse-factor", "2", "--coarse-until", "0.5"];
+    run_ok(&tiny_train_args(d, &plain, &[]));
+    run_ok(&tiny_train_args(d, &a, &coarse));
+    let mut stop: Vec<&str> = coarse.to_vec();
+    stop.extend(["--stop-after", "10"]);
+    run_ok(&tiny_train_args(d, &b, &stop));
+    let checkpoint = root.join("b/checkpoint.bin");
+    let mut resume: Vec<&str> = coarse.to_vec();
+    resume.extend(["--resume", checkpoint.to_str().unwrap()]);
+    run_ok(&tiny_train_args(d, &b, &resume));
+    let read = |dir: &str, file: &str| std::fs::read(std::path::Path::new(dir).join(file)).unwrap();
+    assert!(
+        read(&a, "checkpoint.bin") == read(&b, "checkpoint.bin"),
+        "resumed run differs"
+    );
+    assert!(
+        read(&a, "checkpoint.bin") != read(&plain, "checkpoint.bin"),
+        "--coarse-factor changed nothing"
+    );
+    let (ok, err) = run(&tiny_train_args(d, &out("bad"), &["--coarse-until", "1.5"]));
+    assert!(!ok && err.contains("--coarse-until"), "{err}");
+    std::fs::remove_dir_all(&root).ok();
+}

@@ -44,6 +44,13 @@ fn tile_rect(p: &Prepared) -> ([u32; 2], [u32; 2]) {
     )
 }
 
+/// A `u32` whose unsigned order is [`f32::total_cmp`]'s order of `x`.
+#[inline]
+fn total_order_key(x: f32) -> u32 {
+    let bits = x.to_bits();
+    if bits >> 31 == 1 { !bits } else { bits | 0x8000_0000 }
+}
+
 /// Bins the prepared billboards of an image of `width × height` pixels.
 pub fn bin(prepared: &[Option<Prepared>], width: u32, height: u32) -> TileBins {
     let tiles_x = width.div_ceil(TILE_SIZE);
@@ -94,10 +101,23 @@ pub fn bin(prepared: &[Option<Prepared>], width: u32, height: u32) -> TileBins {
         slices.push(head);
         rest = tail;
     }
+    // Sort keys (depth in total order, then index) are gathered once per entry, so the sort
+    // compares integers instead of loading two scattered records per comparison; sorting
+    // (depth, index) pairs gives exactly the stable depth order of the index-ordered scatter.
     let depth_of = |b: u32| prepared[b as usize].as_ref().map_or(0.0, |p| p.depth);
     slices
         .into_par_iter()
-        .for_each(|s| s.sort_by(|&a, &b| depth_of(a).total_cmp(&depth_of(b))));
+        .for_each_init(Vec::new, |keys: &mut Vec<u64>, s| {
+            keys.clear();
+            keys.extend(
+                s.iter()
+                    .map(|&b| (u64::from(total_order_key(depth_of(b))) << 32) | u64::from(b)),
+            );
+            keys.sort_unstable();
+            for (e, &k) in s.iter_mut().zip(keys.iter()) {
+                *e = k as u32;
+            }
+        });
     // Billboard-major index, each billboard's entries in tile order.
     let mut billboard_entries = vec![0u32; total];
     let mut bcursor: Vec<u32> = billboard_offsets[..prepared.len()].to_vec();
@@ -112,5 +132,35 @@ pub fn bin(prepared: &[Option<Prepared>], width: u32, height: u32) -> TileBins {
         entries,
         billboard_offsets,
         billboard_entries,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::total_order_key;
+
+    #[test]
+    fn total_order_key_sorts_like_total_cmp() {
+        let mut xs = vec![
+            0.2f32,
+            -0.0,
+            0.0,
+            1e-30,
+            -1e-30,
+            3.5,
+            -7.0,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::MAX,
+            f32::MIN_POSITIVE,
+            100.25,
+        ];
+        let mut by_key = xs.clone();
+        xs.sort_by(f32::total_cmp);
+        by_key.sort_by_key(|&x| total_order_key(x));
+        assert_eq!(
+            xs.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+            by_key.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+        );
     }
 }
