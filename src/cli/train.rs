@@ -251,19 +251,22 @@ pub fn run(args: TrainArgs) -> Result<()> {
                 );
             }
             if !args.quiet {
+                let hull = if init.hull > 0 {
+                    format!(
+                        ", {} on the visual hull (of {} surface voxels)",
+                        init.hull, init.hull_candidates
+                    )
+                } else {
+                    String::new()
+                };
+                let random_box = if init.random > 0 {
+                    format!(" ({})", init.box_rule)
+                } else {
+                    String::new()
+                };
                 println!(
-                    "initial billboards: {} from SfM points, {} on the sky sphere (radius {:.2}), {} on the visual hull (of {} surface voxels), {} random{}",
-                    init.sfm,
-                    init.sky,
-                    init.sky_radius,
-                    init.hull,
-                    init.hull_candidates,
-                    init.random,
-                    if init.random > 0 {
-                        format!(" ({})", init.box_rule)
-                    } else {
-                        String::new()
-                    }
+                    "initial billboards: {} from SfM points, {} on the sky sphere (radius {:.2}){hull}, {} random{random_box}",
+                    init.sfm, init.sky, init.sky_radius, init.random,
                 );
             }
             Trainer::new(model, config)
