@@ -161,5 +161,7 @@ pub fn random_scene(config: &RandomSceneConfig) -> Billboards {
         b.alpha.extend((0..t).map(|_| rng.range(lo, hi)));
         b.colour.extend((0..3 * t).map(|_| rng.uniform()));
     }
+    b.alpha = crate::memory::copied(&b.alpha);
+    b.colour = crate::memory::copied(&b.colour);
     b
 }

@@ -21,6 +21,7 @@ pub mod eval;
 pub mod gradcheck;
 pub mod init;
 pub mod loss;
+pub mod memory;
 pub mod model;
 pub mod model_file;
 pub mod raster;

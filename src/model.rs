@@ -212,8 +212,8 @@ impl Model {
             quaternions: self.quaternions.clone(),
             log_scales: self.log_scales.clone(),
             sh: self.sh.clone(),
-            alpha: vec![0.0; self.alpha_logits.len()],
-            colour: vec![0.0; self.colour_logits.len()],
+            alpha: crate::memory::filled(self.alpha_logits.len(), 0.0),
+            colour: crate::memory::filled(self.colour_logits.len(), 0.0),
             texture_size: self.texture_size,
         };
         for i in 0..self.len() {

@@ -53,8 +53,8 @@ impl RenderGradients {
             quaternions: vec![[0.0; 4]; n],
             log_scales: vec![Vec2::ZERO; n],
             sh: vec![0.0; n * SH_FLOATS],
-            alpha: vec![0.0; n * t],
-            colour: vec![0.0; n * 3 * t],
+            alpha: crate::memory::filled(n * t, 0.0),
+            colour: crate::memory::filled(n * 3 * t, 0.0),
             background: Vec3::ZERO,
         }
     }

@@ -53,8 +53,8 @@ impl AdamGroup {
     pub fn new(rows: usize, row_len: usize) -> Self {
         Self {
             row_len,
-            m: vec![0.0; rows * row_len],
-            v: vec![0.0; rows * row_len],
+            m: crate::memory::filled(rows * row_len, 0.0),
+            v: crate::memory::filled(rows * row_len, 0.0),
             steps: vec![0; rows],
             global_step: 0,
         }

@@ -203,10 +203,13 @@ impl<'a> Reader<'a> {
             .checked_mul(4)
             .ok_or_else(|| self.inconsistent(format!("{what}: size overflows")))?;
         let raw = self.take(bytes, what)?;
-        Ok(raw
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
-            .collect())
+        // Texture and moment arrays are the large ones: keep them on huge pages (crate::memory).
+        let mut out = crate::memory::with_capacity(n);
+        out.extend(
+            raw.chunks_exact(4)
+                .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes"))),
+        );
+        Ok(out)
     }
     fn flag(&mut self, what: &str) -> Result<bool, CheckpointError> {
         match self.u8(what)? {

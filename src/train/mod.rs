@@ -307,7 +307,11 @@ impl Trainer {
     /// `clamp(mean alpha / mean shape, 1e-4, 1 − 1e-4)` (0.5 for a freshly initialised model) and
     /// its alpha logits are overwritten with `logit(o · shape)` so that the model alone renders
     /// what the trainer renders.
-    pub fn new(model: Model, config: TrainConfig) -> Self {
+    pub fn new(mut model: Model, config: TrainConfig) -> Self {
+        // The logits are read and written row by row at scattered billboards every step: keep
+        // them on huge pages (`crate::memory`), whichever way the model was built or loaded.
+        model.alpha_logits = crate::memory::copied(&model.alpha_logits);
+        model.colour_logits = crate::memory::copied(&model.colour_logits);
         let n = model.len();
         let t = model.texture_size * model.texture_size;
         let alpha0: Vec<f32> = initial_alpha(model.texture_size)

@@ -1,0 +1,99 @@
+//! Allocation of the large per-billboard arrays (textures, their gradients and optimiser
+//! moments) with a transparent-huge-page hint.
+//!
+//! The rasterizer reads and writes these arrays at scattered rows: a 16×16 texture is 1 KiB per
+//! channel, so every billboard a pixel touches is a different 4 KiB page, and at 50 000
+//! billboards the textures alone span 200 MiB, far more than the TLB covers. Backing them with
+//! 2 MiB pages removes most TLB misses. On Linux, when the kernel's transparent huge pages are in
+//! `madvise` mode (`/sys/kernel/mm/transparent_hugepage/enabled`), a region gets them only if
+//! the process asks with `madvise(MADV_HUGEPAGE)` *before* its pages are first touched; the
+//! helpers here allocate, ask, and only then write. Elsewhere, or when the kernel refuses,
+//! they are plain allocations: the hint never changes a value, only where it lives.
+
+/// Arrays smaller than this are allocated without the hint (2 MiB pages would not pay off).
+pub const HUGE_PAGE_MIN_BYTES: usize = 4 << 20;
+
+/// Size of a transparent huge page on x86-64 and most aarch64 kernels.
+const HUGE_PAGE: usize = 2 << 20;
+
+/// An empty vector with room for `capacity` values, its storage hinted to use huge pages when
+/// it is at least [`HUGE_PAGE_MIN_BYTES`] long. Fill it without reallocating (`extend`, `push`
+/// up to the capacity) to keep the hint.
+///
+/// ```
+/// let mut v = bbsplat::memory::with_capacity::<f32>(4);
+/// v.extend([1.0, 2.0]);
+/// assert!(v.capacity() >= 4);
+/// ```
+pub fn with_capacity<T>(capacity: usize) -> Vec<T> {
+    let v = Vec::with_capacity(capacity);
+    advise(&v);
+    v
+}
+
+/// A vector of `len` copies of `value`, its storage hinted to use huge pages (see
+/// [`with_capacity`]).
+///
+/// ```
+/// let v = bbsplat::memory::filled(3, 0.5f32);
+/// assert_eq!(v, vec![0.5; 3]);
+/// ```
+pub fn filled<T: Clone>(len: usize, value: T) -> Vec<T> {
+    let mut v = with_capacity(len);
+    v.resize(len, value);
+    v
+}
+
+/// A copy of `src` whose storage is hinted to use huge pages (see [`filled`]).
+///
+/// ```
+/// assert_eq!(bbsplat::memory::copied(&[1u8, 2, 3]), vec![1, 2, 3]);
+/// ```
+pub fn copied<T: Clone>(src: &[T]) -> Vec<T> {
+    let mut v = with_capacity(src.len());
+    v.extend_from_slice(src);
+    v
+}
+
+/// Asks the kernel to back the 2 MiB-aligned part of `v`'s capacity with huge pages.
+fn advise<T>(v: &Vec<T>) {
+    let bytes = v.capacity() * size_of::<T>();
+    if bytes < HUGE_PAGE_MIN_BYTES {
+        return;
+    }
+    let start = (v.as_ptr() as usize).next_multiple_of(HUGE_PAGE);
+    let end = (v.as_ptr() as usize + bytes) / HUGE_PAGE * HUGE_PAGE;
+    if end > start {
+        advise_range(start, end - start);
+    }
+}
+
+#[cfg(target_os = "linux")]
+fn advise_range(start: usize, len: usize) {
+    // SAFETY: `start..start + len` lies inside one live allocation owned by the caller's vector
+    // and is page-aligned; MADV_HUGEPAGE only changes how the kernel backs those pages, never
+    // their contents, and a refusal (EINVAL when THP is compiled out) is ignored.
+    unsafe {
+        libc::madvise(start as *mut libc::c_void, len, libc::MADV_HUGEPAGE);
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn advise_range(_start: usize, _len: usize) {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn large_and_small_vectors_hold_the_requested_values() {
+        let n = 3 * HUGE_PAGE_MIN_BYTES / 4 + 17;
+        let v = filled(n, 0.25f32);
+        assert_eq!(v.len(), n);
+        assert!(v.iter().all(|&x| x == 0.25));
+        let src: Vec<u32> = (0..n as u32).collect();
+        assert_eq!(copied(&src), src);
+        assert_eq!(filled(0, 1u8), Vec::<u8>::new());
+        assert_eq!(copied::<f64>(&[]), Vec::<f64>::new());
+    }
+}
