@@ -78,46 +78,34 @@ pub fn bin(prepared: &[Option<Prepared>], width: u32, height: u32) -> TileBins {
         billboard_offsets[b + 1] += billboard_offsets[b];
     }
     let total = tile_offsets[n_tiles] as usize;
-    // Scatter in billboard order, so that each tile starts sorted by index.
-    let mut entries = vec![0u32; total];
+    // Scatter the sort keys (depth in total order, then index) in billboard order, reading each
+    // prepared record once and in sequence; sorting each tile's (depth, index) keys gives
+    // exactly the stable depth order of an index-ordered scatter. Comparing integers gathered
+    // here, rather than loading scattered records inside the sort, keeps the sort in cache.
+    let mut keys = vec![0u64; total];
     let mut cursor: Vec<u32> = tile_offsets[..n_tiles].to_vec();
     for (b, p) in prepared.iter().enumerate() {
         if let Some(p) = p {
+            let key = (u64::from(total_order_key(p.depth)) << 32) | b as u64;
             let (lo, hi) = tile_rect(p);
             for ty in lo[1]..=hi[1] {
                 for tx in lo[0]..=hi[0] {
                     let t = (ty * tiles_x + tx) as usize;
-                    entries[cursor[t] as usize] = b as u32;
+                    keys[cursor[t] as usize] = key;
                     cursor[t] += 1;
                 }
             }
         }
     }
-    // Stable sort of each tile by depth keeps index order among equal depths.
-    let mut slices: Vec<&mut [u32]> = Vec::with_capacity(n_tiles);
-    let mut rest = entries.as_mut_slice();
+    let mut slices: Vec<&mut [u64]> = Vec::with_capacity(n_tiles);
+    let mut rest = keys.as_mut_slice();
     for t in 0..n_tiles {
         let (head, tail) = rest.split_at_mut(tile_counts[t] as usize);
         slices.push(head);
         rest = tail;
     }
-    // Sort keys (depth in total order, then index) are gathered once per entry, so the sort
-    // compares integers instead of loading two scattered records per comparison; sorting
-    // (depth, index) pairs gives exactly the stable depth order of the index-ordered scatter.
-    let depth_of = |b: u32| prepared[b as usize].as_ref().map_or(0.0, |p| p.depth);
-    slices
-        .into_par_iter()
-        .for_each_init(Vec::new, |keys: &mut Vec<u64>, s| {
-            keys.clear();
-            keys.extend(
-                s.iter()
-                    .map(|&b| (u64::from(total_order_key(depth_of(b))) << 32) | u64::from(b)),
-            );
-            keys.sort_unstable();
-            for (e, &k) in s.iter_mut().zip(keys.iter()) {
-                *e = k as u32;
-            }
-        });
+    slices.into_par_iter().for_each(|s| s.sort_unstable());
+    let entries: Vec<u32> = keys.iter().map(|&k| k as u32).collect();
     // Billboard-major index, each billboard's entries in tile order.
     let mut billboard_entries = vec![0u32; total];
     let mut bcursor: Vec<u32> = billboard_offsets[..prepared.len()].to_vec();
