@@ -219,6 +219,30 @@ fn missing_file_and_unwritable_folder_are_io_errors() {
 }
 
 #[test]
+fn streamed_file_equals_the_in_memory_checkpoint() {
+    let dir = temp_dir("stream");
+    for (adam, mode) in [
+        (AdamMode::Sparse, TextureMode::Full),
+        (AdamMode::Dense, TextureMode::Gaussian),
+    ] {
+        let (mut tr, views) = setup(adam, mode);
+        for _ in 0..3 {
+            tr.step(&views).unwrap();
+        }
+        let path = dir.join("s.ckpt");
+        tr.save_checkpoint(&path).unwrap();
+        let on_disk = std::fs::read(&path).unwrap();
+        assert!(
+            on_disk == tr.checkpoint_bytes(),
+            "{adam:?} {mode:?}: streamed bytes differ"
+        );
+        let back = Trainer::load_checkpoint(&path).unwrap();
+        assert!(back.checkpoint_bytes() == on_disk, "{adam:?} {mode:?}: round trip");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
 fn bad_views_are_typed_errors_and_leave_the_trainer_unchanged() {
     let (mut tr, mut views) = setup(AdamMode::Dense, TextureMode::Full);
     let before = tr.checkpoint_bytes();

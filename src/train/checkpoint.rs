@@ -119,9 +119,16 @@ pub enum CheckpointError {
     },
 }
 
+/// FNV-1a 64 offset basis (the hash of no bytes).
+const FNV_BASIS: u64 = 0xcbf2_9ce4_8422_2325;
+
 /// FNV-1a, 64 bit.
 fn fnv1a(data: &[u8]) -> u64 {
-    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    fnv1a_update(FNV_BASIS, data)
+}
+
+/// Continues an FNV-1a 64 hash over `data`.
+fn fnv1a_update(mut h: u64, data: &[u8]) -> u64 {
     for &b in data {
         h ^= b as u64;
         h = h.wrapping_mul(0x0000_0100_0000_01b3);
@@ -129,25 +136,75 @@ fn fnv1a(data: &[u8]) -> u64 {
     h
 }
 
-struct Writer(Vec<u8>);
+/// Where [`encode_into`] puts the checkpoint bytes: counted, collected or streamed to a file.
+trait Sink {
+    fn put(&mut self, bytes: &[u8]);
+}
 
-impl Writer {
+impl<S: Sink> Sink for &mut S {
+    fn put(&mut self, bytes: &[u8]) {
+        (**self).put(bytes);
+    }
+}
+
+/// Counts the bytes (first pass of a streamed save: the header stores the file length).
+struct Counter(u64);
+
+impl Sink for Counter {
+    fn put(&mut self, bytes: &[u8]) {
+        self.0 += bytes.len() as u64;
+    }
+}
+
+impl Sink for Vec<u8> {
+    fn put(&mut self, bytes: &[u8]) {
+        self.extend_from_slice(bytes);
+    }
+}
+
+/// Writes through to `out` while hashing; the first I/O error is kept and later writes skipped.
+struct HashingWriter<W: Write> {
+    out: W,
+    hash: u64,
+    error: Option<std::io::Error>,
+}
+
+impl<W: Write> Sink for HashingWriter<W> {
+    fn put(&mut self, bytes: &[u8]) {
+        if self.error.is_some() {
+            return;
+        }
+        self.hash = fnv1a_update(self.hash, bytes);
+        if let Err(e) = self.out.write_all(bytes) {
+            self.error = Some(e);
+        }
+    }
+}
+
+struct Writer<S: Sink>(S);
+
+impl<S: Sink> Writer<S> {
     fn u8(&mut self, x: u8) {
-        self.0.push(x);
+        self.0.put(&[x]);
     }
     fn u32(&mut self, x: u32) {
-        self.0.extend_from_slice(&x.to_le_bytes());
+        self.0.put(&x.to_le_bytes());
     }
     fn u64(&mut self, x: u64) {
-        self.0.extend_from_slice(&x.to_le_bytes());
+        self.0.put(&x.to_le_bytes());
     }
     fn f32(&mut self, x: f32) {
-        self.0.extend_from_slice(&x.to_le_bytes());
+        self.0.put(&x.to_le_bytes());
     }
+    /// Little-endian floats, converted through a small buffer so that large arrays stream
+    /// without a second copy of their size.
     fn f32s(&mut self, xs: &[f32]) {
-        self.0.reserve(4 * xs.len());
-        for &x in xs {
-            self.f32(x);
+        let mut buf = [0u8; 4 * 1024];
+        for chunk in xs.chunks(1024) {
+            for (b, x) in buf.chunks_exact_mut(4).zip(chunk) {
+                b.copy_from_slice(&x.to_le_bytes());
+            }
+            self.0.put(&buf[..4 * chunk.len()]);
         }
     }
 }
@@ -220,11 +277,30 @@ impl<'a> Reader<'a> {
     }
 }
 
+/// The checkpoint of `tr` in memory.
 fn encode(tr: &Trainer) -> Vec<u8> {
-    let mut w = Writer(Vec::new());
-    w.0.extend_from_slice(&MAGIC);
+    let len = encoded_len(tr);
+    let mut bytes = Vec::with_capacity(len as usize);
+    encode_into(tr, len, &mut bytes);
+    let sum = fnv1a(&bytes);
+    bytes.extend_from_slice(&sum.to_le_bytes());
+    bytes
+}
+
+/// Total checkpoint length in bytes, checksum included (a counting pass of [`encode_into`]).
+fn encoded_len(tr: &Trainer) -> u64 {
+    let mut counter = Counter(0);
+    encode_into(tr, 0, &mut counter);
+    counter.0 + 8
+}
+
+/// Every byte of the checkpoint before the checksum; `len` is the total file length stored in
+/// the header.
+fn encode_into<S: Sink>(tr: &Trainer, len: u64, sink: &mut S) {
+    let mut w = Writer(sink);
+    w.0.put(&MAGIC);
     w.u32(VERSION);
-    w.u64(0); // file length, patched below
+    w.u64(len);
     let c = &tr.config;
     w.u64(c.iterations as u64);
     w.u32(c.sh_degree);
@@ -283,11 +359,6 @@ fn encode(tr: &Trainer) -> Vec<u8> {
             w.u32(s);
         }
     }
-    let len = (w.0.len() + 8) as u64;
-    w.0[12..20].copy_from_slice(&len.to_le_bytes());
-    let sum = fnv1a(&w.0);
-    w.u64(sum);
-    w.0
 }
 
 fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
@@ -476,6 +547,15 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
 /// Writes `bytes` to `path` atomically: a temporary file in the same folder, flushed to disk,
 /// then renamed over `path`. On error the temporary file is removed and `path` is untouched.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), CheckpointError> {
+    write_atomic_with(path, |f| f.write_all(bytes))
+}
+
+/// Like [`write_atomic`], the content written by `write` into the temporary file (which it must
+/// not leave partly buffered: flush any buffer it wraps around the file).
+fn write_atomic_with(
+    path: &Path,
+    write: impl FnOnce(&mut std::fs::File) -> std::io::Result<()>,
+) -> Result<(), CheckpointError> {
     let io = |action: &'static str| {
         move |source| CheckpointError::Io {
             path: path.to_path_buf(),
@@ -501,7 +581,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), CheckpointError> {
     let tmp = dir.join(format!(".{name}.tmp.{}.{serial}", std::process::id()));
     let result = (|| {
         let mut f = std::fs::File::create(&tmp).map_err(io("creating the temporary file"))?;
-        f.write_all(bytes).map_err(io("writing"))?;
+        write(&mut f).map_err(io("writing"))?;
         f.sync_all().map_err(io("flushing to disk"))?;
         drop(f);
         std::fs::rename(&tmp, path).map_err(io("renaming the temporary file"))
@@ -528,10 +608,28 @@ impl Trainer {
 
     /// Saves the whole training state to `path` atomically (temporary file + rename).
     ///
+    /// The file is streamed (a counting pass gives the length stored in the header, then the
+    /// bytes go through a 1 MiB buffer while being hashed), so saving needs no in-memory copy of
+    /// the checkpoint; the bytes are those of [`Trainer::checkpoint_bytes`].
+    ///
     /// # Errors
     /// [`CheckpointError::Io`] when the folder cannot be written.
     pub fn save_checkpoint(&self, path: impl AsRef<Path>) -> Result<(), CheckpointError> {
-        write_atomic(path.as_ref(), &encode(self))
+        let len = encoded_len(self);
+        write_atomic_with(path.as_ref(), |file| {
+            let mut sink = HashingWriter {
+                out: std::io::BufWriter::with_capacity(1 << 20, file),
+                hash: FNV_BASIS,
+                error: None,
+            };
+            encode_into(self, len, &mut sink);
+            if let Some(e) = sink.error {
+                return Err(e);
+            }
+            let mut out = sink.out;
+            out.write_all(&sink.hash.to_le_bytes())?;
+            out.flush()
+        })
     }
 
     /// Loads a trainer saved by [`Trainer::save_checkpoint`]; continuing it is bit-identical to
