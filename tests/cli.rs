@@ -83,17 +83,8 @@ fn run_ok(args: &[&str]) -> String {
 #[test]
 fn train_render_and_eval_run_on_a_tiny_scene() {
     let root = temp("workflow");
-    let data = root.join("data");
+    let data = export_demo(&root, 24, 100);
     let out = root.join("out");
-    run_ok(&[
-        "demo",
-        "--export",
-        data.to_str().unwrap(),
-        "--resolution",
-        "24",
-        "--billboards",
-        "100",
-    ]);
     assert!(data.join("sparse/0/cameras.bin").exists());
     let printed = run_ok(&[
         "train",
@@ -156,16 +147,7 @@ fn train_names_a_missing_scene_folder() {
 #[test]
 fn eval_names_an_unreadable_model() {
     let root = temp("badmodel");
-    let data = root.join("data");
-    run_ok(&[
-        "demo",
-        "--export",
-        data.to_str().unwrap(),
-        "--resolution",
-        "16",
-        "--billboards",
-        "20",
-    ]);
+    let data = export_demo(&root, 16, 20);
     let model = root.join("model");
     std::fs::create_dir_all(&model).unwrap();
     std::fs::write(model.join("point_cloud.ply"), b"ply\nformat garbage\n").unwrap();
@@ -173,6 +155,22 @@ fn eval_names_an_unreadable_model() {
     assert!(!ok);
     assert!(err.contains("point_cloud.ply") || err.contains("bbsplat.json"), "{err}");
     std::fs::remove_dir_all(&root).ok();
+}
+
+/// Exports the demo scene at `resolution` px with `billboards` into `root/data`; returns that folder.
+fn export_demo(root: &std::path::Path, resolution: u32, billboards: usize) -> std::path::PathBuf {
+    let data = root.join("data");
+    let (resolution, billboards) = (resolution.to_string(), billboards.to_string());
+    run_ok(&[
+        "demo",
+        "--export",
+        data.to_str().unwrap(),
+        "--resolution",
+        &resolution,
+        "--billboards",
+        &billboards,
+    ]);
+    data
 }
 
 fn tiny_train_args<'a>(data: &'a str, out: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
@@ -199,16 +197,7 @@ fn tiny_train_args<'a>(data: &'a str, out: &'a str, extra: &[&'a str]) -> Vec<&'
 #[test]
 fn a_stopped_and_resumed_run_equals_an_uninterrupted_one_bit_for_bit() {
     let root = temp("resume");
-    let data = root.join("data");
-    run_ok(&[
-        "demo",
-        "--export",
-        data.to_str().unwrap(),
-        "--resolution",
-        "24",
-        "--billboards",
-        "100",
-    ]);
+    let data = export_demo(&root, 24, 100);
     let (d, a, b) = (
         data.to_str().unwrap(),
         root.join("a").to_str().unwrap().to_string(),
@@ -251,16 +240,7 @@ fn a_stopped_and_resumed_run_equals_an_uninterrupted_one_bit_for_bit() {
 fn ctrl_c_saves_a_checkpoint_and_exits_cleanly() {
     use std::io::BufRead;
     let root = temp("sigint");
-    let data = root.join("data");
-    run_ok(&[
-        "demo",
-        "--export",
-        data.to_str().unwrap(),
-        "--resolution",
-        "24",
-        "--billboards",
-        "100",
-    ]);
+    let data = export_demo(&root, 24, 100);
     let out = root.join("out");
     let mut child = Command::new(env!("CARGO_BIN_EXE_bbsplat"))
         .args([
@@ -368,16 +348,7 @@ fn hull_initialisation_needs_alpha_masks() {
 #[test]
 fn coarse_to_fine_resumes_across_the_switch_bit_for_bit() {
     let root = temp("coarse");
-    let data = root.join("data");
-    run_ok(&[
-        "demo",
-        "--export",
-        data.to_str().unwrap(),
-        "--resolution",
-        "24",
-        "--billboards",
-        "100",
-    ]);
+    let data = export_demo(&root, 24, 100);
     let d = data.to_str().unwrap();
     let out = |name: &str| root.join(name).to_str().unwrap().to_string();
     let (plain, a, b) = (out("plain"), out("a"), out("b"));
