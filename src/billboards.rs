@@ -134,6 +134,9 @@ pub fn random_scene(config: &RandomSceneConfig) -> Billboards {
     let ts = config.texture_size;
     let t = ts * ts;
     let mut b = Billboards::empty(ts);
+    // The textures are the arrays the rasterizer reads at random rows: huge-page storage.
+    b.alpha = crate::memory::with_capacity(config.billboards * t);
+    b.colour = crate::memory::with_capacity(config.billboards * 3 * t);
     for _ in 0..config.billboards {
         let (x, y) = (
             rng.range(0.0, config.width as f32),
@@ -161,7 +164,5 @@ pub fn random_scene(config: &RandomSceneConfig) -> Billboards {
         b.alpha.extend((0..t).map(|_| rng.range(lo, hi)));
         b.colour.extend((0..3 * t).map(|_| rng.uniform()));
     }
-    b.alpha = crate::memory::copied(&b.alpha);
-    b.colour = crate::memory::copied(&b.colour);
     b
 }

@@ -113,7 +113,10 @@ pub struct Model {
     pub log_scales: Vec<Vec2>,
     /// SH coefficients, 48 per billboard.
     pub sh: Vec<f32>,
-    /// Alpha logits, `TS²` per billboard.
+    /// Alpha logits, `TS²` per billboard. The crate's constructors ([`Model::from_points`],
+    /// `model_file::load_model`, checkpoints) allocate both logit arrays with
+    /// [`crate::memory`]'s huge-page hint; a model assembled by hand works the same, only
+    /// without the hint.
     pub alpha_logits: Vec<f32>,
     /// Colour logits, `3·TS²` per billboard.
     pub colour_logits: Vec<f32>,
@@ -187,8 +190,8 @@ impl Model {
             quaternions: Vec::with_capacity(n),
             log_scales: Vec::with_capacity(n),
             sh: vec![0.0; n * SH_FLOATS],
-            alpha_logits: Vec::with_capacity(n * t),
-            colour_logits: vec![logit(0.1); n * 3 * t],
+            alpha_logits: crate::memory::with_capacity(n * t),
+            colour_logits: crate::memory::filled(n * 3 * t, logit(0.1)),
             alpha_mask,
             texture_size,
         };

@@ -503,8 +503,8 @@ pub fn load_model(dir: &Path) -> Result<(Model, ModelMeta), ModelFileError> {
         quaternions: Vec::with_capacity(n),
         log_scales: Vec::with_capacity(n),
         sh: vec![0.0; n * SH_FLOATS],
-        alpha_logits: Vec::with_capacity(n * t),
-        colour_logits: Vec::with_capacity(n * 3 * t),
+        alpha_logits: crate::memory::with_capacity(n * t),
+        colour_logits: crate::memory::with_capacity(n * 3 * t),
         alpha_mask: standard_alpha_mask(ts),
         texture_size: ts,
     };

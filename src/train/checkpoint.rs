@@ -46,7 +46,7 @@
 use super::adam::AdamGroup;
 use super::{AdamMode, TextureMode, TrainConfig, Trainer, adam_groups, group};
 use crate::model::Model;
-use crate::raster::{RenderGradients, SH_FLOATS};
+use crate::raster::SH_FLOATS;
 use crate::rng::Rng;
 use glam::{Vec2, Vec3};
 use std::io::Write;
@@ -522,12 +522,13 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
     if r.pos != body.len() {
         return Err(r.inconsistent(format!("{} unexpected bytes before the checksum", body.len() - r.pos)));
     }
-    let mut trainer = Trainer::new(
+    let mut trainer = Trainer::with_adam(
         model,
         TrainConfig {
             texture_mode: TextureMode::Full,
             ..config
         },
+        adam,
     );
     trainer.config = config;
     trainer.opacity_logits = opacity_logits;
@@ -536,8 +537,6 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
             trainer.refresh_row(b);
         }
     }
-    trainer.adam = adam;
-    trainer.grads = RenderGradients::zeros(n, ts);
     trainer.order = order;
     trainer.rng = rng;
     trainer.step = step;

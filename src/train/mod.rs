@@ -307,11 +307,14 @@ impl Trainer {
     /// `clamp(mean alpha / mean shape, 1e-4, 1 − 1e-4)` (0.5 for a freshly initialised model) and
     /// its alpha logits are overwritten with `logit(o · shape)` so that the model alone renders
     /// what the trainer renders.
-    pub fn new(mut model: Model, config: TrainConfig) -> Self {
-        // The logits are read and written row by row at scattered billboards every step: keep
-        // them on huge pages (`crate::memory`), whichever way the model was built or loaded.
-        model.alpha_logits = crate::memory::copied(&model.alpha_logits);
-        model.colour_logits = crate::memory::copied(&model.colour_logits);
+    pub fn new(model: Model, config: TrainConfig) -> Self {
+        let adam = adam_groups(model.len(), model.texture_size * model.texture_size);
+        Self::with_adam(model, config, adam)
+    }
+
+    /// [`Trainer::new`] with given optimiser state (a checkpoint's), so that loading does not
+    /// first allocate zero moments only to replace them.
+    pub(crate) fn with_adam(model: Model, config: TrainConfig, adam: [AdamGroup; group::COUNT]) -> Self {
         let n = model.len();
         let t = model.texture_size * model.texture_size;
         let alpha0: Vec<f32> = initial_alpha(model.texture_size)
@@ -333,7 +336,7 @@ impl Trainer {
         };
         let mut trainer = Self {
             grads: RenderGradients::zeros(n, model.texture_size),
-            adam: adam_groups(n, t),
+            adam,
             model,
             activated,
             config,
