@@ -136,7 +136,7 @@ fn fnv1a_update(mut h: u64, data: &[u8]) -> u64 {
     h
 }
 
-/// Where [`encode_into`] puts the checkpoint bytes: counted, collected or streamed to a file.
+/// Where [`encode_into`] puts the checkpoint bytes: counted, or hashed and written.
 trait Sink {
     fn put(&mut self, bytes: &[u8]);
 }
@@ -153,12 +153,6 @@ struct Counter(u64);
 impl Sink for Counter {
     fn put(&mut self, bytes: &[u8]) {
         self.0 += bytes.len() as u64;
-    }
-}
-
-impl Sink for Vec<u8> {
-    fn put(&mut self, bytes: &[u8]) {
-        self.extend_from_slice(bytes);
     }
 }
 
@@ -280,11 +274,24 @@ impl<'a> Reader<'a> {
 /// The checkpoint of `tr` in memory.
 fn encode(tr: &Trainer) -> Vec<u8> {
     let len = encoded_len(tr);
-    let mut bytes = Vec::with_capacity(len as usize);
-    encode_into(tr, len, &mut bytes);
-    let sum = fnv1a(&bytes);
-    bytes.extend_from_slice(&sum.to_le_bytes());
-    bytes
+    write_checkpoint(tr, len, Vec::with_capacity(len as usize)).expect("writing to a Vec cannot fail")
+}
+
+/// Writes the whole checkpoint of `tr` (total length `len`, from [`encoded_len`]) to `out`,
+/// hashing the bytes on the way and appending the checksum; returns `out`, not flushed.
+fn write_checkpoint<W: Write>(tr: &Trainer, len: u64, out: W) -> std::io::Result<W> {
+    let mut sink = HashingWriter {
+        out,
+        hash: FNV_BASIS,
+        error: None,
+    };
+    encode_into(tr, len, &mut sink);
+    if let Some(e) = sink.error {
+        return Err(e);
+    }
+    let mut out = sink.out;
+    out.write_all(&sink.hash.to_le_bytes())?;
+    Ok(out)
 }
 
 /// Total checkpoint length in bytes, checksum included (a counting pass of [`encode_into`]).
@@ -616,18 +623,7 @@ impl Trainer {
     pub fn save_checkpoint(&self, path: impl AsRef<Path>) -> Result<(), CheckpointError> {
         let len = encoded_len(self);
         write_atomic_with(path.as_ref(), |file| {
-            let mut sink = HashingWriter {
-                out: std::io::BufWriter::with_capacity(1 << 20, file),
-                hash: FNV_BASIS,
-                error: None,
-            };
-            encode_into(self, len, &mut sink);
-            if let Some(e) = sink.error {
-                return Err(e);
-            }
-            let mut out = sink.out;
-            out.write_all(&sink.hash.to_le_bytes())?;
-            out.flush()
+            write_checkpoint(self, len, std::io::BufWriter::with_capacity(1 << 20, file))?.flush()
         })
     }
 
