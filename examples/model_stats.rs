@@ -11,11 +11,14 @@
 //! `MODEL` is a model folder written by `bbsplat train` or a checkpoint file
 //! (`checkpoint.bin`, e.g. from `--stop-after`). The background defaults to the one stored in
 //! the model; `VIEWS` (default 5) test views are rendered `REPEATS` times each (default 1), after
-//! one warm-up render. The backward pass is fed the gradient of `½‖render − image‖²`.
+//! one warm-up render. The backward pass is fed the gradient of `½‖render − image‖²`. Times are
+//! wall clock and process CPU time (all threads, without the time spent waiting for a core:
+//! the steadier figure on a shared machine).
 use bbsplat::model::Model;
 use bbsplat::model_file::load_model;
 use bbsplat::raster::backward::ImageGradients;
 use bbsplat::raster::{RenderGradients, RenderSettings, render, render_backward};
+use bbsplat::report::process_cpu_ms;
 use bbsplat::scene::{Background, LoadOptions, load};
 use bbsplat::train::Trainer;
 use glam::Vec3;
@@ -79,20 +82,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         set.texture_size
     );
     println!(
-        "| view | pixels | tile entries | evaluated pairs / px | blended pairs / px | forward ms | forward+backward ms |"
+        "| view | pixels | tile entries | evaluated pairs / px | blended pairs / px | forward ms | forward+backward ms | forward CPU ms | forward+backward CPU ms |"
     );
-    println!("|---|--:|--:|--:|--:|--:|--:|");
+    println!("|---|--:|--:|--:|--:|--:|--:|--:|--:|");
     let mut grads = RenderGradients::zeros(set.len(), set.texture_size);
     let mut hasher = DefaultHasher::new();
     let (mut sum_fwd, mut sum_both, mut count) = (0.0, 0.0, 0usize);
+    let (mut sum_fwd_cpu, mut sum_both_cpu) = (0.0, 0.0);
     for view in test.iter().take(views) {
         let target = view.image.to_f32_rgb();
         let (mut fwd_ms, mut both_ms) = (0.0, 0.0);
+        let (mut fwd_cpu, mut both_cpu) = (0.0, 0.0);
         let mut stats = None;
         for _ in 0..repeats {
-            let start = Instant::now();
+            let (start, cpu_start) = (Instant::now(), process_cpu_ms());
             let out = render(&set, &view.camera, &settings);
             fwd_ms += start.elapsed().as_secs_f64() * 1e3;
+            fwd_cpu += process_cpu_ms() - cpu_start;
             let d_rgb: Vec<f32> = out.rgb.iter().zip(&target).map(|(r, t)| r - t).collect();
             let ig = ImageGradients {
                 rgb: &d_rgb,
@@ -101,6 +107,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             };
             let touched = render_backward(&set, &out, &ig, &mut grads);
             both_ms += start.elapsed().as_secs_f64() * 1e3;
+            both_cpu += process_cpu_ms() - cpu_start;
             out.rgb.iter().for_each(|v| v.to_bits().hash(&mut hasher));
             touched.hash(&mut hasher);
             grads
@@ -122,24 +129,31 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (fwd_ms, both_ms) = (fwd_ms / repeats as f64, both_ms / repeats as f64);
         sum_fwd += fwd_ms;
         sum_both += both_ms;
+        let (fwd_cpu, both_cpu) = (fwd_cpu / repeats as f64, both_cpu / repeats as f64);
+        sum_fwd_cpu += fwd_cpu;
+        sum_both_cpu += both_cpu;
         count += 1;
         let pixels = f64::from(view.camera.width) * f64::from(view.camera.height);
         println!(
-            "| {} | {} | {} | {:.1} | {:.1} | {:.1} | {:.1} |",
+            "| {} | {} | {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} |",
             view.name,
             pixels,
             stats.tile_entries,
             stats.evaluated_pairs as f64 / pixels,
             stats.blended_pairs as f64 / pixels,
             fwd_ms,
-            both_ms
+            both_ms,
+            fwd_cpu,
+            both_cpu
         );
     }
     let n = count.max(1) as f64;
     println!(
-        "mean: forward {:.1} ms, forward+backward {:.1} ms; checksum {:016x}",
+        "mean: forward {:.1} ms, forward+backward {:.1} ms (CPU {:.1}, {:.1} ms); checksum {:016x}",
         sum_fwd / n,
         sum_both / n,
+        sum_fwd_cpu / n,
+        sum_both_cpu / n,
         hasher.finish()
     );
     Ok(())

@@ -10,20 +10,8 @@ use bbsplat::raster::backward::ImageGradients;
 use bbsplat::raster::binning::bin;
 use bbsplat::raster::preprocess::preprocess;
 use bbsplat::raster::{RenderGradients, RenderSettings, render, render_backward};
+use bbsplat::report::process_cpu_ms as cpu_ms;
 use std::time::Instant;
-
-/// CPU time of all threads of this process so far, in ms (Linux `schedstat`; 0 elsewhere):
-/// on a shared machine it excludes the time the threads waited for a core.
-fn cpu_ms() -> f64 {
-    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else {
-        return 0.0;
-    };
-    tasks
-        .filter_map(|t| std::fs::read_to_string(t.ok()?.path().join("schedstat")).ok())
-        .filter_map(|s| s.split_whitespace().next()?.parse::<f64>().ok())
-        .sum::<f64>()
-        / 1e6
-}
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();

@@ -82,6 +82,28 @@ pub fn peak_rss_bytes() -> u64 {
         .map_or(0, |kb| kb * 1024)
 }
 
+/// CPU time consumed so far by all threads of this process, in milliseconds (the first field of
+/// each `/proc/self/task/*/schedstat`), or 0 when the platform does not expose it. On a shared
+/// machine it excludes the time the threads waited for a core, so differences of it measure work
+/// done rather than wall time; the benchmark harnesses (`examples/raster_stats`,
+/// `examples/model_stats`) report both.
+///
+/// ```
+/// let before = bbsplat::report::process_cpu_ms();
+/// let x: f64 = (0..100_000).map(|i| (i as f64).sqrt()).sum();
+/// assert!(x > 0.0 && bbsplat::report::process_cpu_ms() >= before);
+/// ```
+pub fn process_cpu_ms() -> f64 {
+    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else {
+        return 0.0;
+    };
+    tasks
+        .filter_map(|t| std::fs::read_to_string(t.ok()?.path().join("schedstat")).ok())
+        .filter_map(|s| s.split_whitespace().next()?.parse::<f64>().ok())
+        .sum::<f64>()
+        / 1e6
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

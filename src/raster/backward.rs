@@ -8,8 +8,9 @@
 //!
 //! Gradients are first accumulated per tile entry (one (tile, billboard) pair) in the tile's
 //! scratch, then summed per billboard over its entries in tile order, so the result does not
-//! depend on how rayon schedules tiles. Texture gradients are kept sparse per entry (only the
-//! texels some pixel of the tile touched).
+//! depend on how rayon schedules tiles. Texture gradients are summed per (entry, texel) in a
+//! dense per-thread accumulator as the pixels produce them and handed on sparse per entry (only
+//! the texels some pixel of the tile touched); see `TexelSums`.
 
 use super::forward::{RenderOutput, TileCandidates, prefetch, prefetch_ref, split_by_lengths, tile_pixels};
 use super::preprocess::Prepared;
@@ -130,94 +131,98 @@ struct TileGrads {
 #[derive(Default)]
 struct Scratch {
     blended: Vec<Blended>,
-    /// Texture-gradient contributions `(entry slot, texel, [∂alpha, ∂r, ∂g, ∂b])` in pixel
-    /// order; grouped by slot and summed per (slot, texel) in pixel order at the end of the tile
-    /// ([`merge_texture_log`]), so the sums are taken in a fixed order. Its size is proportional to the tile's pairs, not to its entries
-    /// times the texture size.
-    log: Vec<(u32, u32, [f32; 4])>,
-    merge: MergeScratch,
     candidates: TileCandidates,
 }
 
-/// Scratch of [`merge_texture_log`], reused across the tiles of a task.
-#[derive(Default)]
-struct MergeScratch {
-    /// Log positions grouped by slot (a stable counting sort: pixel order within a slot).
-    order: Vec<u32>,
-    cursor: Vec<u32>,
-    /// Dense per-texel sums of the slot being merged, and whether the texel has been seen.
-    sums: Vec<[f32; 4]>,
-    seen: Vec<bool>,
-    touched: Vec<u32>,
-}
-
-/// Groups a tile's texture-gradient log by entry slot and sums the contributions of each
-/// (slot, texel) in log (pixel) order, starting from the first one: the same sums, added in the
-/// same order, as a stable sort by (slot, texel) followed by a merge of equal keys
-/// ([`merge_texture_log_reference`]), in `O(log + texels)` instead of a comparison sort. Within
-/// a slot the texels come out in first-touch order (the per-billboard reduction adds each of
-/// them once, so their order does not change any sum).
+/// Per-tile texture-gradient sums, dense over (entry slot, texel) and reused by every tile a
+/// thread processes (see [`TEXEL_SUMS`]).
 ///
-/// Returns `(offsets, texels)`: the texels of slot `k` are `texels[offsets[k]..offsets[k + 1]]`.
-fn merge_texture_log(
-    log: &[(u32, u32, [f32; 4])],
-    slots: usize,
+/// Each contribution is added to its (slot, texel) cell the moment the pixel pass produces it,
+/// so every cell is the sum of its contributions in pixel order, starting from the first one
+/// (assigned, not added to 0, so that a lone `−0.0` stays `−0.0`): the same sums, in the same
+/// order, as a stable sort of all contributions by (slot, texel) followed by a merge of equal
+/// keys (`texel_sums_reference`, tested). Only the touched cells are read out and reset, so a
+/// tile costs `O(contributions + touched cells)` whatever its number of entries; the storage is
+/// `slots × TS²` cells of the largest tile seen so far (17 bytes a cell).
+#[derive(Default)]
+struct TexelSums {
+    /// `[∂alpha, ∂r, ∂g, ∂b]` of cell `slot · texels + texel`; meaningful only where `seen`.
+    sums: Vec<[f32; 4]>,
+    /// True for the cells touched in the current tile (all false between tiles).
+    seen: Vec<bool>,
+    /// Touched cells `(slot, texel)` in first-touch order.
+    touched: Vec<(u32, u32)>,
+    /// Cells per slot (`TS²`) of the current tile.
     texels: usize,
-    m: &mut MergeScratch,
-) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
-    m.cursor.clear();
-    m.cursor.resize(slots + 1, 0);
-    for &(slot, _, _) in log {
-        m.cursor[slot as usize + 1] += 1;
-    }
-    for k in 0..slots {
-        m.cursor[k + 1] += m.cursor[k];
-    }
-    m.order.clear();
-    m.order.resize(log.len(), 0);
-    for (pos, &(slot, _, _)) in log.iter().enumerate() {
-        let c = &mut m.cursor[slot as usize];
-        m.order[*c as usize] = pos as u32;
-        *c += 1;
-    }
-    if m.seen.len() < texels {
-        m.seen.resize(texels, false);
-        m.sums.resize(texels, [0.0; 4]);
-    }
-    let mut offsets = vec![0u32; slots + 1];
-    let mut out: Vec<(u32, [f32; 4])> = Vec::with_capacity(log.len());
-    // After the scatter, cursor[k] is the end of slot k, hence the start of slot k + 1.
-    for k in 0..slots {
-        m.touched.clear();
-        let start = if k == 0 { 0 } else { m.cursor[k - 1] as usize };
-        for &pos in &m.order[start..m.cursor[k] as usize] {
-            let (_, texel, g) = log[pos as usize];
-            let t = texel as usize;
-            if m.seen[t] {
-                let s = &mut m.sums[t];
-                for c in 0..4 {
-                    s[c] += g[c];
-                }
-            } else {
-                m.seen[t] = true;
-                m.sums[t] = g;
-                m.touched.push(texel);
-            }
-        }
-        for &texel in &m.touched {
-            let t = texel as usize;
-            out.push((texel, m.sums[t]));
-            m.seen[t] = false;
-        }
-        offsets[k + 1] = out.len() as u32;
-    }
-    (offsets, out)
+    /// Per-slot counts, then write cursors, of [`TexelSums::finish`].
+    cursor: Vec<u32>,
 }
 
-/// Plain reference of [`merge_texture_log`]: stable sort by (slot, texel), then each run of
-/// equal keys summed in order. Texels come out sorted within a slot.
+impl TexelSums {
+    /// Prepares for a tile of `slots` entries with `texels` texels per channel.
+    fn start(&mut self, slots: usize, texels: usize) {
+        debug_assert!(self.touched.is_empty(), "the previous tile was finished");
+        let cells = slots * texels;
+        if self.sums.len() < cells {
+            self.sums.resize(cells, [0.0; 4]);
+            self.seen.resize(cells, false);
+        }
+        self.texels = texels;
+    }
+
+    /// Adds one contribution to cell (`slot`, `texel`).
+    #[inline]
+    fn add(&mut self, slot: u32, texel: u32, g: [f32; 4]) {
+        let cell = slot as usize * self.texels + texel as usize;
+        if self.seen[cell] {
+            let s = &mut self.sums[cell];
+            for c in 0..4 {
+                s[c] += g[c];
+            }
+        } else {
+            self.seen[cell] = true;
+            self.sums[cell] = g;
+            self.touched.push((slot, texel));
+        }
+    }
+
+    /// The touched cells grouped by slot (a stable counting sort: first-touch order within a
+    /// slot), resetting them for the next tile. Returns `(offsets, texels)`: the texels of slot
+    /// `k` are `texels[offsets[k]..offsets[k + 1]]`.
+    fn finish(&mut self, slots: usize) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
+        let mut offsets = vec![0u32; slots + 1];
+        for &(slot, _) in &self.touched {
+            offsets[slot as usize + 1] += 1;
+        }
+        for k in 0..slots {
+            offsets[k + 1] += offsets[k];
+        }
+        self.cursor.clear();
+        self.cursor.extend_from_slice(&offsets[..slots]);
+        let mut out = vec![(0u32, [0.0f32; 4]); self.touched.len()];
+        for &(slot, texel) in &self.touched {
+            let cell = slot as usize * self.texels + texel as usize;
+            let c = &mut self.cursor[slot as usize];
+            out[*c as usize] = (texel, self.sums[cell]);
+            *c += 1;
+            self.seen[cell] = false;
+        }
+        self.touched.clear();
+        (offsets, out)
+    }
+}
+
+thread_local! {
+    /// Each thread's [`TexelSums`], kept across tiles and calls so that its pages are zeroed
+    /// by the kernel once, not per call.
+    static TEXEL_SUMS: std::cell::RefCell<TexelSums> = std::cell::RefCell::default();
+}
+
+/// Plain reference of [`TexelSums`]: stable sort of the contributions `(slot, texel, g)` by
+/// (slot, texel), then each run of equal keys summed in order. Texels come out sorted within a
+/// slot.
 #[cfg(test)]
-fn merge_texture_log_reference(log: &[(u32, u32, [f32; 4])], slots: usize) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
+fn texel_sums_reference(log: &[(u32, u32, [f32; 4])], slots: usize) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
     let mut log = log.to_vec();
     log.sort_by_key(|&(slot, texel, _)| (slot, texel));
     let mut counts = vec![0u32; slots + 1];
@@ -249,6 +254,7 @@ fn backward_tile(
     grads_in: &ImageGradients<'_>,
     tile: usize,
     scratch: &mut Scratch,
+    sums: &mut TexelSums,
 ) -> TileGrads {
     let state = &out.state;
     let bins = &state.bins;
@@ -268,7 +274,7 @@ fn backward_tile(
         list.len()
     ];
     let mut background = Vec3::ZERO;
-    scratch.log.clear();
+    sums.start(list.len(), ts * ts);
     let bg = settings.background;
     let rect = (i0, j0, i1, j1);
     let tw = (i1 - i0) as usize;
@@ -341,13 +347,12 @@ fn backward_tile(
                 let d_colour = g_rgb * w;
                 let b = bl.billboard as usize;
                 let slot = bl.slot;
-                let log = &mut scratch.log;
                 let (du, dv) = bl.taps.vjp_alpha_colour(
                     set.alpha_of(b),
                     set.colour_of(b),
                     d_tex_alpha,
                     d_colour.to_array(),
-                    |texel, g| log.push((slot, texel, g)),
+                    |texel, g| sums.add(slot, texel, g),
                 );
                 let pr = prepared[b].as_ref().expect("blended entries are prepared");
                 let d_t = intersect_vjp(&pr.transform, px, py, du, dv, w * g_depth);
@@ -358,7 +363,7 @@ fn backward_tile(
         }
         first = end;
     }
-    let (tex_offsets, texels_out) = merge_texture_log(&scratch.log, list.len(), ts * ts, &mut scratch.merge);
+    let (tex_offsets, texels_out) = sums.finish(list.len());
     TileGrads {
         geometry,
         tex_offsets,
@@ -402,7 +407,7 @@ pub fn render_backward(
     let tiles: Vec<TileGrads> = (0..n_tiles)
         .into_par_iter()
         .map_init(Scratch::default, |scratch, t| {
-            backward_tile(set, out, image_grads, t, scratch)
+            TEXEL_SUMS.with_borrow_mut(|sums| backward_tile(set, out, image_grads, t, scratch, sums))
         })
         .collect();
     for tg in &tiles {
@@ -537,10 +542,10 @@ pub fn render_backward(
 mod tests {
     use super::*;
 
-    /// The counting-sort merge gives, slot by slot, the same (texel, sum) set as the sort-based
+    /// The dense accumulator gives, slot by slot, the same (texel, sum) set as the sort-based
     /// reference, bit for bit.
     #[test]
-    fn merge_texture_log_matches_the_sorting_reference() {
+    fn texel_sums_match_the_sorting_reference() {
         let mut state = 0x2545f4914f6cdd1du64;
         let mut next = |m: u64| {
             state ^= state << 13;
@@ -548,7 +553,8 @@ mod tests {
             state ^= state << 17;
             state % m
         };
-        let mut scratch = MergeScratch::default();
+        // One accumulator across all cases: it must come back clean from every tile.
+        let mut sums = TexelSums::default();
         for &(slots, texels, len) in &[(1usize, 4usize, 0usize), (3, 4, 50), (17, 256, 400), (40, 16, 2000)] {
             let log: Vec<(u32, u32, [f32; 4])> = (0..len)
                 .map(|_| {
@@ -556,8 +562,13 @@ mod tests {
                     (next(slots as u64) as u32, next(texels as u64) as u32, g)
                 })
                 .collect();
-            let (offsets, out) = merge_texture_log(&log, slots, texels, &mut scratch);
-            let (ref_offsets, ref_out) = merge_texture_log_reference(&log, slots);
+            sums.start(slots, texels);
+            for &(slot, texel, g) in &log {
+                sums.add(slot, texel, g);
+            }
+            let (offsets, out) = sums.finish(slots);
+            assert!(sums.seen.iter().all(|&s| !s) && sums.touched.is_empty());
+            let (ref_offsets, ref_out) = texel_sums_reference(&log, slots);
             assert_eq!(offsets, ref_offsets);
             for k in 0..slots {
                 let r = offsets[k] as usize..offsets[k + 1] as usize;
