@@ -14,6 +14,7 @@
 //! one warm-up render. The backward pass is fed the gradient of `½‖render − image‖²`. Times are
 //! wall clock and process CPU time (all threads, without the time spent waiting for a core:
 //! the steadier figure on a shared machine).
+use bbsplat::billboards::planar_textures;
 use bbsplat::model::Model;
 use bbsplat::model_file::load_model;
 use bbsplat::raster::backward::ImageGradients;
@@ -110,10 +111,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             both_cpu += process_cpu_ms() - cpu_start;
             out.rgb.iter().for_each(|v| v.to_bits().hash(&mut hasher));
             touched.hash(&mut hasher);
-            grads
-                .alpha
+            // Planar order (alpha, then colour by channel): the checksum of the planar layout.
+            let (d_alpha, d_colour) = planar_textures(&grads.textures, set.texels());
+            d_alpha
                 .iter()
-                .chain(&grads.colour)
+                .chain(&d_colour)
                 .chain(&grads.sh)
                 .for_each(|v| v.to_bits().hash(&mut hasher));
             for b in touched {

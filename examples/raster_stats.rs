@@ -5,7 +5,7 @@
 //! `raster_stats 256 50000 loop 20` only runs 20 forward+backward calls after one warm-up and
 //! prints their mean (a steady harness for `perf record` and `valgrind`); `loopf` the same for
 //! the forward alone.
-use bbsplat::billboards::{RandomSceneConfig, random_scene, random_scene_camera};
+use bbsplat::billboards::{RandomSceneConfig, planar_textures, random_scene, random_scene_camera};
 use bbsplat::raster::backward::ImageGradients;
 use bbsplat::raster::binning::bin;
 use bbsplat::raster::preprocess::preprocess;
@@ -70,8 +70,10 @@ fn main() {
         mix(&out.depth);
         mix(&out.impact);
         mix(&g1.sh);
-        mix(&g1.alpha);
-        mix(&g1.colour);
+        // Planar order (alpha, then colour by channel): the checksum of the planar layout.
+        let (d_alpha, d_colour) = planar_textures(&g1.textures, 256);
+        mix(&d_alpha);
+        mix(&d_colour);
         mix(&g1.positions.iter().flat_map(|p| p.to_array()).collect::<Vec<_>>());
         mix(&g1.quaternions.concat());
         println!("checksum {h:016x}");

@@ -16,10 +16,8 @@ pub struct Billboards {
     pub log_scales: Vec<Vec2>,
     /// SH coefficients, 48 per billboard, `[coeff][rgb]`.
     pub sh: Vec<f32>,
-    /// Alpha textures in `[0, 1]`, `TS²` per billboard.
-    pub alpha: Vec<f32>,
-    /// Colour textures in `[0, 1]`, `3·TS²` per billboard.
-    pub colour: Vec<f32>,
+    /// Textures, `TS²` texels `[r, g, b, alpha]` in `[0, 1]` per billboard, row-major.
+    pub textures: Vec<[f32; 4]>,
     /// Texture side.
     pub texture_size: usize,
 }
@@ -32,8 +30,7 @@ impl Billboards {
             quaternions: Vec::new(),
             log_scales: Vec::new(),
             sh: Vec::new(),
-            alpha: Vec::new(),
-            colour: Vec::new(),
+            textures: Vec::new(),
             texture_size,
         }
     }
@@ -55,8 +52,7 @@ impl Billboards {
             quaternions: &self.quaternions,
             log_scales: &self.log_scales,
             sh: &self.sh,
-            alpha: &self.alpha,
-            colour: &self.colour,
+            textures: &self.textures,
             texture_size: self.texture_size,
         }
     }
@@ -69,8 +65,7 @@ impl Billboards {
         self.quaternions.push(other.quaternions[i]);
         self.log_scales.push(other.log_scales[i]);
         self.sh.extend_from_slice(&other.sh[i * SH_FLOATS..(i + 1) * SH_FLOATS]);
-        self.alpha.extend_from_slice(&other.alpha[i * t..(i + 1) * t]);
-        self.colour.extend_from_slice(&other.colour[i * 3 * t..(i + 1) * 3 * t]);
+        self.textures.extend_from_slice(&other.textures[i * t..(i + 1) * t]);
     }
 
     /// Concatenation of `self` and `other`.
@@ -81,6 +76,24 @@ impl Billboards {
         }
         out
     }
+}
+
+/// Planar copies of RGBA texels (`texels = TS²` per billboard): alpha `[billboard][texel]` and
+/// colour `[billboard][channel][texel]`, the layout of [`crate::model::Model`]'s logits.
+///
+/// ```
+/// let tex = [[0.1, 0.2, 0.3, 0.9], [0.4, 0.5, 0.6, 0.8]];
+/// let (alpha, colour) = bbsplat::billboards::planar_textures(&tex, 2);
+/// assert_eq!(alpha, [0.9, 0.8]);
+/// assert_eq!(colour, [0.1, 0.4, 0.2, 0.5, 0.3, 0.6]);
+/// ```
+pub fn planar_textures(textures: &[[f32; 4]], texels: usize) -> (Vec<f32>, Vec<f32>) {
+    let alpha = textures.iter().map(|t| t[3]).collect();
+    let colour = textures
+        .chunks(texels.max(1))
+        .flat_map(|row| (0..3).flat_map(move |c| row.iter().map(move |t| t[c])))
+        .collect();
+    (alpha, colour)
 }
 
 /// Settings of [`random_scene`].
@@ -135,8 +148,8 @@ pub fn random_scene(config: &RandomSceneConfig) -> Billboards {
     let t = ts * ts;
     let mut b = Billboards::empty(ts);
     // The textures are the arrays the rasterizer reads at random rows: huge-page storage.
-    b.alpha = crate::memory::with_capacity(config.billboards * t);
-    b.colour = crate::memory::with_capacity(config.billboards * 3 * t);
+    b.textures = crate::memory::with_capacity(config.billboards * t);
+    let mut colour = vec![0.0f32; 3 * t];
     for _ in 0..config.billboards {
         let (x, y) = (
             rng.range(0.0, config.width as f32),
@@ -160,9 +173,16 @@ pub fn random_scene(config: &RandomSceneConfig) -> Billboards {
             };
             b.sh.push(v);
         }
+        // Drawn as alpha plane then colour planes `[channel][texel]`, then interleaved.
         let (lo, hi) = config.alpha_range;
-        b.alpha.extend((0..t).map(|_| rng.range(lo, hi)));
-        b.colour.extend((0..3 * t).map(|_| rng.uniform()));
+        let start = b.textures.len();
+        b.textures.extend((0..t).map(|_| [0.0, 0.0, 0.0, rng.range(lo, hi)]));
+        colour.iter_mut().for_each(|c| *c = rng.uniform());
+        for (k, texel) in b.textures[start..].iter_mut().enumerate() {
+            for c in 0..3 {
+                texel[c] = colour[c * t + k];
+            }
+        }
     }
     b
 }

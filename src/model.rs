@@ -208,15 +208,16 @@ impl Model {
         model
     }
 
-    /// Activated textures and geometry in the layout of the rasterizer.
+    /// Activated textures and geometry in the layout of the rasterizer: the planar alpha and
+    /// colour logits become interleaved RGBA texels `[sigmoid(r), sigmoid(g), sigmoid(b),
+    /// sigmoid(alpha)]` (masked alpha texels 0).
     pub fn activate(&self) -> Billboards {
         let mut b = Billboards {
             positions: self.positions.clone(),
             quaternions: self.quaternions.clone(),
             log_scales: self.log_scales.clone(),
             sh: self.sh.clone(),
-            alpha: crate::memory::filled(self.alpha_logits.len(), 0.0),
-            colour: crate::memory::filled(self.colour_logits.len(), 0.0),
+            textures: crate::memory::filled(self.alpha_logits.len(), [0.0; 4]),
             texture_size: self.texture_size,
         };
         for i in 0..self.len() {
@@ -232,15 +233,18 @@ impl Model {
         out.quaternions[i] = self.quaternions[i];
         out.log_scales[i] = self.log_scales[i];
         out.sh[i * SH_FLOATS..(i + 1) * SH_FLOATS].copy_from_slice(&self.sh[i * SH_FLOATS..(i + 1) * SH_FLOATS]);
-        for k in 0..t {
-            out.alpha[i * t + k] = if self.alpha_mask[k] {
-                sigmoid(self.alpha_logits[i * t + k])
-            } else {
-                0.0
-            };
-        }
-        for k in 0..3 * t {
-            out.colour[i * 3 * t + k] = sigmoid(self.colour_logits[i * 3 * t + k]);
+        let colour = &self.colour_logits[i * 3 * t..(i + 1) * 3 * t];
+        for (k, texel) in out.textures[i * t..(i + 1) * t].iter_mut().enumerate() {
+            *texel = [
+                sigmoid(colour[k]),
+                sigmoid(colour[t + k]),
+                sigmoid(colour[2 * t + k]),
+                if self.alpha_mask[k] {
+                    sigmoid(self.alpha_logits[i * t + k])
+                } else {
+                    0.0
+                },
+            ];
         }
     }
 }
@@ -268,8 +272,8 @@ mod tests {
         let pts = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z, Vec3::splat(5.0)];
         let m = Model::from_points(&pts, &[[0.5; 3]; 5], 16, 0);
         let b = m.activate();
-        assert_eq!(b.alpha[0], 0.0);
-        assert!((b.colour[7] - 0.1).abs() < 1e-6);
+        assert_eq!(b.textures[0][3], 0.0);
+        assert!((b.textures[7][1] - 0.1).abs() < 1e-6);
         // Point 0 has three neighbours at distance 1: log-scale ln(1) = 0.
         assert!(m.log_scales[0].x.abs() < 1e-6);
         // SH DC reproduces the point colour minus 0.1 in SH units.

@@ -101,12 +101,18 @@ fn check_round_trip(m: &Model, what: &str, dir: &Path) {
     assert_eq!(l.texture_size, m.texture_size);
     let (a, b) = (m.activate(), l.activate());
     let worst = |x: &[f32], y: &[f32]| x.iter().zip(y).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max);
-    let (wa, wc) = (worst(&a.alpha, &b.alpha), worst(&a.colour, &b.colour));
+    let channel = |x: &[[f32; 4]], c: std::ops::Range<usize>| -> Vec<f32> {
+        x.iter().flat_map(|t| t[c.clone()].to_vec()).collect()
+    };
+    let (wa, wc) = (
+        worst(&channel(&a.textures, 3..4), &channel(&b.textures, 3..4)),
+        worst(&channel(&a.textures, 0..3), &channel(&b.textures, 0..3)),
+    );
     // Half a quantisation step (2/255 alpha, 1/255 colour), plus f32 rounding.
     assert!(wa <= 1.0 / 255.0 + 1e-6, "{what}: alpha error {wa}");
     assert!(wc <= 0.5 / 255.0 + 1e-6, "{what}: colour error {wc}");
     let t = m.texture_size * m.texture_size;
-    for (k, &v) in b.alpha.iter().enumerate() {
+    for (k, v) in b.textures.iter().map(|t| t[3]).enumerate() {
         if !m.alpha_mask[k % t] {
             assert_eq!(v, 0.0, "{what}: masked texel {k}");
         }

@@ -118,8 +118,8 @@ fn flatten(b: &Billboards, g: Group) -> Vec<f32> {
         Group::LogScales => b.log_scales.iter().flat_map(|p| p.to_array()).collect(),
         Group::Quaternions => b.quaternions.iter().flatten().copied().collect(),
         Group::Sh => b.sh.clone(),
-        Group::Alpha => b.alpha.clone(),
-        Group::Colour => b.colour.clone(),
+        Group::Alpha => b.textures.iter().map(|t| t[3]).collect(),
+        Group::Colour => b.textures.iter().flat_map(|t| [t[0], t[1], t[2]]).collect(),
     }
 }
 
@@ -129,8 +129,12 @@ fn unflatten(b: &mut Billboards, g: Group, x: &[f32]) {
         Group::LogScales => b.log_scales = x.chunks(2).map(Vec2::from_slice).collect(),
         Group::Quaternions => b.quaternions = x.chunks(4).map(|c| [c[0], c[1], c[2], c[3]]).collect(),
         Group::Sh => b.sh = x.to_vec(),
-        Group::Alpha => b.alpha = x.to_vec(),
-        Group::Colour => b.colour = x.to_vec(),
+        Group::Alpha => b.textures.iter_mut().zip(x).for_each(|(t, &a)| t[3] = a),
+        Group::Colour => b
+            .textures
+            .iter_mut()
+            .zip(x.chunks(3))
+            .for_each(|(t, c)| t[..3].copy_from_slice(c)),
     }
 }
 
@@ -140,8 +144,8 @@ fn analytic(g: &RenderGradients, group: Group) -> Vec<f64> {
         Group::LogScales => g.log_scales.iter().flat_map(|p| p.to_array()).collect(),
         Group::Quaternions => g.quaternions.iter().flatten().copied().collect(),
         Group::Sh => g.sh.clone(),
-        Group::Alpha => g.alpha.clone(),
-        Group::Colour => g.colour.clone(),
+        Group::Alpha => g.textures.iter().map(|t| t[3]).collect(),
+        Group::Colour => g.textures.iter().flat_map(|t| [t[0], t[1], t[2]]).collect(),
     };
     v.into_iter().map(f64::from).collect()
 }
@@ -360,10 +364,10 @@ fn fd_scene(seed: u64) -> (Billboards, Camera) {
         for r in 0..ts {
             for c in 0..ts {
                 let d2 = (c as f32 - cx).powi(2) + (r as f32 - cy).powi(2);
-                scene.alpha[b * t + r * ts + c] = 0.03 + peak * (-d2 / 8.0).exp();
-                for ch in 0..3 {
-                    let v = 0.5 + 0.3 * (0.4 * c as f32 + 0.3 * r as f32 + phase + ch as f32).sin();
-                    scene.colour[b * 3 * t + ch * t + r * ts + c] = v;
+                let texel = &mut scene.textures[b * t + r * ts + c];
+                texel[3] = 0.03 + peak * (-d2 / 8.0).exp();
+                for (ch, v) in texel[..3].iter_mut().enumerate() {
+                    *v = 0.5 + 0.3 * (0.4 * c as f32 + 0.3 * r as f32 + phase + ch as f32).sin();
                 }
             }
         }
@@ -504,7 +508,7 @@ fn culled_billboards(ts: usize, seed: u64) -> Billboards {
     extra.positions[2] = Vec3::new(500.0, 0.0, 4.0); // far off screen
     extra.positions[3] = Vec3::new(0.0, -80.0, 4.0); // off screen
     let t = ts * ts;
-    extra.alpha[4 * t..6 * t].fill(0.0); // fully transparent, on screen
+    extra.textures[4 * t..6 * t].iter_mut().for_each(|x| x[3] = 0.0); // fully transparent, on screen
     extra
 }
 
@@ -535,15 +539,13 @@ fn hidden_billboard_gets_exactly_zero_gradient() {
         scene.quaternions.push([1.0, 0.0, 0.0, 0.0]);
         scene.log_scales.push(Vec2::splat(z.ln())); // far larger than the view
         scene.sh.extend(std::iter::repeat_n(0.1 * k as f32, 48));
-        scene.alpha.extend(std::iter::repeat_n(1.0, t));
-        scene.colour.extend(std::iter::repeat_n(0.5, 3 * t));
+        scene.textures.extend(std::iter::repeat_n([0.5, 0.5, 0.5, 1.0], t));
     }
     scene.positions.push(Vec3::new(0.1, 0.0, 5.0));
     scene.quaternions.push([0.9, 0.1, 0.2, 0.0]);
     scene.log_scales.push(Vec2::splat(-1.0));
     scene.sh.extend(std::iter::repeat_n(0.3, 48));
-    scene.alpha.extend(std::iter::repeat_n(0.7, t));
-    scene.colour.extend(std::iter::repeat_n(0.4, 3 * t));
+    scene.textures.extend(std::iter::repeat_n([0.4, 0.4, 0.4, 0.7], t));
     let s = settings(Vec3::ONE);
     let loss = WeightedLoss::new(cam.pixel_count(), 5);
     let g = gradients(&scene, &cam, &s, &loss);
@@ -554,8 +556,7 @@ fn hidden_billboard_gets_exactly_zero_gradient() {
     assert_eq!(g.quaternions[3], [0.0; 4]);
     assert_eq!(g.log_scales[3], Vec2::ZERO);
     assert!(g.sh[3 * 48..4 * 48].iter().all(|&x| x == 0.0));
-    assert!(g.alpha[3 * t..].iter().all(|&x| x == 0.0));
-    assert!(g.colour[3 * 3 * t..].iter().all(|&x| x == 0.0));
+    assert!(g.textures[3 * t..].iter().flatten().all(|&x| x == 0.0));
     assert!(g.positions[0].length() > 0.0, "the front wall does receive gradient");
 }
 
@@ -615,7 +616,7 @@ fn assert_finite(out: &RenderOutput, g: &RenderGradients) {
     assert!(g.positions.iter().all(|p| p.is_finite()));
     assert!(g.log_scales.iter().all(|p| p.is_finite()));
     assert!(g.quaternions.iter().flatten().all(|p| p.is_finite()));
-    assert!(g.sh.iter().chain(&g.alpha).chain(&g.colour).all(|x| x.is_finite()));
+    assert!(g.sh.iter().chain(g.textures.iter().flatten()).all(|x| x.is_finite()));
     assert!(g.background.is_finite());
 }
 

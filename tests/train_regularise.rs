@@ -33,6 +33,7 @@ struct Case {
     mask: Vec<bool>,
 }
 
+/// Planar activated alpha (`N·T`) and colour (`3·N·T`, `[billboard][channel][texel]`).
 fn activate(case: &Case, x: &[f32]) -> (Vec<f32>, Vec<f32>) {
     let alpha = (0..N * T)
         .map(|k| if case.mask[k % T] { sigmoid(x[k]) } else { 0.0 })
@@ -41,36 +42,45 @@ fn activate(case: &Case, x: &[f32]) -> (Vec<f32>, Vec<f32>) {
     (alpha, colour)
 }
 
+/// The rasterizer's RGBA texels of planar alpha and colour.
+fn rgba(alpha: &[f32], colour: &[f32]) -> Vec<[f32; 4]> {
+    (0..N * T)
+        .map(|j| {
+            let (i, k) = (j / T, j % T);
+            let c = |ch: usize| colour[i * 3 * T + ch * T + k];
+            [c(0), c(1), c(2), alpha[j]]
+        })
+        .collect()
+}
+
+/// Planar alpha and colour gradients of RGBA texel gradients (inverse of [`rgba`]).
+fn planar(d: &[[f32; 4]]) -> (Vec<f32>, Vec<f32>) {
+    let alpha = d.iter().map(|t| t[3]).collect();
+    let colour = (0..3 * N * T)
+        .map(|j| {
+            let (i, ch, k) = (j / (3 * T), (j / T) % 3, j % T);
+            d[i * T + k][ch]
+        })
+        .collect();
+    (alpha, colour)
+}
+
 fn loss(case: &Case, x: &[f32]) -> f64 {
     let (alpha, colour) = activate(case, x);
-    let (mut da, mut dc) = (vec![0.0; N * T], vec![0.0; 3 * N * T]);
-    texture_regulariser(
-        &alpha,
-        &colour,
-        &case.alpha0,
-        &case.impact,
-        SIGMA,
-        LAMBDA_TEX,
-        &mut da,
-        &mut dc,
-    ) + opacity_regulariser(&alpha, LAMBDA_OP, &mut da)
+    let tex = rgba(&alpha, &colour);
+    let mut d = vec![[0.0; 4]; N * T];
+    texture_regulariser(&tex, &case.alpha0, &case.impact, SIGMA, LAMBDA_TEX, &mut d)
+        + opacity_regulariser(&tex, LAMBDA_OP, &mut d)
 }
 
 /// Analytic gradient wrt the logits. `broken` selects a deliberate mistake.
 fn analytic(case: &Case, broken: Option<&str>) -> Vec<f64> {
     let (alpha, colour) = activate(case, &case.x);
-    let (mut da, mut dc) = (vec![0.0; N * T], vec![0.0; 3 * N * T]);
-    texture_regulariser(
-        &alpha,
-        &colour,
-        &case.alpha0,
-        &case.impact,
-        SIGMA,
-        LAMBDA_TEX,
-        &mut da,
-        &mut dc,
-    );
-    opacity_regulariser(&alpha, LAMBDA_OP, &mut da);
+    let tex = rgba(&alpha, &colour);
+    let mut d = vec![[0.0; 4]; N * T];
+    texture_regulariser(&tex, &case.alpha0, &case.impact, SIGMA, LAMBDA_TEX, &mut d);
+    opacity_regulariser(&tex, LAMBDA_OP, &mut d);
+    let (da, dc) = planar(&d);
     let mut out = vec![0.0f32; 4 * N * T];
     let (oa, oc) = out.split_at_mut(N * T);
     if broken == Some("ignore mask") {
@@ -164,7 +174,8 @@ fn gaussian_check(seed: u64, broken: bool) -> GradReport {
     let vjp = |w: &[f32], cot: &[f32]| -> Vec<f32> {
         (0..w.len())
             .map(|i| {
-                let g = gaussian_opacity_grad(w[i], &cot[i * T..(i + 1) * T], &shape);
+                let d: Vec<[f32; 4]> = cot[i * T..(i + 1) * T].iter().map(|&a| [0.0, 0.0, 0.0, a]).collect();
+                let g = gaussian_opacity_grad(w[i], &d, &shape);
                 if broken {
                     // Forgetting the sigmoid's derivative o(1 − o).
                     let o = sigmoid(w[i]);

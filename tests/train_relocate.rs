@@ -38,7 +38,7 @@ fn dead_rows_get_copies_whose_split_alpha_composites_back() {
     let mut tr = synthetic(seed, TextureMode::Full);
     assert_eq!(tr.alive_count(), 12 - DEAD.len());
     let before_model = tr.model.clone();
-    let before_alpha = tr.activated.alpha.clone();
+    let before_alpha: Vec<f32> = tr.activated.textures.iter().map(|t| t[3]).collect();
     let moved = tr.relocate();
     assert_eq!(moved, DEAD.len(), "seed {seed}");
     assert_eq!(tr.alive_count(), 12, "seed {seed}");
@@ -71,7 +71,7 @@ fn dead_rows_get_copies_whose_split_alpha_composites_back() {
         }
         for k in 0..T {
             let original = before_alpha[s * T + k] as f64;
-            let split = tr.activated.alpha[s * T + k] as f64;
+            let split = tr.activated.textures[s * T + k][3] as f64;
             if n == 0 {
                 assert_eq!(split, original, "billboard {s} was not a source: unchanged");
                 continue;
@@ -91,7 +91,7 @@ fn dead_rows_get_copies_whose_split_alpha_composites_back() {
     for i in 0..12 {
         for k in 0..T {
             if !tr.model.alpha_mask[k] {
-                assert_eq!(tr.activated.alpha[i * T + k], 0.0);
+                assert_eq!(tr.activated.textures[i * T + k][3], 0.0);
             }
         }
     }
@@ -176,7 +176,7 @@ fn relocation_resets_the_moments_of_sources_and_dead_slots_only() {
     for &d in &DEAD {
         for k in 0..T {
             tr.model.alpha_logits[d * T + k] = -12.0;
-            tr.activated.alpha[d * T + k] = if tr.model.alpha_mask[k] { sigmoid(-12.0) } else { 0.0 };
+            tr.activated.textures[d * T + k][3] = if tr.model.alpha_mask[k] { sigmoid(-12.0) } else { 0.0 };
         }
     }
     let before = tr.model.clone();

@@ -442,9 +442,9 @@ fn effective_model(trainer: &Trainer) -> Model {
     let mut model = trainer.model.clone();
     if trainer.config().texture_mode == TextureMode::Gaussian {
         let t = model.texture_size * model.texture_size;
-        for (i, &a) in trainer.activated.alpha.iter().enumerate() {
+        for (i, texel) in trainer.activated.textures.iter().enumerate() {
             model.alpha_logits[i] = if model.alpha_mask[i % t] {
-                logit(a.clamp(1e-6, 1.0 - 1e-6))
+                logit(texel[3].clamp(1e-6, 1.0 - 1e-6))
             } else {
                 0.0
             };

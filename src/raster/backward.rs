@@ -37,10 +37,9 @@ pub struct RenderGradients {
     pub log_scales: Vec<Vec2>,
     /// `∂L/∂SH`, 48 floats per billboard.
     pub sh: Vec<f32>,
-    /// `∂L/∂alpha texel` (activated texture values).
-    pub alpha: Vec<f32>,
-    /// `∂L/∂colour texel` (activated texture values).
-    pub colour: Vec<f32>,
+    /// `∂L/∂texel`, `[∂r, ∂g, ∂b, ∂alpha]` of the activated texture values, laid out like
+    /// [`BillboardSet::textures`].
+    pub textures: Vec<[f32; 4]>,
     /// `∂L/∂background`.
     pub background: Vec3,
 }
@@ -54,8 +53,7 @@ impl RenderGradients {
             quaternions: vec![[0.0; 4]; n],
             log_scales: vec![Vec2::ZERO; n],
             sh: vec![0.0; n * SH_FLOATS],
-            alpha: crate::memory::filled(n * t, 0.0),
-            colour: crate::memory::filled(n * 3 * t, 0.0),
+            textures: crate::memory::filled(n * t, [0.0; 4]),
             background: Vec3::ZERO,
         }
     }
@@ -64,13 +62,12 @@ impl RenderGradients {
     /// consumed the rows [`render_backward`] reported, clearing just those keeps the buffers
     /// ready for the next accumulation without touching the whole set.
     pub fn clear_row(&mut self, b: usize) {
-        let t = self.alpha.len() / self.positions.len().max(1);
+        let t = self.textures.len() / self.positions.len().max(1);
         self.positions[b] = Vec3::ZERO;
         self.quaternions[b] = [0.0; 4];
         self.log_scales[b] = Vec2::ZERO;
         self.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS].fill(0.0);
-        self.alpha[b * t..(b + 1) * t].fill(0.0);
-        self.colour[b * 3 * t..(b + 1) * 3 * t].fill(0.0);
+        self.textures[b * t..(b + 1) * t].fill([0.0; 4]);
     }
 }
 
@@ -122,7 +119,7 @@ struct TileGrads {
     geometry: Vec<EntryGrad>,
     /// Texture gradients of entry `k` are `texels[tex_offsets[k]..tex_offsets[k + 1]]`.
     tex_offsets: Vec<u32>,
-    /// (texel index within a channel, [∂alpha, ∂r, ∂g, ∂b]).
+    /// (texel index, `[∂r, ∂g, ∂b, ∂alpha]`).
     texels: Vec<(u32, [f32; 4])>,
     background: Vec3,
 }
@@ -146,7 +143,7 @@ struct Scratch {
 /// `slots × TS²` cells of the largest tile seen so far (17 bytes a cell).
 #[derive(Default)]
 struct TexelSums {
-    /// `[∂alpha, ∂r, ∂g, ∂b]` of cell `slot · texels + texel`; meaningful only where `seen`.
+    /// `[∂r, ∂g, ∂b, ∂alpha]` of cell `slot · texels + texel`; meaningful only where `seen`.
     sums: Vec<[f32; 4]>,
     /// True for the cells touched in the current tile (all false between tiles).
     seen: Vec<bool>,
@@ -300,18 +297,16 @@ fn backward_tile(
             let (px, py) = (i as f32 + 0.5, j as f32 + 0.5);
             scratch.blended.clear();
             let mut t = 1.0f32;
-            let mut colour = [0.0f32; 3];
             for cand in candidates {
                 let k = cand.slot as usize;
                 let b = list[k];
                 let taps = cand.taps;
-                let a = taps.sample_one(set.alpha_of(b as usize));
+                let [r, g, bl, a] = taps.sample_rgba(set.texture_of(b as usize));
                 let alpha = a.min(params.max_alpha);
                 if alpha < params.min_alpha {
                     continue;
                 }
                 let pr = prepared[b as usize].as_ref().expect("binned billboards are prepared");
-                taps.sample(set.colour_of(b as usize), 3, &mut colour);
                 scratch.blended.push(Blended {
                     slot: k as u32,
                     billboard: b,
@@ -320,7 +315,7 @@ fn backward_tile(
                     t,
                     depth: cand.depth,
                     taps,
-                    colour: Vec3::from_array(colour) + pr.rgb,
+                    colour: Vec3::new(r, g, bl) + pr.rgb,
                 });
                 t *= 1.0 - alpha;
             }
@@ -347,11 +342,9 @@ fn backward_tile(
                 let d_colour = g_rgb * w;
                 let b = bl.billboard as usize;
                 let slot = bl.slot;
-                let (du, dv) = bl.taps.vjp_alpha_colour(
-                    set.alpha_of(b),
-                    set.colour_of(b),
-                    d_tex_alpha,
-                    d_colour.to_array(),
+                let (du, dv) = bl.taps.vjp_rgba(
+                    set.texture_of(b),
+                    [d_colour.x, d_colour.y, d_colour.z, d_tex_alpha],
                     |texel, g| sums.add(slot, texel, g),
                 );
                 let pr = prepared[b].as_ref().expect("blended entries are prepared");
@@ -443,12 +436,11 @@ pub fn render_backward(
         grads.quaternions.par_chunks_mut(CHUNK),
         grads.log_scales.par_chunks_mut(CHUNK),
         grads.sh.par_chunks_mut(CHUNK * SH_FLOATS),
-        grads.alpha.par_chunks_mut(CHUNK * texels),
-        grads.colour.par_chunks_mut(CHUNK * 3 * texels),
+        grads.textures.par_chunks_mut(CHUNK * texels),
     )
         .into_par_iter()
         .enumerate()
-        .map(|(c, (d_pos, d_quat, d_scale, d_sh, d_alpha, d_colour))| {
+        .map(|(c, (d_pos, d_quat, d_scale, d_sh, d_tex))| {
             let b0 = c * CHUNK;
             let len = d_pos.len();
             let mut touched = Vec::new();
@@ -472,11 +464,7 @@ pub fn render_backward(
                     let mut any = false;
                     for (tg, k) in entry_results(b0 + la) {
                         for &(idx, _) in &tg.texels[tg.tex_offsets[k] as usize..tg.tex_offsets[k + 1] as usize] {
-                            let (idx, colour_row) = (idx as usize, 3 * la * texels);
-                            prefetch(d_alpha, la * texels + idx);
-                            prefetch(d_colour, colour_row + idx);
-                            prefetch(d_colour, colour_row + texels + idx);
-                            prefetch(d_colour, colour_row + 2 * texels + idx);
+                            prefetch(d_tex, la * texels + idx as usize);
                             any = true;
                         }
                     }
@@ -489,10 +477,7 @@ pub fn render_backward(
                     }
                 }
                 let b = b0 + lb;
-                let (d_alpha, d_colour) = (
-                    &mut d_alpha[lb * texels..(lb + 1) * texels],
-                    &mut d_colour[3 * lb * texels..3 * (lb + 1) * texels],
-                );
+                let d_tex = &mut d_tex[lb * texels..(lb + 1) * texels];
                 let mut d_t = ZERO_TRANSFORM;
                 let mut d_rgb = Vec3::ZERO;
                 let mut any = false;
@@ -505,11 +490,10 @@ pub fn render_backward(
                     add_transform(&mut d_t, &tg.geometry[k].transform);
                     d_rgb += tg.geometry[k].rgb;
                     for &(idx, v) in tex {
-                        let idx = idx as usize;
-                        d_alpha[idx] += v[0];
-                        d_colour[idx] += v[1];
-                        d_colour[texels + idx] += v[2];
-                        d_colour[2 * texels + idx] += v[3];
+                        let d = &mut d_tex[idx as usize];
+                        for c in 0..4 {
+                            d[c] += v[c];
+                        }
                     }
                 }
                 if !any {

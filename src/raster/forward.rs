@@ -119,12 +119,11 @@ fn shade_pixel(
         evaluated: own.len() as u32,
         ..Default::default()
     };
-    let mut colour = [0.0f32; 3];
     for cand in candidates {
         let k = cand.slot as usize;
         let b = list[k] as usize;
-        let taps = &cand.taps;
-        let a = taps.sample_one(set.alpha_of(b));
+        // All four channels in one go: the texels' lines are fetched for alpha anyway.
+        let [r, g, bl, a] = cand.taps.sample_rgba(set.texture_of(b));
         let alpha = a.min(params.max_alpha);
         if alpha < params.min_alpha {
             continue;
@@ -137,8 +136,7 @@ fn shade_pixel(
         }
         let p = prepared[b].as_ref().expect("binned billboards are prepared");
         let w = alpha * t;
-        taps.sample(set.colour_of(b), 3, &mut colour);
-        let c = Vec3::from_array(colour) + p.rgb;
+        let c = Vec3::new(r, g, bl) + p.rgb;
         out.rgb += c * w;
         out.alpha += w;
         out.depth += cand.depth * w;
@@ -235,7 +233,6 @@ impl TileCandidates {
         slots: impl Fn(usize) -> &'a [u32],
     ) -> usize {
         let ts = set.texture_size;
-        let plane = set.texels();
         let tw = (i1 - i0) as usize;
         let n = tw * (j1 - j0) as usize;
         self.first = first;
@@ -257,13 +254,11 @@ impl TileCandidates {
                 let Some(taps) = bilinear::taps(hit.u, hit.v, ts) else {
                     continue;
                 };
-                let (alpha, colour) = (set.alpha_of(b), set.colour_of(b));
+                // One 16-byte RGBA texel per tap: the two taps of a row share a cache line unless
+                // they straddle a 64-byte boundary (one row pair in four).
+                let texture = set.texture_of(b);
                 for &ix in taps.indices() {
-                    let ix = ix as usize;
-                    prefetch(alpha, ix);
-                    prefetch(colour, ix);
-                    prefetch(colour, plane + ix);
-                    prefetch(colour, 2 * plane + ix);
+                    prefetch(texture, ix as usize);
                 }
                 self.items.push(Candidate {
                     slot: k,

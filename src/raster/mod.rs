@@ -15,9 +15,9 @@
 //! the tiled renderer is tested against.
 //!
 //! Conventions: camera and pixel conventions of [`crate::camera`]; textures are *activated*
-//! values (alpha and colour in `[0, 1]`), `TS × TS` per billboard, alpha `[row][col]`, colour
-//! `[channel][row][col]`; SH coefficients `[coeff][rgb]`, 48 floats per billboard. Output images
-//! are interleaved row-major.
+//! values (colour and alpha in `[0, 1]`), `TS × TS` RGBA texels `[r, g, b, alpha]` per billboard,
+//! row-major (`[billboard][row][col]`); SH coefficients `[coeff][rgb]`, 48 floats per billboard.
+//! Output images are interleaved row-major.
 
 pub mod backward;
 pub mod binning;
@@ -48,10 +48,10 @@ pub struct BillboardSet<'a> {
     pub log_scales: &'a [Vec2],
     /// SH coefficients, `[billboard][coeff][rgb]`, 48 floats per billboard.
     pub sh: &'a [f32],
-    /// Activated alpha textures in `[0, 1]`, `[billboard][row][col]`.
-    pub alpha: &'a [f32],
-    /// Activated colour textures in `[0, 1]`, `[billboard][channel][row][col]`.
-    pub colour: &'a [f32],
+    /// Activated textures, `TS²` texels `[r, g, b, alpha]` (each in `[0, 1]`) per billboard,
+    /// `[billboard][row][col]`. Interleaved so that a bilinear tap row reads one or two cache
+    /// lines for all four channels.
+    pub textures: &'a [[f32; 4]],
     /// Texture side `TS ≥ 2`.
     pub texture_size: usize,
 }
@@ -84,22 +84,14 @@ impl BillboardSet<'_> {
         assert_eq!(self.quaternions.len(), n, "one quaternion per billboard");
         assert_eq!(self.log_scales.len(), n, "one scale pair per billboard");
         assert_eq!(self.sh.len(), n * SH_FLOATS, "48 SH floats per billboard");
-        assert_eq!(self.alpha.len(), n * t, "TS² alpha texels per billboard");
-        assert_eq!(self.colour.len(), n * 3 * t, "3·TS² colour texels per billboard");
+        assert_eq!(self.textures.len(), n * t, "TS² RGBA texels per billboard");
     }
 
-    /// The alpha texture of billboard `i`.
+    /// The RGBA texture of billboard `i`, `TS²` texels `[r, g, b, alpha]`, row-major.
     #[inline]
-    pub fn alpha_of(&self, i: usize) -> &[f32] {
+    pub fn texture_of(&self, i: usize) -> &[[f32; 4]] {
         let t = self.texels();
-        &self.alpha[i * t..(i + 1) * t]
-    }
-
-    /// The colour texture of billboard `i`.
-    #[inline]
-    pub fn colour_of(&self, i: usize) -> &[f32] {
-        let t = 3 * self.texels();
-        &self.colour[i * t..(i + 1) * t]
+        &self.textures[i * t..(i + 1) * t]
     }
 
     /// The SH coefficients of billboard `i`.

@@ -7,6 +7,7 @@
 //! up as a difference.
 
 use super::{BillboardSet, RenderSettings};
+use crate::billboards::planar_textures;
 use crate::camera::Camera;
 use crate::stages::bilinear;
 use crate::stages::composite::composite;
@@ -42,6 +43,11 @@ pub fn render_reference(set: &BillboardSet<'_>, camera: &Camera, settings: &Rend
         projected.push(p);
     }
     order.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+    // Planar copies of the RGBA textures, sampled with the planar bilinear stage (independent of
+    // the rasterizer's RGBA path): alpha `[texel]`, colour `[channel][texel]`.
+    let (alpha_planes, colour_planes): (Vec<Vec<f32>>, Vec<Vec<f32>>) = (0..set.len())
+        .map(|b| planar_textures(set.texture_of(b), set.texels()))
+        .unzip();
     let sh_rgb: Vec<_> = (0..set.len())
         .map(|b| sh_colour(settings.sh_degree, set.sh_of(b), set.positions[b], camera.centre()).rgb)
         .collect();
@@ -74,9 +80,9 @@ pub fn render_reference(set: &BillboardSet<'_>, camera: &Camera, settings: &Rend
                     continue;
                 };
                 let mut a = [0.0f32];
-                bilinear::sample(set.alpha_of(b), ts, 1, hit.u, hit.v, &mut a);
+                bilinear::sample(&alpha_planes[b], ts, 1, hit.u, hit.v, &mut a);
                 let mut c = [0.0f32; 3];
-                bilinear::sample(set.colour_of(b), ts, 3, hit.u, hit.v, &mut c);
+                bilinear::sample(&colour_planes[b], ts, 3, hit.u, hit.v, &mut c);
                 alphas.push(a[0]);
                 features.extend_from_slice(&[
                     c[0] + sh_rgb[b].x,

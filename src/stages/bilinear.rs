@@ -17,8 +17,11 @@
 //!   is chosen, so the support test is exact and no float-to-integer cast can see an
 //!   out-of-range value: non-finite or huge `(u, v)` simply give no taps.
 //!
-//! The hot loop of the rasterizer computes [`BilinearTaps`] once per (billboard, pixel) and reuses
-//! them for the alpha texture (1 channel) and the colour texture (3 channels).
+//! The hot loop of the rasterizer computes [`BilinearTaps`] once per (billboard, pixel) and samples
+//! the billboard's RGBA texture with them ([`BilinearTaps::sample_rgba`]): texels interleaved
+//! `[r, g, b, alpha]`, so that the two taps of a texture row share one or two cache lines instead
+//! of one line per channel. The planar functions (`[channel][row][column]`) are the reference the
+//! RGBA ones are tested against.
 //!
 //! ```
 //! use bbsplat::stages::bilinear;
@@ -35,6 +38,8 @@
 //! assert!((du - 0.5).abs() < 1e-6 && (dv - 1.0).abs() < 1e-6);
 //! assert_eq!(d_tex, [0.25; 4]);
 //! ```
+
+use glam::Vec4;
 
 /// The (at most four) texels that contribute to a bilinear sample at one `(u, v)`, with their
 /// weights and the derivatives of the weights with respect to `u` and `v`.
@@ -301,42 +306,65 @@ impl BilinearTaps {
         self.accumulate_vjp(texels, 1, &[g], d_texels)
     }
 
-    /// Backward of sampling a 1-channel `alpha` texture and a 3-channel `colour` texture at the
-    /// same taps (the rasterizer's pattern), without a dense gradient buffer: calls
-    /// `emit(texel_index, [∂L/∂alpha, ∂L/∂r, ∂L/∂g, ∂L/∂b])` once per tap and returns
-    /// `(∂L/∂u, ∂L/∂v)` for the upstream gradients `d_alpha` and `d_colour`. Equals
-    /// [`BilinearTaps::accumulate_vjp_one`] plus [`BilinearTaps::accumulate_vjp`] with 3
-    /// channels, up to the order of float additions (tested).
+    /// Samples an RGBA texture: `ts × ts` texels `[r, g, b, alpha]`, row-major (the rasterizer's
+    /// layout, see [`crate::raster::BillboardSet::textures`]). Each channel is exactly what
+    /// [`BilinearTaps::sample`] gives on that channel's plane (same products, same order).
     ///
     /// # Panics
-    /// If `alpha` does not hold `ts²` values or `colour` `3·ts²`.
+    /// If `texels.len() != ts²`.
     #[inline]
-    pub fn vjp_alpha_colour(
-        &self,
-        alpha: &[f32],
-        colour: &[f32],
-        d_alpha: f32,
-        d_colour: [f32; 3],
-        mut emit: impl FnMut(u32, [f32; 4]),
-    ) -> (f32, f32) {
-        let plane = self.check_lengths(alpha, 1);
-        self.check_lengths(colour, 3);
+    pub fn sample_rgba(&self, texels: &[[f32; 4]]) -> [f32; 4] {
+        self.check_texel_count(texels.len());
+        let n = self.len as usize;
+        if n == 4 {
+            let [i0, i1, i2, i3] = self.index.map(|i| i as usize);
+            let w = self.weight;
+            let (t0, t1, t2, t3) = (
+                Vec4::from_array(texels[i0]),
+                Vec4::from_array(texels[i1]),
+                Vec4::from_array(texels[i2]),
+                Vec4::from_array(texels[i3]),
+            );
+            return (Vec4::ZERO + w[0] * t0 + w[1] * t1 + w[2] * t2 + w[3] * t3).to_array();
+        }
+        let mut acc = Vec4::ZERO;
+        for k in 0..n {
+            acc += self.weight[k] * Vec4::from_array(texels[self.index[k] as usize]);
+        }
+        acc.to_array()
+    }
+
+    /// Backward of [`BilinearTaps::sample_rgba`] without a dense gradient buffer: calls
+    /// `emit(texel_index, weight · d_rgba)` once per tap, in tap order, and returns
+    /// `(∂L/∂u, ∂L/∂v)` for the upstream gradient `d_rgba = [∂L/∂r, ∂L/∂g, ∂L/∂b, ∂L/∂alpha]`.
+    /// Equals [`BilinearTaps::accumulate_vjp`] on the four channel planes, up to the order of
+    /// float additions (tested).
+    ///
+    /// # Panics
+    /// If `texels.len() != ts²`.
+    #[inline]
+    pub fn vjp_rgba(&self, texels: &[[f32; 4]], d_rgba: [f32; 4], mut emit: impl FnMut(u32, [f32; 4])) -> (f32, f32) {
+        self.check_texel_count(texels.len());
+        let d = Vec4::from_array(d_rgba);
         let (mut du, mut dv) = (0.0f32, 0.0f32);
         for k in 0..self.len as usize {
-            let i = self.index[k] as usize;
-            let seen = alpha[i] * d_alpha
-                + colour[i] * d_colour[0]
-                + colour[plane + i] * d_colour[1]
-                + colour[2 * plane + i] * d_colour[2];
+            let t = texels[self.index[k] as usize];
+            // The texel's value seen through the upstream gradient: alpha first, then r, g, b.
+            let seen = t[3] * d_rgba[3] + t[0] * d_rgba[0] + t[1] * d_rgba[1] + t[2] * d_rgba[2];
             du += self.d_weight_du[k] * seen;
             dv += self.d_weight_dv[k] * seen;
-            let w = self.weight[k];
-            emit(
-                self.index[k],
-                [w * d_alpha, w * d_colour[0], w * d_colour[1], w * d_colour[2]],
-            );
+            emit(self.index[k], (self.weight[k] * d).to_array());
         }
         (du, dv)
+    }
+
+    #[inline]
+    fn check_texel_count(&self, texels: usize) {
+        assert_eq!(
+            texels,
+            self.ts as usize * self.ts as usize,
+            "texels must hold ts × ts RGBA values"
+        );
     }
 }
 
@@ -374,36 +402,56 @@ pub fn sample_vjp(
 }
 
 #[cfg(test)]
-mod alpha_colour_tests {
+mod rgba_tests {
     use super::*;
 
+    fn planes(rgba: &[[f32; 4]]) -> Vec<f32> {
+        (0..4).flat_map(|c| rgba.iter().map(move |t| t[c])).collect()
+    }
+
+    /// RGBA sampling equals planar sampling channel by channel, bit for bit, and its VJP equals
+    /// the dense planar VJP (texel gradients exactly, `(u, v)` up to the order of additions).
     #[test]
-    fn vjp_alpha_colour_matches_the_dense_vjps() {
+    fn rgba_matches_the_planar_sample_and_vjp() {
         let ts = 5;
-        let alpha: Vec<f32> = (0..ts * ts).map(|i| (i as f32 * 0.37).sin().abs()).collect();
-        let colour: Vec<f32> = (0..3 * ts * ts).map(|i| (i as f32 * 0.61).cos().abs()).collect();
-        for &(u, v) in &[(0.13f32, -0.42f32), (-1.05, 0.3), (0.999, 1.02), (0.5, 0.5)] {
+        let rgba: Vec<[f32; 4]> = (0..ts * ts)
+            .map(|i| {
+                let x = i as f32;
+                [
+                    (x * 0.61).cos().abs(),
+                    (x * 0.23).sin().abs(),
+                    (x * 0.91).cos().abs(),
+                    (x * 0.37).sin().abs(),
+                ]
+            })
+            .collect();
+        let planar = planes(&rgba);
+        for &(u, v) in &[
+            (0.13f32, -0.42f32),
+            (-1.05, 0.3),
+            (0.999, 1.02),
+            (0.5, 0.5),
+            (1.1, -1.1),
+        ] {
             let taps = taps(u, v, ts).unwrap();
-            let (da, dc) = (0.7f32, [0.2f32, -0.9, 0.4]);
-            let mut dense_a = vec![0.0; ts * ts];
-            let mut dense_c = vec![0.0; 3 * ts * ts];
-            let (ua, va) = taps.accumulate_vjp_one(&alpha, da, &mut dense_a);
-            let (uc, vc) = taps.accumulate_vjp(&colour, 3, &dc, &mut dense_c);
-            let mut sparse_a = vec![0.0; ts * ts];
-            let mut sparse_c = vec![0.0; 3 * ts * ts];
-            let (du, dv) = taps.vjp_alpha_colour(&alpha, &colour, da, dc, |i, g| {
-                let i = i as usize;
-                sparse_a[i] += g[0];
-                for c in 0..3 {
-                    sparse_c[c * ts * ts + i] += g[c + 1];
-                }
-            });
-            assert!(
-                (du - (ua + uc)).abs() < 1e-5 && (dv - (va + vc)).abs() < 1e-5,
+            let mut want = [0.0f32; 4];
+            taps.sample(&planar, 4, &mut want);
+            assert_eq!(
+                taps.sample_rgba(&rgba).map(f32::to_bits),
+                want.map(f32::to_bits),
                 "({u}, {v})"
             );
-            assert_eq!(sparse_a, dense_a);
-            assert_eq!(sparse_c, dense_c);
+            let d = [0.2f32, -0.9, 0.4, 0.7];
+            let mut dense = vec![0.0; 4 * ts * ts];
+            let (ud, vd) = taps.accumulate_vjp(&planar, 4, &d, &mut dense);
+            let mut sparse = vec![0.0; 4 * ts * ts];
+            let (du, dv) = taps.vjp_rgba(&rgba, d, |i, g| {
+                for c in 0..4 {
+                    sparse[c * ts * ts + i as usize] += g[c];
+                }
+            });
+            assert!((du - ud).abs() < 1e-5 && (dv - vd).abs() < 1e-5, "({u}, {v})");
+            assert_eq!(sparse, dense);
         }
     }
 }

@@ -328,7 +328,7 @@ impl Trainer {
             TextureMode::Full => Vec::new(),
             TextureMode::Gaussian => {
                 let mean_shape = shape.iter().map(|&x| x as f64).sum::<f64>() / t.max(1) as f64;
-                mean_alpha(&activated.alpha, t)
+                mean_alpha(&activated.textures, t)
                     .iter()
                     .map(|&m| logit((m as f64 / mean_shape.max(1e-12)).clamp(1e-4, 1.0 - 1e-4) as f32))
                     .collect()
@@ -378,7 +378,7 @@ impl Trainer {
     /// Billboards whose mean alpha exceeds the relocation threshold 0.005.
     pub fn alive_count(&self) -> usize {
         let t = self.model.texture_size * self.model.texture_size;
-        mean_alpha(&self.activated.alpha, t)
+        mean_alpha(&self.activated.textures, t)
             .iter()
             .filter(|&&m| m > DEAD_OPACITY)
             .count()
@@ -455,23 +455,21 @@ impl Trainer {
         let touched = render_backward(&self.activated.as_set(), &out, &ig, &mut self.grads);
         let texture_reg = if self.config.texture_reg_weight != 0.0 {
             texture_regulariser(
-                &self.activated.alpha,
-                &self.activated.colour,
+                &self.activated.textures,
                 &self.alpha0,
                 &out.impact,
                 self.config.impact_threshold,
                 self.config.texture_reg_weight,
-                &mut self.grads.alpha,
-                &mut self.grads.colour,
+                &mut self.grads.textures,
             )
         } else {
             0.0
         };
         let opacity_reg = if self.config.opacity_reg_weight != 0.0 {
             opacity_regulariser(
-                &self.activated.alpha,
+                &self.activated.textures,
                 self.config.opacity_reg_weight,
-                &mut self.grads.alpha,
+                &mut self.grads.textures,
             )
         } else {
             0.0
@@ -494,8 +492,7 @@ impl Trainer {
         // Regulariser gradients may have landed on rows the sparse mode did not consume (the
         // texture step zeroes every row in full-texture mode).
         if self.config.texture_mode == TextureMode::Gaussian {
-            self.grads.alpha.fill(0.0);
-            self.grads.colour.fill(0.0);
+            self.grads.textures.fill([0.0; 4]);
         }
         self.grads.background = Vec3::ZERO;
         let relocated =
@@ -533,7 +530,7 @@ impl Trainer {
             }
             self.model.activate_row(b, &mut self.activated);
             for k in 0..t {
-                self.activated.alpha[b * t + k] = o * self.shape[k];
+                self.activated.textures[b * t + k][3] = o * self.shape[k];
             }
         } else {
             self.model.activate_row(b, &mut self.activated);
@@ -576,7 +573,7 @@ impl Trainer {
             if gaussian {
                 if textures_live {
                     let w = &mut self.opacity_logits[b..b + 1];
-                    let d = gaussian_opacity_grad(w[0], &g.alpha[b * t..(b + 1) * t], &self.shape);
+                    let d = gaussian_opacity_grad(w[0], &g.textures[b * t..(b + 1) * t], &self.shape);
                     step(a_opacity, w, &[d], lr.opacity);
                 }
                 self.refresh_row(b);
@@ -610,8 +607,9 @@ impl Trainer {
             texture_step::step_texture_group(
                 a_alpha,
                 &mut self.model.alpha_logits,
-                &mut self.activated.alpha,
-                &mut self.grads.alpha,
+                &mut self.activated.textures,
+                &mut self.grads.textures,
+                3..4,
                 Some(&self.model.alpha_mask),
                 selection,
                 lr.alpha,
@@ -621,8 +619,9 @@ impl Trainer {
             texture_step::step_texture_group(
                 a_colour,
                 &mut self.model.colour_logits,
-                &mut self.activated.colour,
-                &mut self.grads.colour,
+                &mut self.activated.textures,
+                &mut self.grads.textures,
+                0..3,
                 None,
                 selection,
                 lr.colour,
@@ -641,7 +640,7 @@ impl Trainer {
     /// a dead slot's stale moments belong to the billboard that died there).
     pub fn relocate(&mut self) -> usize {
         let t = self.model.texture_size * self.model.texture_size;
-        let plan = plan_relocation(&mean_alpha(&self.activated.alpha, t), &mut self.rng);
+        let plan = plan_relocation(&mean_alpha(&self.activated.textures, t), &mut self.rng);
         if plan.is_empty() {
             return 0;
         }

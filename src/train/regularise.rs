@@ -1,10 +1,11 @@
 //! Regularisers of the training loss (`bbsplat-spec.md` §5.4-5.5), as pure functions.
 //!
 //! Conventions: textures are *activated* values (sigmoid of the logits) laid out as in
-//! [`crate::raster::BillboardSet`]: alpha `[billboard][row][col]` (`T = TS²` per billboard), colour
-//! `[billboard][channel][row][col]` (`3T` per billboard). Every function returns the value in f64
-//! and *adds* its gradient with respect to the activated textures into the given buffers;
-//! [`chain_sigmoid`] carries an activated-space gradient to the logits and applies the alpha mask.
+//! [`crate::raster::BillboardSet::textures`]: `T = TS²` RGBA texels `[r, g, b, alpha]` per
+//! billboard. Every function returns the value in f64 and *adds* its gradient with respect to the
+//! activated textures into a buffer of the same layout; [`chain_sigmoid`] carries an
+//! activated-space gradient (planar, as the model's logits) to the logits and applies the alpha
+//! mask.
 //!
 //! Impact: `impact[i]` is the raster's per-view `Σ α·T` of billboard `i` over the view's pixels
 //! ([`crate::raster::RenderOutput::impact`], the post-2025 "fixed" definition). The paper-era
@@ -30,21 +31,17 @@ pub const IMPACT_THRESHOLD: f32 = 500.0;
 /// `alpha0` is the reference alpha texture `A0` (`T` values, shared by all billboards).
 #[allow(clippy::too_many_arguments)]
 pub fn texture_regulariser(
-    alpha: &[f32],
-    colour: &[f32],
+    textures: &[[f32; 4]],
     alpha0: &[f32],
     impact: &[f32],
     threshold: f32,
     weight: f32,
-    d_alpha: &mut [f32],
-    d_colour: &mut [f32],
+    d_textures: &mut [[f32; 4]],
 ) -> f64 {
     let t = alpha0.len();
     let n = impact.len();
-    assert_eq!(alpha.len(), n * t, "TS² alpha texels per billboard");
-    assert_eq!(colour.len(), 3 * n * t, "3·TS² colour texels per billboard");
-    assert_eq!(d_alpha.len(), alpha.len(), "alpha gradient buffer");
-    assert_eq!(d_colour.len(), colour.len(), "colour gradient buffer");
+    assert_eq!(textures.len(), n * t, "TS² RGBA texels per billboard");
+    assert_eq!(d_textures.len(), textures.len(), "texture gradient buffer");
     let vis = impact.iter().filter(|&&x| x > 0.0).count();
     if vis == 0 || t == 0 {
         return 0.0;
@@ -61,14 +58,22 @@ pub fn texture_regulariser(
         if w == 0.0 {
             continue;
         }
-        let c = &colour[i * 3 * t..(i + 1) * 3 * t];
-        let mean_c = c.iter().map(|&x| x as f64).sum::<f64>() / (3 * t) as f64;
-        let a = &alpha[i * t..(i + 1) * t];
-        let m = a.iter().zip(alpha0).map(|(&x, &x0)| x as f64 - x0 as f64).sum::<f64>() / t as f64;
+        let tex = &textures[i * t..(i + 1) * t];
+        // Channel by channel (r, g, b), each over the texels in order.
+        let mean_c = (0..3).flat_map(|c| tex.iter().map(move |x| x[c] as f64)).sum::<f64>() / (3 * t) as f64;
+        let m = tex
+            .iter()
+            .zip(alpha0)
+            .map(|(x, &x0)| x[3] as f64 - x0 as f64)
+            .sum::<f64>()
+            / t as f64;
         total += (mean_c + m.abs()) * w;
         let gc = (lambda * w / (vis as f64 * (3 * t) as f64)) as f32;
-        for g in &mut d_colour[i * 3 * t..(i + 1) * 3 * t] {
-            *g += gc;
+        let d_tex = &mut d_textures[i * t..(i + 1) * t];
+        for g in d_tex.iter_mut() {
+            for c in 0..3 {
+                g[c] += gc;
+            }
         }
         let sign = if m > 0.0 {
             1.0
@@ -79,8 +84,8 @@ pub fn texture_regulariser(
         };
         let ga = (lambda * w * sign / (vis as f64 * t as f64)) as f32;
         if ga != 0.0 {
-            for g in &mut d_alpha[i * t..(i + 1) * t] {
-                *g += ga;
+            for g in d_tex.iter_mut() {
+                g[3] += ga;
             }
         }
     }
@@ -89,26 +94,25 @@ pub fn texture_regulariser(
 
 /// Global opacity regulariser: `L = λ · mean over all billboards and texels of alpha`, including
 /// texels held at zero by the alpha mask (the reference's mean runs over all `TS²`). Adds
-/// `λ / (N·T)` to every element of `d_alpha`. An empty model gives 0.
-pub fn opacity_regulariser(alpha: &[f32], weight: f32, d_alpha: &mut [f32]) -> f64 {
-    assert_eq!(d_alpha.len(), alpha.len(), "alpha gradient buffer");
-    if alpha.is_empty() {
+/// `λ / (N·T)` to the alpha channel of every texel of `d_textures`. An empty model gives 0.
+pub fn opacity_regulariser(textures: &[[f32; 4]], weight: f32, d_textures: &mut [[f32; 4]]) -> f64 {
+    assert_eq!(d_textures.len(), textures.len(), "texture gradient buffer");
+    if textures.is_empty() {
         return 0.0;
     }
-    let count = alpha.len() as f64;
-    let g = (weight as f64 / count) as f32;
-    for d in d_alpha.iter_mut() {
-        *d += g;
+    let g = (weight as f64 / textures.len() as f64) as f32;
+    for d in d_textures.iter_mut() {
+        d[3] += g;
     }
-    weight as f64 * alpha.iter().map(|&x| x as f64).sum::<f64>() / count
+    opacity_value(textures, weight)
 }
 
 /// The opacity regulariser's value alone (no gradient).
-pub fn opacity_value(alpha: &[f32], weight: f32) -> f64 {
-    if alpha.is_empty() {
+pub fn opacity_value(textures: &[[f32; 4]], weight: f32) -> f64 {
+    if textures.is_empty() {
         return 0.0;
     }
-    weight as f64 * alpha.iter().map(|&x| x as f64).sum::<f64>() / alpha.len() as f64
+    weight as f64 * textures.iter().map(|x| x[3] as f64).sum::<f64>() / textures.len() as f64
 }
 
 /// Carries a gradient with respect to activated values `y = sigmoid(x)` to the logits `x`:
@@ -124,11 +128,11 @@ pub fn chain_sigmoid(activated: &[f32], d_activated: &[f32], mask: Option<&[bool
     }
 }
 
-/// Mean alpha of each billboard over its `t` texels.
-pub fn mean_alpha(alpha: &[f32], t: usize) -> Vec<f32> {
-    alpha
+/// Mean alpha of each billboard over its `t` RGBA texels.
+pub fn mean_alpha(textures: &[[f32; 4]], t: usize) -> Vec<f32> {
+    textures
         .chunks_exact(t.max(1))
-        .map(|row| (row.iter().map(|&x| x as f64).sum::<f64>() / t as f64) as f32)
+        .map(|row| (row.iter().map(|x| x[3] as f64).sum::<f64>() / t as f64) as f32)
         .collect()
 }
 
@@ -144,11 +148,11 @@ pub fn gaussian_alpha(opacity_logits: &[f32], shape: &[f32]) -> Vec<f32> {
 }
 
 /// Gradient of the loss with respect to the opacity logit `ω` of one Gaussian billboard, given
-/// the gradient with respect to its alpha texels: `∂L/∂ω = o(1 − o) · Σ_k ∂L/∂α_k · shape_k`,
-/// `o = sigmoid(ω)`. Summed in f64.
-pub fn gaussian_opacity_grad(opacity_logit: f32, d_alpha: &[f32], shape: &[f32]) -> f32 {
+/// the gradient with respect to its RGBA texels (only the alpha channel counts):
+/// `∂L/∂ω = o(1 − o) · Σ_k ∂L/∂α_k · shape_k`, `o = sigmoid(ω)`. Summed in f64.
+pub fn gaussian_opacity_grad(opacity_logit: f32, d_texels: &[[f32; 4]], shape: &[f32]) -> f32 {
     let o = crate::model::sigmoid(opacity_logit) as f64;
-    let s: f64 = d_alpha.iter().zip(shape).map(|(&g, &s)| g as f64 * s as f64).sum();
+    let s: f64 = d_texels.iter().zip(shape).map(|(g, &s)| g[3] as f64 * s as f64).sum();
     (o * (1.0 - o) * s) as f32
 }
 
@@ -159,35 +163,24 @@ mod tests {
     #[test]
     fn empty_visibility_is_zero_not_nan() {
         let t = 4;
-        let alpha = vec![0.3; 2 * t];
-        let colour = vec![0.2; 6 * t];
-        let (mut da, mut dc) = (vec![0.0; 2 * t], vec![0.0; 6 * t]);
-        let v = texture_regulariser(&alpha, &colour, &[0.1; 4], &[0.0, 0.0], 500.0, 1e-4, &mut da, &mut dc);
+        let tex = vec![[0.2, 0.2, 0.2, 0.3]; 2 * t];
+        let mut d = vec![[0.0; 4]; 2 * t];
+        let v = texture_regulariser(&tex, &[0.1; 4], &[0.0, 0.0], 500.0, 1e-4, &mut d);
         assert_eq!(v, 0.0);
-        assert!(da.iter().chain(&dc).all(|&g| g == 0.0));
+        assert!(d.iter().flatten().all(|&g| g == 0.0));
         assert_eq!(opacity_regulariser(&[], 0.01, &mut []), 0.0);
     }
 
     #[test]
     fn strongly_visible_billboards_are_not_regularised() {
         let t = 4;
-        let alpha = vec![0.3; 2 * t];
-        let colour = vec![0.2; 6 * t];
-        let (mut da, mut dc) = (vec![0.0; 2 * t], vec![0.0; 6 * t]);
+        let tex = vec![[0.2, 0.2, 0.2, 0.3]; 2 * t];
+        let mut d = vec![[0.0; 4]; 2 * t];
         // Billboard 0 at impact 600 ≥ σ: weight 0. Billboard 1 at 100: weight 400, |vis| = 2.
-        let v = texture_regulariser(
-            &alpha,
-            &colour,
-            &[0.1; 4],
-            &[600.0, 100.0],
-            500.0,
-            1e-4,
-            &mut da,
-            &mut dc,
-        );
+        let v = texture_regulariser(&tex, &[0.1; 4], &[600.0, 100.0], 500.0, 1e-4, &mut d);
         let expected = 1e-4 * (0.2 + 0.2) * 400.0 / 2.0;
         assert!((v - expected).abs() < 1e-9, "{v} vs {expected}");
-        assert!(da[..t].iter().chain(&dc[..3 * t]).all(|&g| g == 0.0));
-        assert!(da[t..].iter().all(|&g| g > 0.0));
+        assert!(d[..t].iter().flatten().all(|&g| g == 0.0));
+        assert!(d[t..].iter().flatten().all(|&g| g > 0.0));
     }
 }

@@ -9,6 +9,7 @@
 use super::adam::{AdamGroup, AdamParams};
 use crate::model::sigmoid;
 use rayon::prelude::*;
+use std::ops::Range;
 
 /// Which rows take an optimiser step.
 #[derive(Clone, Copy, Debug)]
@@ -23,24 +24,30 @@ pub enum RowSelection<'a> {
 const CHUNK_ROWS: usize = 64;
 
 /// One Adam step of the texture group `group` on the logits, for the selected rows, then
-/// refreshes their activated values (`sigmoid`, masked texels 0) and zeroes every row of `grads`.
+/// refreshes their activated values (`sigmoid`, masked texels 0) and zeroes the group's channels
+/// of every row of `grads`.
 ///
-/// * `logits`, `activated`, `grads`: `rows × group.row_len` values; `grads` is the gradient with
-///   respect to the **activated** values, chained here through the sigmoid
-///   (`∂L/∂x = ∂L/∂y · y(1 − y)`, masked texels 0).
-/// * `mask`: per texel of a channel, `false` for the texels that stay at alpha 0 (repeated over
-///   the channels of a row); `None` keeps every texel.
+/// * `logits`: planar rows, `group.row_len = channels.len() · TS²` values per billboard,
+///   `[channel][texel]` (the model's layout);
+/// * `activated`, `grads`: the rasterizer's RGBA texels, `TS²` per billboard; the group owns the
+///   channels `channels` of each texel (`0..3` colour, `3..4` alpha), logit `c · TS² + k` being
+///   channel `channels.start + c` of texel `k`. `grads` is the gradient with respect to the
+///   **activated** values, chained here through the sigmoid (`∂L/∂x = ∂L/∂y · y(1 − y)`, masked
+///   texels 0).
+/// * `mask`: per texel, `false` for the texels that stay at alpha 0; `None` keeps every texel.
 /// * `update`: `false` (textures frozen or before the window when the moments should not move)
 ///   skips the step and only zeroes the gradients.
 ///
 /// # Panics
-/// When the slices do not hold `group.rows() × group.row_len` values.
+/// When the slices do not hold `group.rows()` rows, `channels` is empty or not inside `0..4`,
+/// or `mask` does not hold `TS²` flags.
 #[allow(clippy::too_many_arguments)]
 pub fn step_texture_group(
     group: &mut AdamGroup,
     logits: &mut [f32],
-    activated: &mut [f32],
-    grads: &mut [f32],
+    activated: &mut [[f32; 4]],
+    grads: &mut [[f32; 4]],
+    channels: Range<usize>,
     mask: Option<&[bool]>,
     selection: RowSelection<'_>,
     lr: f32,
@@ -49,29 +56,40 @@ pub fn step_texture_group(
 ) {
     let n = group.row_len;
     let rows = group.rows();
+    assert!(!channels.is_empty() && channels.end <= 4, "channels must lie in 0..4");
+    let texels = n / channels.len();
+    assert_eq!(texels * channels.len(), n, "a row holds every channel's texels");
     assert_eq!(logits.len(), rows * n, "one logit row per billboard");
-    assert_eq!(activated.len(), rows * n, "one activated row per billboard");
-    assert_eq!(grads.len(), rows * n, "one gradient row per billboard");
+    assert_eq!(activated.len(), rows * texels, "one activated row per billboard");
+    assert_eq!(grads.len(), rows * texels, "one gradient row per billboard");
+    assert!(mask.is_none_or(|m| m.len() == texels), "one mask flag per texel");
+    let clear = |g: &mut [[f32; 4]]| {
+        for texel in g {
+            texel[channels.clone()].fill(0.0);
+        }
+    };
     if !update {
-        grads.par_chunks_mut(CHUNK_ROWS * n.max(1)).for_each(|g| g.fill(0.0));
+        grads.par_chunks_mut(CHUNK_ROWS * texels.max(1)).for_each(clear);
         return;
     }
     let global_step = group.global_step;
-    let keep = |k: usize| mask.is_none_or(|m| m[k % m.len()]);
+    let keep = |k: usize| mask.is_none_or(|m| m[k]);
     let AdamGroup { m, v, steps, .. } = group;
     let chunk = CHUNK_ROWS * n.max(1);
+    let texel_chunk = CHUNK_ROWS * texels.max(1);
     m.par_chunks_mut(chunk)
         .zip(v.par_chunks_mut(chunk))
         .zip(steps.par_chunks_mut(CHUNK_ROWS))
         .zip(logits.par_chunks_mut(chunk))
-        .zip(activated.par_chunks_mut(chunk))
-        .zip(grads.par_chunks_mut(chunk))
+        .zip(activated.par_chunks_mut(texel_chunk))
+        .zip(grads.par_chunks_mut(texel_chunk))
         .enumerate()
         .for_each(|(c, (((((m, v), steps), logits), activated), grads))| {
             let mut d_logit = vec![0.0f32; n];
             for r in 0..steps.len() {
                 let row = c * CHUNK_ROWS + r;
                 let span = r * n..(r + 1) * n;
+                let texel_span = r * texels..(r + 1) * texels;
                 let t = match selection {
                     RowSelection::Dense => {
                         steps[r] = steps[r].saturating_add(1);
@@ -79,23 +97,28 @@ pub fn step_texture_group(
                     }
                     RowSelection::Sparse(selected) => {
                         if !selected[row] {
-                            grads[span].fill(0.0);
+                            clear(&mut grads[texel_span]);
                             continue;
                         }
                         steps[r] = steps[r].saturating_add(1);
                         u64::from(steps[r])
                     }
                 };
-                let (y, g) = (&mut activated[span.clone()], &mut grads[span.clone()]);
-                for k in 0..n {
-                    d_logit[k] = if keep(k) { g[k] * y[k] * (1.0 - y[k]) } else { 0.0 };
+                let (y, g) = (&mut activated[texel_span.clone()], &mut grads[texel_span]);
+                for (ci, ch) in channels.clone().enumerate() {
+                    for k in 0..texels {
+                        let y = y[k][ch];
+                        d_logit[ci * texels + k] = if keep(k) { g[k][ch] * y * (1.0 - y) } else { 0.0 };
+                    }
                 }
                 let x = &mut logits[span.clone()];
                 adam_update(&mut m[span.clone()], &mut v[span], x, &d_logit, lr, hp, t);
-                for k in 0..n {
-                    y[k] = if keep(k) { sigmoid(x[k]) } else { 0.0 };
+                for (ci, ch) in channels.clone().enumerate() {
+                    for k in 0..texels {
+                        y[k][ch] = if keep(k) { sigmoid(x[ci * texels + k]) } else { 0.0 };
+                    }
                 }
-                g.fill(0.0);
+                clear(g);
             }
         });
 }
@@ -121,11 +144,12 @@ mod tests {
     use crate::train::regularise::chain_sigmoid;
 
     /// The parallel step equals the serial per-row loop (chain, `AdamGroup` step, activation)
-    /// bit for bit, dense and sparse, with a mask, on 2 and 1 threads.
+    /// bit for bit, dense and sparse, with a mask, for the colour and the alpha channels of RGBA
+    /// texels, on 2 and 1 threads; the other channels are left alone.
     #[test]
     fn matches_the_serial_row_loop_bit_for_bit() {
-        let (rows, n) = (150usize, 12usize);
-        let mask: Vec<bool> = (0..4).map(|k| k != 2).collect();
+        let (rows, texels) = (150usize, 4usize);
+        let mask: Vec<bool> = (0..texels).map(|k| k != 2).collect();
         let mut state = 0x9e3779b97f4a7c15u64;
         let mut next = || {
             state ^= state << 13;
@@ -133,75 +157,109 @@ mod tests {
             state ^= state << 17;
             (state % 20001) as f32 / 10000.0 - 1.0
         };
-        let logits0: Vec<f32> = (0..rows * n).map(|_| 3.0 * next()).collect();
-        let grads0: Vec<f32> = (0..rows * n).map(|_| next()).collect();
+        let rgba0: Vec<[f32; 4]> = (0..rows * texels).map(|_| [0.0; 4].map(|_| next())).collect();
         let selected: Vec<bool> = (0..rows).map(|r| r % 3 != 1).collect();
         let hp = AdamParams::default();
-        let activate = |x: &[f32]| -> Vec<f32> {
-            x.iter()
-                .enumerate()
-                .map(|(k, &x)| if mask[(k % n) % 4] { sigmoid(x) } else { 0.0 })
-                .collect()
-        };
-        for dense in [true, false] {
-            // Serial reference: two steps.
-            let mut group = AdamGroup::new(rows, n);
-            let mut logits = logits0.clone();
-            let mut act = activate(&logits);
-            for _ in 0..2 {
-                group.global_step += 1;
-                for r in 0..rows {
-                    if !dense && !selected[r] {
-                        continue;
-                    }
-                    let span = r * n..(r + 1) * n;
-                    let mut d = vec![0.0; n];
-                    let row_mask: Vec<bool> = (0..n).map(|k| mask[k % 4]).collect();
-                    chain_sigmoid(&act[span.clone()], &grads0[span.clone()], Some(&row_mask), &mut d);
-                    if dense {
-                        let t = group.global_step;
-                        group.step_row_global(r, &mut logits[span.clone()], &d, 0.01, &hp, t);
-                    } else {
-                        group.step_row(r, &mut logits[span.clone()], &d, 0.01, &hp);
-                    }
-                    act.splice(span.clone(), activate(&logits)[span].iter().copied());
-                }
-            }
-            for threads in [1, 2] {
-                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-                let mut g2 = AdamGroup::new(rows, n);
-                let mut logits2 = logits0.clone();
-                let mut act2 = activate(&logits2);
-                let row_mask: Vec<bool> = (0..n).map(|k| mask[k % 4]).collect();
-                pool.install(|| {
-                    for _ in 0..2 {
-                        g2.global_step += 1;
-                        let mut grads = grads0.clone();
-                        let sel = if dense {
-                            RowSelection::Dense
+        for channels in [0..3, 3..4] {
+            let n = channels.len() * texels;
+            let logits0: Vec<f32> = (0..rows * n).map(|_| 3.0 * next()).collect();
+            // Planar gradients `[row][channel][texel]`, the same values as in the RGBA buffer.
+            let grads_rgba0: Vec<[f32; 4]> = (0..rows * texels).map(|_| [0.0; 4].map(|_| next())).collect();
+            let planar = |x: &[[f32; 4]]| -> Vec<f32> {
+                (0..rows)
+                    .flat_map(|r| {
+                        let channels = channels.clone();
+                        channels.flat_map(move |ch| (0..texels).map(move |k| x[r * texels + k][ch]))
+                    })
+                    .collect()
+            };
+            let grads0 = planar(&grads_rgba0);
+            let activate = |x: &[f32]| -> Vec<f32> {
+                x.iter()
+                    .enumerate()
+                    .map(|(k, &x)| if mask[(k % n) % texels] { sigmoid(x) } else { 0.0 })
+                    .collect()
+            };
+            let row_mask: Vec<bool> = (0..n).map(|k| mask[k % texels]).collect();
+            for dense in [true, false] {
+                // Serial reference on planar rows: two steps.
+                let mut group = AdamGroup::new(rows, n);
+                let mut logits = logits0.clone();
+                let mut act = activate(&logits);
+                for _ in 0..2 {
+                    group.global_step += 1;
+                    for r in 0..rows {
+                        if !dense && !selected[r] {
+                            continue;
+                        }
+                        let span = r * n..(r + 1) * n;
+                        let mut d = vec![0.0; n];
+                        chain_sigmoid(&act[span.clone()], &grads0[span.clone()], Some(&row_mask), &mut d);
+                        if dense {
+                            let t = group.global_step;
+                            group.step_row_global(r, &mut logits[span.clone()], &d, 0.01, &hp, t);
                         } else {
-                            RowSelection::Sparse(&selected)
-                        };
-                        step_texture_group(
-                            &mut g2,
-                            &mut logits2,
-                            &mut act2,
-                            &mut grads,
-                            Some(&row_mask),
-                            sel,
-                            0.01,
-                            &hp,
-                            true,
-                        );
-                        assert!(grads.iter().all(|&g| g == 0.0), "gradients are consumed");
+                            group.step_row(r, &mut logits[span.clone()], &d, 0.01, &hp);
+                        }
+                        act.splice(span.clone(), activate(&logits)[span].iter().copied());
                     }
-                });
-                let bits = |x: &[f32]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-                assert_eq!(bits(&logits2), bits(&logits), "dense {dense}, {threads} threads");
-                assert_eq!(bits(&act2), bits(&act), "dense {dense}, {threads} threads");
-                assert_eq!(bits(&g2.m), bits(&group.m));
-                assert_eq!(bits(&g2.v), bits(&group.v));
-                assert_eq!(g2.steps, group.steps);
+                }
+                for threads in [1, 2] {
+                    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                    let mut g2 = AdamGroup::new(rows, n);
+                    let mut logits2 = logits0.clone();
+                    // The group's channels activated from the logits, the others arbitrary.
+                    let mut act2 = rgba0.clone();
+                    let planar_act = activate(&logits2);
+                    for r in 0..rows {
+                        for (ci, ch) in channels.clone().enumerate() {
+                            for k in 0..texels {
+                                act2[r * texels + k][ch] = planar_act[r * n + ci * texels + k];
+                            }
+                        }
+                    }
+                    pool.install(|| {
+                        for _ in 0..2 {
+                            g2.global_step += 1;
+                            let mut grads = grads_rgba0.clone();
+                            let sel = if dense {
+                                RowSelection::Dense
+                            } else {
+                                RowSelection::Sparse(&selected)
+                            };
+                            step_texture_group(
+                                &mut g2,
+                                &mut logits2,
+                                &mut act2,
+                                &mut grads,
+                                channels.clone(),
+                                Some(&mask),
+                                sel,
+                                0.01,
+                                &hp,
+                                true,
+                            );
+                            for (g, g0) in grads.iter().zip(&grads_rgba0) {
+                                for ch in 0..4 {
+                                    let want = if channels.contains(&ch) { 0.0 } else { g0[ch] };
+                                    assert_eq!(g[ch], want, "the group's gradients are consumed, no others");
+                                }
+                            }
+                        }
+                    });
+                    let bits = |x: &[f32]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                    let tag = format!("channels {channels:?}, dense {dense}, {threads} threads");
+                    assert_eq!(bits(&logits2), bits(&logits), "{tag}");
+                    assert_eq!(bits(&planar(&act2)), bits(&act), "{tag}");
+                    for (a, a0) in act2.iter().zip(&rgba0) {
+                        for ch in (0..4).filter(|c| !channels.contains(c)) {
+                            assert_eq!(a[ch], a0[ch], "{tag}: other channels untouched");
+                        }
+                    }
+                    assert_eq!(bits(&g2.m), bits(&group.m));
+                    assert_eq!(bits(&g2.v), bits(&group.v));
+                    assert_eq!(g2.steps, group.steps);
+                }
             }
         }
     }
