@@ -131,38 +131,42 @@ struct Scratch {
     candidates: TileCandidates,
 }
 
-/// Per-tile texture-gradient sums, dense over (entry slot, texel) and reused by every tile a
+/// Per-tile texture-gradient sums over (entry slot, texel) cells, reused by every tile a
 /// thread processes (see [`TEXEL_SUMS`]).
 ///
-/// Each contribution is added to its (slot, texel) cell the moment the pixel pass produces it,
-/// so every cell is the sum of its contributions in pixel order, starting from the first one
-/// (assigned, not added to 0, so that a lone `−0.0` stays `−0.0`): the same sums, in the same
-/// order, as a stable sort of all contributions by (slot, texel) followed by a merge of equal
-/// keys (`texel_sums_reference`, tested). Only the touched cells are read out and reset, so a
-/// tile costs `O(contributions + touched cells)` whatever its number of entries; the storage is
-/// `slots × TS²` cells of the largest tile seen so far (17 bytes a cell).
+/// Each contribution is added to its cell the moment the pixel pass produces it, so every cell
+/// is the sum of its contributions in pixel order, starting from the first one (assigned, not
+/// added to 0, so that a lone `−0.0` stays `−0.0`): the same sums, in the same order, as a
+/// stable sort of all contributions by (slot, texel) followed by a merge of equal keys
+/// (`texel_sums_reference`, tested). A dense `slots × TS²` index (4 bytes a cell) maps each cell
+/// to its position in a compact list of the touched cells, in first-touch order; only the
+/// touched cells are read out and reset, so a tile costs `O(contributions + touched cells)`
+/// whatever its number of entries, and the sums themselves stay in a few cache lines even when
+/// the index is sparse (a benchmark tile: 180 entries touching ~6 texels each).
 #[derive(Default)]
 struct TexelSums {
-    /// `[∂r, ∂g, ∂b, ∂alpha]` of cell `slot · texels + texel`; meaningful only where `seen`.
+    /// Per cell `slot · texels + texel`: its position in `sums`, or [`UNTOUCHED`].
+    cell_of: Vec<u32>,
+    /// `[∂r, ∂g, ∂b, ∂alpha]` of the touched cells, in first-touch order.
     sums: Vec<[f32; 4]>,
-    /// True for the cells touched in the current tile (all false between tiles).
-    seen: Vec<bool>,
-    /// Touched cells `(slot, texel)` in first-touch order.
-    touched: Vec<(u32, u32)>,
+    /// `(slot, texel)` of the touched cells, in the order of `sums`.
+    cells: Vec<(u32, u32)>,
     /// Cells per slot (`TS²`) of the current tile.
     texels: usize,
-    /// Per-slot counts, then write cursors, of [`TexelSums::finish`].
+    /// Per-slot write cursors of [`TexelSums::finish`].
     cursor: Vec<u32>,
 }
+
+/// [`TexelSums::cell_of`] of a cell not touched in the current tile.
+const UNTOUCHED: u32 = u32::MAX;
 
 impl TexelSums {
     /// Prepares for a tile of `slots` entries with `texels` texels per channel.
     fn start(&mut self, slots: usize, texels: usize) {
-        debug_assert!(self.touched.is_empty(), "the previous tile was finished");
+        debug_assert!(self.cells.is_empty(), "the previous tile was finished");
         let cells = slots * texels;
-        if self.sums.len() < cells {
-            self.sums.resize(cells, [0.0; 4]);
-            self.seen.resize(cells, false);
+        if self.cell_of.len() < cells {
+            self.cell_of.resize(cells, UNTOUCHED);
         }
         self.texels = texels;
     }
@@ -170,16 +174,16 @@ impl TexelSums {
     /// Adds one contribution to cell (`slot`, `texel`).
     #[inline]
     fn add(&mut self, slot: u32, texel: u32, g: [f32; 4]) {
-        let cell = slot as usize * self.texels + texel as usize;
-        if self.seen[cell] {
-            let s = &mut self.sums[cell];
+        let cell = &mut self.cell_of[slot as usize * self.texels + texel as usize];
+        if *cell == UNTOUCHED {
+            *cell = self.sums.len() as u32;
+            self.sums.push(g);
+            self.cells.push((slot, texel));
+        } else {
+            let s = &mut self.sums[*cell as usize];
             for c in 0..4 {
                 s[c] += g[c];
             }
-        } else {
-            self.seen[cell] = true;
-            self.sums[cell] = g;
-            self.touched.push((slot, texel));
         }
     }
 
@@ -188,7 +192,7 @@ impl TexelSums {
     /// `k` are `texels[offsets[k]..offsets[k + 1]]`.
     fn finish(&mut self, slots: usize) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
         let mut offsets = vec![0u32; slots + 1];
-        for &(slot, _) in &self.touched {
+        for &(slot, _) in &self.cells {
             offsets[slot as usize + 1] += 1;
         }
         for k in 0..slots {
@@ -196,15 +200,15 @@ impl TexelSums {
         }
         self.cursor.clear();
         self.cursor.extend_from_slice(&offsets[..slots]);
-        let mut out = vec![(0u32, [0.0f32; 4]); self.touched.len()];
-        for &(slot, texel) in &self.touched {
-            let cell = slot as usize * self.texels + texel as usize;
+        let mut out = vec![(0u32, [0.0f32; 4]); self.cells.len()];
+        for (&(slot, texel), &sum) in self.cells.iter().zip(&self.sums) {
             let c = &mut self.cursor[slot as usize];
-            out[*c as usize] = (texel, self.sums[cell]);
+            out[*c as usize] = (texel, sum);
             *c += 1;
-            self.seen[cell] = false;
+            self.cell_of[slot as usize * self.texels + texel as usize] = UNTOUCHED;
         }
-        self.touched.clear();
+        self.cells.clear();
+        self.sums.clear();
         (offsets, out)
     }
 }
@@ -551,7 +555,7 @@ mod tests {
                 sums.add(slot, texel, g);
             }
             let (offsets, out) = sums.finish(slots);
-            assert!(sums.seen.iter().all(|&s| !s) && sums.touched.is_empty());
+            assert!(sums.cell_of.iter().all(|&c| c == UNTOUCHED) && sums.cells.is_empty());
             let (ref_offsets, ref_out) = texel_sums_reference(&log, slots);
             assert_eq!(offsets, ref_offsets);
             for k in 0..slots {
