@@ -884,3 +884,53 @@ fn unit_disk_touching_the_camera_plane() {
     let b = square_screen_bounds(&ps.transform, support()).unwrap();
     assert!(b.min.is_finite() && b.max.is_finite());
 }
+
+/// `pixel_rect` (truncating casts) equals the plain `ceil`/`floor` formula it replaces, on edge
+/// values (integers, half-integers, around 0 and the image size, huge and infinite bounds) and
+/// on random ones.
+#[test]
+fn pixel_rect_matches_the_libm_formula() {
+    let libm = |b: &ScreenBounds, w: u32, h: u32| {
+        let lo = |m: f32, n: u32| (m - 0.5).ceil().clamp(0.0, n as f32) as u32;
+        let hi = |m: f32, n: u32| ((m - 0.5).floor() + 1.0).clamp(0.0, n as f32) as u32;
+        let (x0, y0, x1, y1) = (lo(b.min.x, w), lo(b.min.y, h), hi(b.max.x, w), hi(b.max.y, h));
+        (x0 < x1 && y0 < y1).then_some((x0, y0, x1, y1))
+    };
+    let mut values = vec![
+        0.0,
+        -0.0,
+        0.5,
+        -0.5,
+        1.0,
+        -1.0,
+        -1.5,
+        -2.5,
+        2.5,
+        15.5,
+        16.0,
+        16.5,
+        17.0,
+        1e30,
+        -1e30,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::from_bits(0.5f32.to_bits() + 1),
+        f32::from_bits(0.5f32.to_bits() - 1),
+    ];
+    let mut state = 0x853c49e6748fea9bu64;
+    for _ in 0..400 {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        values.push(((state >> 40) as f32 / (1u64 << 24) as f32) * 40.0 - 12.0);
+    }
+    for (k, &a) in values.iter().enumerate() {
+        let b = values[(k * 7 + 3) % values.len()];
+        let bounds = ScreenBounds {
+            min: Vec2::new(a.min(b), a),
+            max: Vec2::new(a.max(b), b.max(a)),
+        };
+        let got = bounds.pixel_rect(16, 12).map(|r| (r.x_min, r.y_min, r.x_max, r.y_max));
+        assert_eq!(got, libm(&bounds, 16, 12), "bounds {bounds:?}");
+    }
+}

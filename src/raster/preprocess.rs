@@ -3,7 +3,7 @@
 use super::{BillboardSet, RenderSettings};
 use crate::camera::Camera;
 use crate::stages::sh::sh_colour;
-use crate::stages::splat_transform::{SplatTransform, project_splat, square_screen_bounds, support_half_side};
+use crate::stages::splat_transform::{SplatTransform, splat_frame, square_screen_bounds, support_half_side};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -28,7 +28,7 @@ pub struct Prepared {
 /// the near plane, exactly edge-on, degenerate, or off screen).
 pub fn prepare_one(set: &BillboardSet<'_>, i: usize, camera: &Camera, settings: &RenderSettings) -> Option<Prepared> {
     let position = set.positions[i];
-    let projected = project_splat(position, set.log_scales[i], set.quaternions[i], camera)?;
+    let projected = splat_frame(position, set.log_scales[i], set.quaternions[i], camera)?;
     // Tight box of the texture support square (clipped by the near plane), as pixel indices.
     let rect = square_screen_bounds(&projected.transform, support_half_side(set.texture_size))?
         .pixel_rect(camera.width, camera.height)?;

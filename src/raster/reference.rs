@@ -13,7 +13,7 @@ use crate::stages::bilinear;
 use crate::stages::composite::composite;
 use crate::stages::ray_plane::intersect;
 use crate::stages::sh::sh_colour;
-use crate::stages::splat_transform::project_splat;
+use crate::stages::splat_transform::splat_frame;
 
 /// Output of the reference renderer.
 #[derive(Clone, Debug, PartialEq)]
@@ -36,7 +36,7 @@ pub fn render_reference(set: &BillboardSet<'_>, camera: &Camera, settings: &Rend
     let mut order: Vec<(usize, f32)> = Vec::new();
     let mut projected = Vec::with_capacity(set.len());
     for b in 0..set.len() {
-        let p = project_splat(set.positions[b], set.log_scales[b], set.quaternions[b], camera);
+        let p = splat_frame(set.positions[b], set.log_scales[b], set.quaternions[b], camera);
         if let Some(p) = &p {
             order.push((b, p.view_depth));
         }

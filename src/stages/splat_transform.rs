@@ -214,14 +214,49 @@ pub fn project_splat(
     project_with_geometry(position, log_scales, quaternion, camera).map(|(p, _)| p)
 }
 
-/// [`project_splat`], also returning the intermediate geometry for the backward pass.
+/// The ray-splat frame of a billboard: [`project_splat`] without the reference's unit-disk box,
+/// which the rasterizer does not use (it bounds the texture support with
+/// [`square_screen_bounds`]). Same culling as [`project_splat`] except the box's own
+/// degenerate case (`tw.x² + tw.y² = tw.z²` exactly), where this still gives a frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SplatFrame {
+    /// The ray-splat transform `T`.
+    pub transform: SplatTransform,
+    /// Plane normal in view space, flipped to face the camera (see [`ProjectedSplat`]).
+    pub normal_view: Vec3,
+    /// The flip applied to `R_cw·n`: `+1` or `−1`.
+    pub normal_sign: f32,
+    /// View depth of the billboard centre.
+    pub view_depth: f32,
+    /// `exp(log_scales)`.
+    pub scales: Vec2,
+}
+
+/// The [`SplatFrame`] of a billboard, or `None` when it is culled: centre at or behind the
+/// near plane, exactly edge-on (`cos θ = 0`), or non-finite.
+///
+/// ```
+/// use bbsplat::camera::Camera;
+/// use bbsplat::stages::splat_transform::{project_splat, splat_frame};
+/// use glam::{Vec2, Vec3};
+/// let cam = Camera::look_at(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, Vec3::Y, 100.0, 100.0, 64, 48);
+/// let (p, q) = (Vec3::new(0.2, 0.1, 0.0), [0.9, 0.1, 0.3, 0.2]);
+/// let frame = splat_frame(p, Vec2::splat(-1.0), q, &cam).unwrap();
+/// assert_eq!(frame.transform, project_splat(p, Vec2::splat(-1.0), q, &cam).unwrap().transform);
+/// ```
 #[inline]
-fn project_with_geometry(
+pub fn splat_frame(position: Vec3, log_scales: Vec2, quaternion: [f32; 4], camera: &Camera) -> Option<SplatFrame> {
+    frame_with_geometry(position, log_scales, quaternion, camera).map(|(f, _)| f)
+}
+
+/// [`splat_frame`], also returning the intermediate geometry for the backward pass.
+#[inline]
+fn frame_with_geometry(
     position: Vec3,
     log_scales: Vec2,
     quaternion: [f32; 4],
     camera: &Camera,
-) -> Option<(ProjectedSplat, Geometry)> {
+) -> Option<(SplatFrame, Geometry)> {
     let g = geometry(position, log_scales, quaternion, camera);
     if g.c.z.is_nan() || g.c.z <= NEAR_PLANE {
         return None;
@@ -236,15 +271,34 @@ fn project_with_geometry(
         return None;
     }
     let normal_sign = if cos_theta > 0.0 { 1.0 } else { -1.0 };
-    let (centre, half_extent) = unit_disk_box(&transform)?;
-    let projected = ProjectedSplat {
+    let frame = SplatFrame {
         transform,
         normal_view: g.normal_view * normal_sign,
         normal_sign,
         view_depth: g.c.z,
+        scales: g.scales,
+    };
+    Some((frame, g))
+}
+
+/// [`project_splat`], also returning the intermediate geometry for the backward pass.
+#[inline]
+fn project_with_geometry(
+    position: Vec3,
+    log_scales: Vec2,
+    quaternion: [f32; 4],
+    camera: &Camera,
+) -> Option<(ProjectedSplat, Geometry)> {
+    let (f, g) = frame_with_geometry(position, log_scales, quaternion, camera)?;
+    let (centre, half_extent) = unit_disk_box(&f.transform)?;
+    let projected = ProjectedSplat {
+        transform: f.transform,
+        normal_view: f.normal_view,
+        normal_sign: f.normal_sign,
+        view_depth: f.view_depth,
         centre,
         half_extent,
-        scales: g.scales,
+        scales: f.scales,
     };
     Some((projected, g))
 }
@@ -284,7 +338,8 @@ fn unit_disk_box(t: &SplatTransform) -> Option<(Vec2, Vec2)> {
 /// `∂L/∂normal_view` (the flipped normal; the flip sign is treated as a constant).
 ///
 /// The outputs `view_depth`, `centre` and `half_extent` are not differentiated (they only drive
-/// sorting and tiling). A culled billboard (forward `None`) gets zero gradients.
+/// sorting and tiling). A billboard culled by [`splat_frame`] gets zero gradients (the
+/// unit-disk box is not needed here, so its own degenerate case is not a cull).
 ///
 /// Chain: `∂L/∂[a|b|c] = Kᵀ·∂L/∂T`; `∂L/∂position = R_cwᵀ·∂L/∂c`;
 /// `∂L/∂t_u = s_u·R_cwᵀ·∂L/∂a`, `∂L/∂s_u = t_u·R_cwᵀ·∂L/∂a` and `∂L/∂log s_u = s_u·∂L/∂s_u` (same
@@ -311,7 +366,7 @@ pub fn project_splat_vjp(
     d_transform: &SplatTransform,
     d_normal_view: Vec3,
 ) -> SplatGrads {
-    let Some((projected, g)) = project_with_geometry(position, log_scales, quaternion, camera) else {
+    let Some((frame, g)) = frame_with_geometry(position, log_scales, quaternion, camera) else {
         return SplatGrads::default();
     };
     let SplatTransform { tu: du, tv: dv, tw: dw } = *d_transform;
@@ -326,7 +381,7 @@ pub fn project_splat_vjp(
     let d_rotation = Mat3::from_cols(
         da_world * g.scales.x,
         db_world * g.scales.y,
-        wt * d_normal_view * projected.normal_sign,
+        wt * d_normal_view * frame.normal_sign,
     );
     let d_scales = Vec2::new(da_world.dot(g.rotation.x_axis), db_world.dot(g.rotation.y_axis));
     SplatGrads {
@@ -390,10 +445,20 @@ impl ScreenBounds {
     /// ```
     #[inline]
     pub fn pixel_rect(&self, width: u32, height: u32) -> Option<PixelRect> {
-        // Centre i + 0.5 ∈ [min, max]  ⇔  i ∈ [ceil(min − 0.5), floor(max − 0.5)]. Clamp in f32
-        // before casting so that huge or infinite bounds are safe.
-        let lo = |m: f32, n: u32| (m - 0.5).ceil().clamp(0.0, n as f32) as u32;
-        let hi = |m: f32, n: u32| ((m - 0.5).floor() + 1.0).clamp(0.0, n as f32) as u32;
+        // Centre i + 0.5 ∈ [min, max]  ⇔  i ∈ [ceil(min − 0.5), floor(max − 0.5)]. The argument is
+        // clamped first (which changes no result: everything outside lands on 0 or n anyway), so
+        // huge or infinite bounds are safe and the rounding is a truncating cast plus a
+        // correction instead of a libm call (baseline x86-64 has no rounding instruction).
+        let lo = |m: f32, n: u32| {
+            let x = (m - 0.5).clamp(-1.0, n as f32);
+            let t = x as i64;
+            (if (t as f32) < x { t + 1 } else { t }).clamp(0, i64::from(n)) as u32
+        };
+        let hi = |m: f32, n: u32| {
+            let x = (m - 0.5).clamp(-2.0, n as f32);
+            let t = x as i64;
+            (if (t as f32) > x { t - 1 } else { t } + 1).clamp(0, i64::from(n)) as u32
+        };
         let rect = PixelRect {
             x_min: lo(self.min.x, width),
             y_min: lo(self.min.y, height),
