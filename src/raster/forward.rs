@@ -421,53 +421,95 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
             (pixels, blended_slots)
         })
         .collect();
+    // Tile-major prefix sums, serial over tiles only: each tile's first pixel rank and first
+    // blended slot.
+    let mut tile_pixel_base = Vec::with_capacity(n_tiles);
+    let mut tile_blended_base = Vec::with_capacity(n_tiles);
+    let (mut pixel_count, mut blended_count) = (0u32, 0u32);
+    for (pixels, slots) in &tiles {
+        tile_pixel_base.push(pixel_count);
+        tile_blended_base.push(blended_count);
+        pixel_count += pixels.len() as u32;
+        blended_count += slots.len() as u32;
+    }
+    // Blended slots and per-pixel offsets, tile by tile in parallel (disjoint ranges).
+    let mut blended_slots = vec![0u32; blended_count as usize];
+    let mut blended_offsets = vec![0u32; n_pix + 1];
+    let slot_chunks = split_by_lengths(&mut blended_slots, tiles.iter().map(|(_, s)| s.len()));
+    let offset_chunks = split_by_lengths(&mut blended_offsets[1..], tiles.iter().map(|(p, _)| p.len()));
+    let evaluated_pairs: u64 = slot_chunks
+        .into_par_iter()
+        .zip(offset_chunks)
+        .zip(&tiles)
+        .zip(&tile_blended_base)
+        .map(|(((slot_chunk, offset_chunk), (pixels, slots)), &base)| {
+            slot_chunk.copy_from_slice(slots);
+            let mut end = base;
+            for (offset, px) in offset_chunk.iter_mut().zip(pixels) {
+                end += px.blended;
+                *offset = end;
+            }
+            pixels.iter().map(|px| u64::from(px.evaluated)).sum::<u64>()
+        })
+        .sum();
+    // Images, one band of tile rows per task.
+    let band = TILE_SIZE as usize * w as usize;
+    let (mut rgb, mut alpha, mut depth) = (vec![0.0; n_pix * 3], vec![0.0; n_pix], vec![0.0; n_pix]);
+    let (mut median_depth, mut normal) = (vec![0.0; n_pix], vec![0.0; n_pix * 3]);
+    let mut final_transmittance = vec![1.0; n_pix];
+    (
+        rgb.par_chunks_mut(3 * band),
+        alpha.par_chunks_mut(band),
+        depth.par_chunks_mut(band),
+        median_depth.par_chunks_mut(band),
+        normal.par_chunks_mut(3 * band),
+        final_transmittance.par_chunks_mut(band),
+    )
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(ty, (rgb, alpha, depth, median, normal, final_t))| {
+            for tx in 0..bins.tiles_x as usize {
+                let t = ty * bins.tiles_x as usize + tx;
+                let (i0, _, i1, _) = tile_pixels(&bins, t, w, h);
+                let tw = (i1 - i0) as usize;
+                for (k, px) in tiles[t].0.iter().enumerate() {
+                    // Pixel index within the band.
+                    let p = (k / tw) * w as usize + i0 as usize + k % tw;
+                    rgb[3 * p..3 * p + 3].copy_from_slice(&px.rgb.to_array());
+                    alpha[p] = px.alpha;
+                    depth[p] = px.depth;
+                    median[p] = px.median;
+                    normal[3 * p..3 * p + 3].copy_from_slice(&px.normal.to_array());
+                    final_t[p] = px.final_t;
+                }
+            }
+        });
     let mut out = RenderOutput {
         width: w,
         height: h,
-        rgb: vec![0.0; n_pix * 3],
-        alpha: vec![0.0; n_pix],
-        depth: vec![0.0; n_pix],
-        median_depth: vec![0.0; n_pix],
-        normal: vec![0.0; n_pix * 3],
+        rgb,
+        alpha,
+        depth,
+        median_depth,
+        normal,
         impact: vec![0.0; set.len()],
         visible: prepared.iter().map(Option::is_some).collect(),
         stats: RenderStats {
             tile_entries: bins.entries.len() as u64,
-            ..Default::default()
+            evaluated_pairs,
+            blended_pairs: u64::from(blended_count),
         },
         state: ForwardState {
             camera: *camera,
             settings: *settings,
             prepared: Vec::new(),
             bins: TileBins::default(),
-            final_transmittance: vec![1.0; n_pix],
-            blended_slots: Vec::with_capacity(tiles.iter().map(|(_, s)| s.len()).sum()),
-            blended_offsets: Vec::with_capacity(n_pix + 1),
-            tile_pixel_base: Vec::with_capacity(n_tiles),
+            final_transmittance,
+            blended_slots,
+            blended_offsets,
+            tile_pixel_base,
         },
     };
-    out.state.blended_offsets.push(0);
-    for (t, (pixels, slots)) in tiles.iter().enumerate() {
-        out.state
-            .tile_pixel_base
-            .push(out.state.blended_offsets.len() as u32 - 1);
-        out.state.blended_slots.extend_from_slice(slots);
-        let (i0, j0, i1, _) = tile_pixels(&bins, t, w, h);
-        let tw = (i1 - i0) as usize;
-        for (k, px) in pixels.iter().enumerate() {
-            let p = (j0 as usize + k / tw) * w as usize + i0 as usize + k % tw;
-            out.rgb[3 * p..3 * p + 3].copy_from_slice(&px.rgb.to_array());
-            out.alpha[p] = px.alpha;
-            out.depth[p] = px.depth;
-            out.median_depth[p] = px.median;
-            out.normal[3 * p..3 * p + 3].copy_from_slice(&px.normal.to_array());
-            out.state.final_transmittance[p] = px.final_t;
-            let end = out.state.blended_offsets.last().copied().unwrap_or(0) + px.blended;
-            out.state.blended_offsets.push(end);
-            out.stats.evaluated_pairs += px.evaluated as u64;
-            out.stats.blended_pairs += px.blended as u64;
-        }
-    }
     // Per-billboard impact: entries summed in tile order (fixed, thread-independent).
     out.impact.par_iter_mut().enumerate().for_each(|(b, imp)| {
         let r = bins.billboard_offsets[b] as usize..bins.billboard_offsets[b + 1] as usize;
