@@ -11,6 +11,8 @@
 //! ([`crate::raster::RenderOutput::impact`], the post-2025 "fixed" definition). The paper-era
 //! threshold σ = 500 is our default (see `docs/training.md` for the choice).
 
+use rayon::prelude::*;
+
 /// Weight of the texture regulariser in the reference (`1e-4`).
 pub const TEXTURE_REG_WEIGHT: f32 = 1e-4;
 /// Weight of the global opacity regulariser in the reference (`0.01`).
@@ -48,47 +50,53 @@ pub fn texture_regulariser(
     }
     let threshold = threshold as f64;
     let lambda = weight as f64;
-    let mut total = 0.0;
-    for i in 0..n {
-        let imp = impact[i] as f64;
-        if imp <= 0.0 {
-            continue;
-        }
-        let w = threshold - imp.clamp(0.0, threshold);
-        if w == 0.0 {
-            continue;
-        }
-        let tex = &textures[i * t..(i + 1) * t];
-        // Channel by channel (r, g, b), each over the texels in order.
-        let mean_c = (0..3).flat_map(|c| tex.iter().map(move |x| x[c] as f64)).sum::<f64>() / (3 * t) as f64;
-        let m = tex
-            .iter()
-            .zip(alpha0)
-            .map(|(x, &x0)| x[3] as f64 - x0 as f64)
-            .sum::<f64>()
-            / t as f64;
-        total += (mean_c + m.abs()) * w;
-        let gc = (lambda * w / (vis as f64 * (3 * t) as f64)) as f32;
-        let d_tex = &mut d_textures[i * t..(i + 1) * t];
-        for g in d_tex.iter_mut() {
-            for c in 0..3 {
-                g[c] += gc;
+    // Billboards in parallel, each writing only its own gradient rows; the per-billboard terms
+    // are summed afterwards in index order, so the value does not depend on the thread count.
+    let terms: Vec<f64> = d_textures
+        .par_chunks_mut(t)
+        .zip(textures.par_chunks(t))
+        .zip(impact)
+        .map(|((d_tex, tex), &imp)| {
+            let imp = imp as f64;
+            if imp <= 0.0 {
+                return 0.0;
             }
-        }
-        let sign = if m > 0.0 {
-            1.0
-        } else if m < 0.0 {
-            -1.0
-        } else {
-            0.0
-        };
-        let ga = (lambda * w * sign / (vis as f64 * t as f64)) as f32;
-        if ga != 0.0 {
+            let w = threshold - imp.clamp(0.0, threshold);
+            if w == 0.0 {
+                return 0.0;
+            }
+            // Channel by channel (r, g, b), each over the texels in order.
+            let mean_c = (0..3).flat_map(|c| tex.iter().map(move |x| x[c] as f64)).sum::<f64>() / (3 * t) as f64;
+            let m = tex
+                .iter()
+                .zip(alpha0)
+                .map(|(x, &x0)| x[3] as f64 - x0 as f64)
+                .sum::<f64>()
+                / t as f64;
+            let gc = (lambda * w / (vis as f64 * (3 * t) as f64)) as f32;
             for g in d_tex.iter_mut() {
-                g[3] += ga;
+                for c in 0..3 {
+                    g[c] += gc;
+                }
             }
-        }
-    }
+            let sign = if m > 0.0 {
+                1.0
+            } else if m < 0.0 {
+                -1.0
+            } else {
+                0.0
+            };
+            let ga = (lambda * w * sign / (vis as f64 * t as f64)) as f32;
+            if ga != 0.0 {
+                for g in d_tex.iter_mut() {
+                    g[3] += ga;
+                }
+            }
+            (mean_c + m.abs()) * w
+        })
+        .collect();
+    // Skipped billboards contribute an exact 0.0, which leaves the running sum unchanged.
+    let total: f64 = terms.iter().fold(0.0, |acc, &x| acc + x);
     lambda * total / vis as f64
 }
 

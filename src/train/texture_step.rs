@@ -63,9 +63,16 @@ pub fn step_texture_group(
     assert_eq!(activated.len(), rows * texels, "one activated row per billboard");
     assert_eq!(grads.len(), rows * texels, "one gradient row per billboard");
     assert!(mask.is_none_or(|m| m.len() == texels), "one mask flag per texel");
+    // Fixed trip count with a per-channel test: a `fill` of the variable channel range would be
+    // a `memset` call per texel.
+    let owned: [bool; 4] = std::array::from_fn(|c| channels.contains(&c));
     let clear = |g: &mut [[f32; 4]]| {
         for texel in g {
-            texel[channels.clone()].fill(0.0);
+            for c in 0..4 {
+                if owned[c] {
+                    texel[c] = 0.0;
+                }
+            }
         }
     };
     if !update {
@@ -105,10 +112,12 @@ pub fn step_texture_group(
                     }
                 };
                 let (y, g) = (&mut activated[texel_span.clone()], &mut grads[texel_span]);
+                // Chain through the sigmoid, consuming (zeroing) the gradient as it is read.
                 for (ci, ch) in channels.clone().enumerate() {
                     for k in 0..texels {
                         let y = y[k][ch];
-                        d_logit[ci * texels + k] = if keep(k) { g[k][ch] * y * (1.0 - y) } else { 0.0 };
+                        let g = std::mem::take(&mut g[k][ch]);
+                        d_logit[ci * texels + k] = if keep(k) { g * y * (1.0 - y) } else { 0.0 };
                     }
                 }
                 let x = &mut logits[span.clone()];
@@ -118,7 +127,6 @@ pub fn step_texture_group(
                         y[k][ch] = if keep(k) { sigmoid(x[ci * texels + k]) } else { 0.0 };
                     }
                 }
-                clear(g);
             }
         });
 }
