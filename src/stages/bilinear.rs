@@ -96,7 +96,7 @@ fn floor_in_range(x: f64) -> i64 {
 /// assert!(edge.weights().iter().all(|&w| w < 1e-6));
 /// assert!(taps(1e30, f32::NEG_INFINITY, 16).is_none());
 /// ```
-#[inline]
+#[inline(always)]
 pub fn taps(u: f32, v: f32, ts: usize) -> Option<BilinearTaps> {
     assert!((2..=65536).contains(&ts), "texture size must be in 2..=65536, got {ts}");
     let x = texel_coordinate(u, ts);
