@@ -7,11 +7,12 @@
 
 use bbsplat::camera::Camera;
 use bbsplat::gradcheck::{GradReport, GradTolerance, StepRule, check_vjp};
+use bbsplat::stages::bilinear;
 use bbsplat::stages::ray_plane::intersect;
 use bbsplat::stages::rotation::quat_to_rotation;
 use bbsplat::stages::splat_transform::{
     NEAR_PLANE, ProjectedSplat, ScreenBounds, SplatGrads, SplatTransform, project_splat, project_splat_vjp,
-    square_screen_bounds, support_half_side,
+    square_screen_bounds, support_half_side, support_quad,
 };
 use bbsplat::strategies::{BillboardPose, billboard_in_front, camera, identity_camera, seeded_config};
 use glam::{DMat3, DVec2, DVec3, Mat3, Vec2, Vec3};
@@ -933,4 +934,88 @@ fn pixel_rect_matches_the_libm_formula() {
         let got = bounds.pixel_rect(16, 12).map(|r| (r.x_min, r.y_min, r.x_max, r.y_max));
         assert_eq!(got, libm(&bounds, 16, 12), "bounds {bounds:?}");
     }
+}
+
+proptest! {
+    #![proptest_config(seeded_config(256))]
+
+    /// Every point the rasterizer would accept (ray-plane hit and bilinear taps at TS = 16) lies
+    /// inside its row's span of the support quad: pixel centres of the whole image, and points
+    /// projected from a thin ring around the support square's border (where the margin matters).
+    #[test]
+    fn support_quad_spans_contain_every_accepted_point((cam, b) in scene(), ring in prop::collection::vec((0.0f32..1.0, -0.02f32..0.02), 200)) {
+        let ps = project_splat(b.position, b.log_scales, b.quaternion, &cam).unwrap();
+        let t = ps.transform;
+        let h = support_half_side(16);
+        let Some(quad) = support_quad(&t, h) else {
+            return Ok(());
+        };
+        let accepted = |px: f32, py: f32| {
+            intersect(&t, px, py).is_some_and(|hit| bilinear::taps(hit.u, hit.v, 16).is_some())
+        };
+        let check = |px: f32, py: f32| -> Result<(), TestCaseError> {
+            if accepted(px, py) {
+                let span = quad.row_span(py);
+                prop_assert!(
+                    span.is_some_and(|(lo, hi)| lo <= px && px <= hi),
+                    "({px}, {py}) accepted but outside the span {span:?} of {quad:?}"
+                );
+            }
+            Ok(())
+        };
+        for j in 0..cam.height {
+            for i in 0..cam.width {
+                check(i as f32 + 0.5, j as f32 + 0.5)?;
+            }
+        }
+        // Points around the border: walk the square's perimeter, offset across it.
+        let tw = t.tw.as_dvec3();
+        for &(s, off) in &ring {
+            let w = (4.0 * s as f64).fract() * 2.0 - 1.0;
+            let e = (h + off) as f64;
+            let (u, v) = match (4.0 * s) as u32 {
+                0 => (w * e, -e),
+                1 => (e, w * e),
+                2 => (-w * e, e),
+                _ => (-e, -w * e),
+            };
+            let x = DVec3::new(u, v, 1.0);
+            let p = DVec2::new(t.tu.as_dvec3().dot(x), t.tv.as_dvec3().dot(x)) / tw.dot(x);
+            check(p.x as f32, p.y as f32)?;
+        }
+    }
+}
+
+/// A square crossing or close to the near plane, or seen at a steep angle, has no quad (the
+/// rasterizer falls back to its bounding box).
+#[test]
+fn support_quad_refuses_near_and_steep_squares() {
+    let h = support_half_side(16);
+    let face_on = |depth: f32| SplatTransform {
+        tu: Vec3::new(10.0, 0.0, 10.0 * depth / 2.0),
+        tv: Vec3::new(0.0, 10.0, 10.0 * depth / 2.0),
+        tw: Vec3::new(0.0, 0.0, depth),
+    };
+    assert!(support_quad(&face_on(2.0), h).is_some());
+    assert!(
+        support_quad(&face_on(0.3), h).is_none(),
+        "closer than twice the near plane"
+    );
+    // Tilted so that one edge is 19× deeper than the other (depths 0.5 and 9.5).
+    let steep = SplatTransform {
+        tu: Vec3::new(10.0, 0.0, 10.0),
+        tv: Vec3::new(0.0, 10.0, 10.0),
+        tw: Vec3::new(0.0, 4.5 / h, 5.0),
+    };
+    assert!(support_quad(&steep, h).is_none(), "depth ratio above 16");
+    assert!(
+        support_quad(
+            &SplatTransform {
+                tw: Vec3::new(f32::NAN, 0.0, 2.0),
+                ..face_on(2.0)
+            },
+            h
+        )
+        .is_none()
+    );
 }

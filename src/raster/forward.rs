@@ -78,7 +78,8 @@ pub struct RenderStats {
     /// (tile, billboard) entries after binning.
     pub tile_entries: u64,
     /// (pixel, billboard) pairs whose ray-plane intersection was evaluated (the pixel centre was
-    /// inside the billboard's screen box).
+    /// inside the billboard's screen box and, for billboards with a support quad, inside its
+    /// row span).
     pub evaluated_pairs: u64,
     /// (pixel, billboard) pairs that were blended.
     pub blended_pairs: u64,
@@ -280,10 +281,22 @@ impl TileCandidates {
     }
 }
 
-/// Tile-local pixel boxes `[x0, y0, x1, y1]` (inclusive, clamped to the tile) of a tile's
-/// entries: the per-pixel reject test reads these 4 contiguous bytes instead of the whole
-/// prepared record of each billboard.
-pub(crate) fn local_boxes(prepared: &[Option<Prepared>], list: &[u32], i0: u32, j0: u32) -> Vec<[u8; 4]> {
+/// Where one entry of a tile can contribute, in tile-local pixels: rows `rows[0]..=rows[1]` and,
+/// for each tile row `y`, the columns `cols[y][0]..=cols[y][1]` (empty when the first exceeds the
+/// second).
+#[derive(Clone, Copy)]
+pub(crate) struct EntrySpans {
+    rows: [u8; 2],
+    cols: [[u8; 2]; TILE_SIZE as usize],
+}
+
+/// The [`EntrySpans`] of a tile's entries: the billboard's pixel box clamped to the tile and, when
+/// it has a [`Prepared::quad`], each row narrowed to [`SupportQuad::row_span`] (pixels outside it
+/// cannot hit the texture support, so culling them changes no value). The per-pixel reject test
+/// then reads these few contiguous bytes instead of the whole prepared record of each billboard.
+///
+/// [`SupportQuad::row_span`]: crate::stages::splat_transform::SupportQuad::row_span
+pub(crate) fn local_spans(prepared: &[Option<Prepared>], list: &[u32], i0: u32, j0: u32) -> Vec<EntrySpans> {
     let last = TILE_SIZE - 1;
     list.iter()
         .enumerate()
@@ -296,20 +309,42 @@ pub(crate) fn local_boxes(prepared: &[Option<Prepared>], list: &[u32], i0: u32, 
             let lo = |v: u32, o: u32| v.saturating_sub(o).min(last) as u8;
             let hi = |v: u32, o: u32| if v < o { 0 } else { (v - o).min(last) as u8 };
             // A box entirely left of / above the tile cannot be binned here; keep it exact anyway.
-            [
-                lo(p.pixel_min[0], i0),
-                lo(p.pixel_min[1], j0),
-                hi(p.pixel_max[0], i0),
-                hi(p.pixel_max[1], j0),
-            ]
+            let (x0, y0) = (lo(p.pixel_min[0], i0), lo(p.pixel_min[1], j0));
+            let (x1, y1) = (hi(p.pixel_max[0], i0), hi(p.pixel_max[1], j0));
+            let mut spans = EntrySpans {
+                rows: [y0, y1],
+                cols: [[x0, x1]; TILE_SIZE as usize],
+            };
+            if let Some(quad) = &p.quad {
+                for y in y0..=y1 {
+                    let py = (j0 + u32::from(y)) as f32 + 0.5;
+                    spans.cols[y as usize] = match quad.row_span(py) {
+                        // Columns c with c + 0.5 in [lo, hi], clamped to the box first (so the
+                        // casts are in range).
+                        Some((lo, hi)) => {
+                            let (bx0, bx1) = ((i0 + u32::from(x0)) as f32, (i0 + u32::from(x1)) as f32);
+                            let first = (lo - 0.5).ceil().clamp(bx0, bx1 + 1.0) as u32 - i0;
+                            let end = (hi - 0.5).floor().clamp(bx0 - 1.0, bx1) + 1.0;
+                            let end = end as u32 - i0;
+                            if first < end {
+                                [first as u8, (end - 1) as u8]
+                            } else {
+                                [1, 0]
+                            }
+                        }
+                        None => [1, 0],
+                    };
+                }
+            }
+            spans
         })
         .collect()
 }
 
 /// Per-pixel entry lists of one tile (per-pixel culling): the entries of pixel `p` (tile-local,
 /// row-major over 16×16) are `items[offsets[p]..offsets[p + 1]]`, in tile-list (depth) order.
-/// Built by a counting sort over the entries' boxes, `O(entries + pairs)`, so that a pixel visits
-/// only the billboards whose box contains it.
+/// Built by a counting sort over the entries' spans, `O(entries + pairs)`, so that a pixel visits
+/// only the billboards whose span contains it.
 #[derive(Default)]
 pub(crate) struct PixelLists {
     pub(crate) offsets: Vec<u32>,
@@ -317,13 +352,14 @@ pub(crate) struct PixelLists {
 }
 
 impl PixelLists {
-    pub(crate) fn build(&mut self, boxes: &[[u8; 4]]) {
+    pub(crate) fn build(&mut self, spans: &[EntrySpans]) {
         let side = TILE_SIZE as usize;
         self.offsets.clear();
         self.offsets.resize(side * side + 1, 0);
-        for bx in boxes {
-            for y in bx[1]..=bx[3] {
-                for x in bx[0]..=bx[2] {
+        for e in spans {
+            for y in e.rows[0]..=e.rows[1] {
+                let [x0, x1] = e.cols[y as usize];
+                for x in x0..=x1 {
                     self.offsets[y as usize * side + x as usize + 1] += 1;
                 }
             }
@@ -334,9 +370,10 @@ impl PixelLists {
         self.items.clear();
         self.items.resize(self.offsets[side * side] as usize, 0);
         let mut cursor: Vec<u32> = self.offsets[..side * side].to_vec();
-        for (k, bx) in boxes.iter().enumerate() {
-            for y in bx[1]..=bx[3] {
-                for x in bx[0]..=bx[2] {
+        for (k, e) in spans.iter().enumerate() {
+            for y in e.rows[0]..=e.rows[1] {
+                let [x0, x1] = e.cols[y as usize];
+                for x in x0..=x1 {
                     let p = y as usize * side + x as usize;
                     self.items[cursor[p] as usize] = k as u32;
                     cursor[p] += 1;
@@ -396,7 +433,7 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
             let tw = (i1 - i0) as usize;
             let n_q = tw * (j1 - j0) as usize;
             let mut lists = PixelLists::default();
-            lists.build(&local_boxes(&prepared, list, i0, j0));
+            lists.build(&local_spans(&prepared, list, i0, j0));
             let own = |q: usize| lists.of((q % tw) as u32, (q / tw) as u32);
             let mut candidates = TileCandidates::default();
             let mut pixels = Vec::with_capacity(n_q);

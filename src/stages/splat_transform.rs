@@ -403,6 +403,105 @@ pub fn support_half_side(texture_size: usize) -> f32 {
     1.0 + 2.0 / (texture_size.max(2) - 1) as f32
 }
 
+/// The projected texture support square of a billboard, for culling pixels row by row: a
+/// pixel whose centre lies outside [`SupportQuad::row_span`] of its row cannot hit the support
+/// (the bounding box alone lets in every pixel of the box's corners, about half of the pairs a
+/// trained scene evaluates).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SupportQuad {
+    /// Projected corners of `(u, v) = (−h, −h), (h, −h), (h, h), (−h, h)`, in pixels: a convex
+    /// quadrilateral (the square lies entirely in front of the camera).
+    pub corners: [Vec2; 4],
+    /// Safety margin in pixels, covering the f32 rounding of the ray-plane intersection: at least
+    /// 0.01 px and 1e-3 of the quad's extent. A pixel accepted by
+    /// [`crate::stages::ray_plane::intersect`] and the bilinear support test lies within this
+    /// distance of the quad (tested).
+    pub margin: f32,
+}
+
+/// Largest ratio of the corner depths for which [`support_quad`] returns a quad: beyond it the
+/// perspective stretches the intersection's rounding errors too far for the fixed margin.
+pub const SUPPORT_QUAD_MAX_DEPTH_RATIO: f64 = 16.0;
+
+/// The [`SupportQuad`] of the support square `|u|, |v| ≤ half_side` of a billboard with transform
+/// `t`, or `None` (use the bounding box) when a corner lies closer than `2 ·` [`NEAR_PLANE`], the
+/// corner depths differ by more than [`SUPPORT_QUAD_MAX_DEPTH_RATIO`], or the projection is not
+/// finite or wider than 10⁶ px. Corners computed in f64.
+///
+/// ```
+/// use bbsplat::stages::splat_transform::{support_quad, SplatTransform};
+/// use glam::Vec3;
+/// // Face-on square at depth 2, fx = fy = 10, principal point (5, 5), half sides 1.
+/// let t = SplatTransform { tu: Vec3::new(10.0, 0.0, 10.0), tv: Vec3::new(0.0, 10.0, 10.0), tw: Vec3::new(0.0, 0.0, 2.0) };
+/// let q = support_quad(&t, 1.0).unwrap();
+/// let (lo, hi) = q.row_span(5.0).unwrap();
+/// assert!(lo <= 0.0 && lo > -0.1 && hi >= 10.0 && hi < 10.1);
+/// assert!(q.row_span(10.5).is_none());
+/// ```
+pub fn support_quad(t: &SplatTransform, half_side: f32) -> Option<SupportQuad> {
+    if !(t.tu.is_finite() && t.tv.is_finite() && t.tw.is_finite() && half_side.is_finite()) {
+        return None;
+    }
+    let (tu, tv, tw) = (t.tu.as_dvec3(), t.tv.as_dvec3(), t.tw.as_dvec3());
+    let h = half_side.abs() as f64;
+    let uv = [(-h, -h), (h, -h), (h, h), (-h, h)].map(|(u, v)| DVec3::new(u, v, 1.0));
+    let depths = uv.map(|x| tw.dot(x));
+    let (lo, hi) = depths
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &d| (a.min(d), b.max(d)));
+    // Written positively: NaN fails.
+    if !(lo >= 2.0 * NEAR_PLANE as f64 && hi <= SUPPORT_QUAD_MAX_DEPTH_RATIO * lo) {
+        return None;
+    }
+    let corners: [Vec2; 4] = std::array::from_fn(|k| (DVec2::new(tu.dot(uv[k]), tv.dot(uv[k])) / depths[k]).as_vec2());
+    let (min, max) = corners
+        .iter()
+        .fold((Vec2::INFINITY, Vec2::NEG_INFINITY), |(a, b), &c| (a.min(c), b.max(c)));
+    let extent = (max - min).max_element();
+    if !(extent <= 1e6) {
+        return None;
+    }
+    Some(SupportQuad {
+        corners,
+        margin: (1e-3 * extent).max(0.01),
+    })
+}
+
+impl SupportQuad {
+    /// The x-range `[lo, hi]` (pixels) of the quad within the band `|y − py| ≤ margin`, widened
+    /// by `margin` on both sides; `None` when the band misses the quad. Every pixel centre
+    /// `(x, py)` accepted by the ray-plane intersection and the bilinear support test has
+    /// `lo ≤ x ≤ hi`.
+    #[inline]
+    pub fn row_span(&self, py: f32) -> Option<(f32, f32)> {
+        let m = self.margin;
+        let (y_lo, y_hi) = (py - m, py + m);
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for k in 0..4 {
+            let (a, b) = (self.corners[k], self.corners[(k + 1) % 4]);
+            // The part of edge a → b inside the band, as parameters [t0, t1] of a + t·(b − a).
+            let dy = b.y - a.y;
+            let (mut t0, mut t1) = (0.0f32, 1.0f32);
+            if dy == 0.0 {
+                if !(a.y >= y_lo && a.y <= y_hi) {
+                    continue;
+                }
+            } else {
+                let (ta, tb) = ((y_lo - a.y) / dy, (y_hi - a.y) / dy);
+                t0 = t0.max(ta.min(tb));
+                t1 = t1.min(ta.max(tb));
+                if !(t0 <= t1) {
+                    continue;
+                }
+            }
+            let (x0, x1) = (a.x + (b.x - a.x) * t0, a.x + (b.x - a.x) * t1);
+            lo = lo.min(x0.min(x1));
+            hi = hi.max(x0.max(x1));
+        }
+        (lo <= hi).then_some((lo - m, hi + m))
+    }
+}
+
 /// An axis-aligned box in continuous pixel coordinates (pixel `(i, j)` has its centre at
 /// `(i + 0.5, j + 0.5)`).
 #[derive(Clone, Copy, Debug, PartialEq)]
