@@ -458,7 +458,7 @@ pub fn support_quad(t: &SplatTransform, half_side: f32) -> Option<SupportQuad> {
         .iter()
         .fold((Vec2::INFINITY, Vec2::NEG_INFINITY), |(a, b), &c| (a.min(c), b.max(c)));
     let extent = (max - min).max_element();
-    if !(extent <= 1e6) {
+    if extent.is_nan() || extent > 1e6 {
         return None;
     }
     Some(SupportQuad {
@@ -490,7 +490,7 @@ impl SupportQuad {
                 let (ta, tb) = ((y_lo - a.y) / dy, (y_hi - a.y) / dy);
                 t0 = t0.max(ta.min(tb));
                 t1 = t1.min(ta.max(tb));
-                if !(t0 <= t1) {
+                if t0.is_nan() || t1.is_nan() || t0 > t1 {
                     continue;
                 }
             }
