@@ -6,6 +6,7 @@ use super::{BillboardSet, RenderSettings, TILE_SIZE};
 use crate::camera::Camera;
 use crate::stages::bilinear::{self, BilinearTaps};
 use crate::stages::ray_plane::intersect;
+use crate::stages::splat_transform::support_quad;
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -290,13 +291,27 @@ pub(crate) struct EntrySpans {
     cols: [[u8; 2]; TILE_SIZE as usize],
 }
 
+/// Boxes narrower than this many pixel columns are not culled row by row (nothing to gain).
+pub const QUAD_MIN_COLUMNS: u32 = 4;
+
 /// The [`EntrySpans`] of a tile's entries: the billboard's pixel box clamped to the tile and, when
-/// it has a [`Prepared::quad`], each row narrowed to [`SupportQuad::row_span`] (pixels outside it
-/// cannot hit the texture support, so culling them changes no value). The per-pixel reject test
-/// then reads these few contiguous bytes instead of the whole prepared record of each billboard.
+/// the box is at least [`QUAD_MIN_COLUMNS`] wide and [`support_quad`] gives the projected support
+/// square, each row narrowed to [`SupportQuad::row_span`] (pixels outside it cannot hit the
+/// texture support, so culling them changes no value). The quad is recomputed per tile entry
+/// rather than stored with the billboard's record: the records of the narrow billboards of a
+/// dense view stay small, and the quad costs a few tens of nanoseconds against the candidate
+/// evaluations it saves. The per-pixel reject test then reads these few contiguous bytes instead
+/// of the whole prepared record of each billboard. `half_side` is [`support_half_side`] of the
+/// texture size.
 ///
+/// [`support_half_side`]: crate::stages::splat_transform::support_half_side
 /// [`SupportQuad::row_span`]: crate::stages::splat_transform::SupportQuad::row_span
-pub(crate) fn local_spans(prepared: &[Option<Prepared>], list: &[u32], i0: u32, j0: u32) -> Vec<EntrySpans> {
+pub(crate) fn local_spans(
+    prepared: &[Option<Prepared>],
+    list: &[u32],
+    (i0, j0): (u32, u32),
+    half_side: f32,
+) -> Vec<EntrySpans> {
     let last = TILE_SIZE - 1;
     list.iter()
         .enumerate()
@@ -315,7 +330,8 @@ pub(crate) fn local_spans(prepared: &[Option<Prepared>], list: &[u32], i0: u32, 
                 rows: [y0, y1],
                 cols: [[x0, x1]; TILE_SIZE as usize],
             };
-            if let Some(quad) = &p.quad {
+            let wide = p.pixel_max[0] - p.pixel_min[0] + 1 >= QUAD_MIN_COLUMNS;
+            if let Some(quad) = wide.then(|| support_quad(&p.transform, half_side)).flatten() {
                 for y in y0..=y1 {
                     let py = (j0 + u32::from(y)) as f32 + 0.5;
                     spans.cols[y as usize] = match quad.row_span(py) {
@@ -422,6 +438,7 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
     let prepared = preprocess(set, camera, settings);
     let bins = bin(&prepared, w, h);
     let n_tiles = bins.tile_count();
+    let half_side = crate::stages::splat_transform::support_half_side(set.texture_size);
     let mut entry_impact = vec![0.0f32; bins.entries.len()];
     let impact_chunks = split_by_lengths(&mut entry_impact, (0..n_tiles).map(|t| bins.tile_range(t).len()));
     let tiles: Vec<(Vec<PixelOut>, Vec<u32>)> = impact_chunks
@@ -433,7 +450,7 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
             let tw = (i1 - i0) as usize;
             let n_q = tw * (j1 - j0) as usize;
             let mut lists = PixelLists::default();
-            lists.build(&local_spans(&prepared, list, i0, j0));
+            lists.build(&local_spans(&prepared, list, (i0, j0), half_side));
             let own = |q: usize| lists.of((q % tw) as u32, (q / tw) as u32);
             let mut candidates = TileCandidates::default();
             let mut pixels = Vec::with_capacity(n_q);

@@ -3,9 +3,7 @@
 use super::{BillboardSet, RenderSettings};
 use crate::camera::Camera;
 use crate::stages::sh::sh_colour;
-use crate::stages::splat_transform::{
-    SplatTransform, SupportQuad, splat_frame, square_screen_bounds, support_half_side, support_quad,
-};
+use crate::stages::splat_transform::{SplatTransform, splat_frame, square_screen_bounds, support_half_side};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -24,13 +22,7 @@ pub struct Prepared {
     pub pixel_min: [u32; 2],
     /// Last pixel column and row whose centre lies in the screen box (inclusive).
     pub pixel_max: [u32; 2],
-    /// The projected support square, for per-row culling inside the box; `None` when the box is
-    /// narrower than [`QUAD_MIN_COLUMNS`] (nothing to gain) or [`support_quad`] refuses.
-    pub quad: Option<SupportQuad>,
 }
-
-/// Boxes narrower than this many pixel columns are not culled row by row.
-pub const QUAD_MIN_COLUMNS: u32 = 4;
 
 /// Prepares one billboard; `None` when it cannot contribute to any pixel of this view (behind
 /// the near plane, exactly edge-on, degenerate, or off screen).
@@ -38,13 +30,8 @@ pub fn prepare_one(set: &BillboardSet<'_>, i: usize, camera: &Camera, settings: 
     let position = set.positions[i];
     let projected = splat_frame(position, set.log_scales[i], set.quaternions[i], camera)?;
     // Tight box of the texture support square (clipped by the near plane), as pixel indices.
-    let half_side = support_half_side(set.texture_size);
-    let rect = square_screen_bounds(&projected.transform, half_side)?.pixel_rect(camera.width, camera.height)?;
-    let quad = if rect.x_max - rect.x_min >= QUAD_MIN_COLUMNS {
-        support_quad(&projected.transform, half_side)
-    } else {
-        None
-    };
+    let rect = square_screen_bounds(&projected.transform, support_half_side(set.texture_size))?
+        .pixel_rect(camera.width, camera.height)?;
     let (pixel_min, pixel_max) = ([rect.x_min, rect.y_min], [rect.x_max - 1, rect.y_max - 1]);
     let rgb = sh_colour(settings.sh_degree, set.sh_of(i), position, camera.centre()).rgb;
     Some(Prepared {
@@ -54,7 +41,6 @@ pub fn prepare_one(set: &BillboardSet<'_>, i: usize, camera: &Camera, settings: 
         rgb,
         pixel_min,
         pixel_max,
-        quad,
     })
 }
 
