@@ -94,8 +94,34 @@ fn bench_bilinear(c: &mut Criterion) {
             black_box(t.accumulate_vjp(&colour, 3, &[0.5, -0.25, 0.125], &mut d_colour))
         })
     });
+    // The rasterizer's path: one RGBA texture, all four channels per tap.
+    let rgba: Vec<[f32; 4]> = (0..TS * TS)
+        .map(|k| [colour[k], colour[TS * TS + k], colour[2 * TS * TS + k], alpha[k]])
+        .collect();
+    g.bench_function("taps+sample_rgba", |b| {
+        b.iter(|| {
+            i = (i + 1) % RING;
+            let (u, v) = uv[i];
+            let t = taps(black_box(u), black_box(v), TS).unwrap();
+            black_box(t.sample_rgba(&rgba))
+        })
+    });
+    let mut d_rgba = vec![[0.0f32; 4]; TS * TS];
+    g.bench_function("taps+vjp_rgba", |b| {
+        b.iter(|| {
+            i = (i + 1) % RING;
+            let (u, v) = uv[i];
+            let t = taps(black_box(u), black_box(v), TS).unwrap();
+            black_box(t.vjp_rgba(&rgba, [0.5, -0.25, 0.125, 0.5], |k, g| {
+                let d = &mut d_rgba[k as usize];
+                for c in 0..4 {
+                    d[c] += g[c];
+                }
+            }))
+        })
+    });
     g.finish();
-    black_box((d_alpha, d_colour));
+    black_box((d_alpha, d_colour, d_rgba));
 }
 
 fn bench_composite(c: &mut Criterion) {
