@@ -6,7 +6,7 @@ use super::{BillboardSet, RenderSettings, TILE_SIZE};
 use crate::camera::Camera;
 use crate::stages::bilinear::{self, BilinearTaps};
 use crate::stages::ray_plane::intersect;
-use crate::stages::splat_transform::support_quad;
+use crate::stages::splat_transform::{pixel_range, support_quad};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -335,15 +335,12 @@ pub(crate) fn local_spans(
                 for y in y0..=y1 {
                     let py = (j0 + u32::from(y)) as f32 + 0.5;
                     spans.cols[y as usize] = match quad.row_span(py) {
-                        // Columns c with c + 0.5 in [lo, hi], clamped to the box first (so the
-                        // casts are in range).
+                        // Columns whose centres lie in [lo, hi], within the box.
                         Some((lo, hi)) => {
-                            let (bx0, bx1) = ((i0 + u32::from(x0)) as f32, (i0 + u32::from(x1)) as f32);
-                            let first = (lo - 0.5).ceil().clamp(bx0, bx1 + 1.0) as u32 - i0;
-                            let end = (hi - 0.5).floor().clamp(bx0 - 1.0, bx1) + 1.0;
-                            let end = end as u32 - i0;
+                            let (first, end) = pixel_range(lo, hi, i0 + u32::from(x1) + 1);
+                            let first = first.max(i0 + u32::from(x0));
                             if first < end {
-                                [first as u8, (end - 1) as u8]
+                                [(first - i0) as u8, (end - 1 - i0) as u8]
                             } else {
                                 [1, 0]
                             }

@@ -544,28 +544,41 @@ impl ScreenBounds {
     /// ```
     #[inline]
     pub fn pixel_rect(&self, width: u32, height: u32) -> Option<PixelRect> {
-        // Centre i + 0.5 ∈ [min, max]  ⇔  i ∈ [ceil(min − 0.5), floor(max − 0.5)]. The argument is
-        // clamped first (which changes no result: everything outside lands on 0 or n anyway), so
-        // huge or infinite bounds are safe and the rounding is a truncating cast plus a
-        // correction instead of a libm call (baseline x86-64 has no rounding instruction).
-        let lo = |m: f32, n: u32| {
-            let x = (m - 0.5).clamp(-1.0, n as f32);
-            let t = x as i64;
-            (if (t as f32) < x { t + 1 } else { t }).clamp(0, i64::from(n)) as u32
-        };
-        let hi = |m: f32, n: u32| {
-            let x = (m - 0.5).clamp(-2.0, n as f32);
-            let t = x as i64;
-            (if (t as f32) > x { t - 1 } else { t } + 1).clamp(0, i64::from(n)) as u32
-        };
-        let rect = PixelRect {
-            x_min: lo(self.min.x, width),
-            y_min: lo(self.min.y, height),
-            x_max: hi(self.max.x, width),
-            y_max: hi(self.max.y, height),
-        };
-        (rect.x_min < rect.x_max && rect.y_min < rect.y_max).then_some(rect)
+        let (x_min, x_max) = pixel_range(self.min.x, self.max.x, width);
+        let (y_min, y_max) = pixel_range(self.min.y, self.max.y, height);
+        (x_min < x_max && y_min < y_max).then_some(PixelRect {
+            x_min,
+            y_min,
+            x_max,
+            y_max,
+        })
     }
+}
+
+/// The pixel indices `first..end` of a row or column of `n` pixels whose centres `i + 0.5` lie
+/// in `[lo, hi]`: `first = clamp(⌈lo − 0.5⌉, 0, n)`, `end = clamp(⌊hi − 0.5⌋ + 1, 0, n)` (empty
+/// when `first ≥ end`). Used by [`ScreenBounds::pixel_rect`] and the rasterizer's per-row
+/// culling.
+///
+/// The arguments are clamped first (which changes no result: everything outside lands on 0 or
+/// `n` anyway), so huge or infinite bounds are safe, and the rounding is a truncating cast plus a
+/// correction instead of a libm call (baseline x86-64 has no rounding instruction).
+///
+/// ```
+/// use bbsplat::stages::splat_transform::pixel_range;
+/// assert_eq!(pixel_range(1.5, 4.49, 10), (1, 4)); // centres 1.5, 2.5, 3.5
+/// assert_eq!(pixel_range(-1e30, f32::INFINITY, 10), (0, 10));
+/// assert_eq!(pixel_range(3.6, 4.4, 10), (4, 4)); // no centre inside
+/// ```
+#[inline]
+pub fn pixel_range(lo: f32, hi: f32, n: u32) -> (u32, u32) {
+    let x = (lo - 0.5).clamp(-1.0, n as f32);
+    let t = x as i64;
+    let first = (if (t as f32) < x { t + 1 } else { t }).clamp(0, i64::from(n)) as u32;
+    let x = (hi - 0.5).clamp(-2.0, n as f32);
+    let t = x as i64;
+    let end = (if (t as f32) > x { t - 1 } else { t } + 1).clamp(0, i64::from(n)) as u32;
+    (first, end)
 }
 
 /// Tight screen-space bounding box of the texture support square `|u|, |v| ≤ half_side` (use
