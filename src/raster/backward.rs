@@ -8,9 +8,9 @@
 //!
 //! Gradients are first accumulated per tile entry (one (tile, billboard) pair) in the tile's
 //! scratch, then summed per billboard over its entries in tile order, so the result does not
-//! depend on how rayon schedules tiles. Texture gradients are summed per (entry, texel) in a
-//! dense per-thread accumulator as the pixels produce them and handed on sparse per entry (only
-//! the texels some pixel of the tile touched); see `TexelSums`.
+//! depend on how rayon schedules tiles. Texture gradients are summed per (entry, texel) as the
+//! pixels produce them, in a per-thread accumulator whose sums list only the touched cells, and
+//! handed on sparse per entry (only the texels some pixel of the tile touched); see `TexelSums`.
 
 use super::forward::{RenderOutput, TileCandidates, prefetch, prefetch_ref, split_by_lengths, tile_pixels};
 use super::preprocess::Prepared;
@@ -530,7 +530,33 @@ pub fn render_backward(
 mod tests {
     use super::*;
 
-    /// The dense accumulator gives, slot by slot, the same (texel, sum) set as the sort-based
+    /// A cell's first contribution is assigned, not added to 0: a lone `−0.0` stays `−0.0`
+    /// (`0.0 + −0.0` would be `+0.0`), as in the sorting reference.
+    #[test]
+    fn texel_sums_keep_a_lone_negative_zero() {
+        let mut sums = TexelSums::default();
+        sums.start(2, 4);
+        sums.add(1, 3, [-0.0, 1.0, -0.0, 2.0]);
+        let (offsets, out) = sums.finish(2);
+        assert_eq!(offsets, [0, 0, 1]);
+        let bits = out[0].1.map(f32::to_bits);
+        assert_eq!(
+            (out[0].0, bits),
+            (
+                3,
+                [
+                    (-0.0f32).to_bits(),
+                    1.0f32.to_bits(),
+                    (-0.0f32).to_bits(),
+                    2.0f32.to_bits()
+                ]
+            )
+        );
+        let log = [(1u32, 3u32, [-0.0f32, 1.0, -0.0, 2.0])];
+        assert_eq!(texel_sums_reference(&log, 2).1[0].1.map(f32::to_bits), bits);
+    }
+
+    /// The accumulator gives, slot by slot, the same (texel, sum) set as the sort-based
     /// reference, bit for bit.
     #[test]
     fn texel_sums_match_the_sorting_reference() {
