@@ -12,7 +12,7 @@ use bbsplat::stages::ray_plane::intersect;
 use bbsplat::stages::rotation::quat_to_rotation;
 use bbsplat::stages::splat_transform::{
     NEAR_PLANE, ProjectedSplat, ScreenBounds, SplatGrads, SplatTransform, project_splat, project_splat_vjp,
-    square_screen_bounds, support_half_side, support_quad,
+    splat_frame, square_screen_bounds, support_half_side, support_quad,
 };
 use bbsplat::strategies::{BillboardPose, billboard_in_front, camera, identity_camera, seeded_config};
 use glam::{DMat3, DVec2, DVec3, Mat3, Vec2, Vec3};
@@ -1018,4 +1018,31 @@ fn support_quad_refuses_near_and_steep_squares() {
         )
         .is_none()
     );
+}
+
+proptest! {
+    #![proptest_config(seeded_config(512))]
+
+    /// `splat_frame` is `project_splat` without the unit-disk box: the same frame fields, and the
+    /// same culling (behind the near plane, edge-on) on poses anywhere around the camera,
+    /// including behind it.
+    #[test]
+    fn splat_frame_matches_project_splat(
+        cam in camera(),
+        p in (-8.0f32..8.0, -8.0f32..8.0, -8.0f32..8.0),
+        s in (-3.0f32..1.0, -3.0f32..1.0),
+        q in bbsplat::strategies::quaternion(),
+    ) {
+        let (p, s) = (Vec3::new(p.0, p.1, p.2), Vec2::new(s.0, s.1));
+        let frame = splat_frame(p, s, q, &cam);
+        let projected = project_splat(p, s, q, &cam);
+        prop_assert_eq!(frame.is_some(), projected.is_some());
+        if let (Some(f), Some(ps)) = (frame, projected) {
+            prop_assert_eq!(f.transform, ps.transform);
+            prop_assert_eq!(f.normal_view, ps.normal_view);
+            prop_assert_eq!(f.normal_sign, ps.normal_sign);
+            prop_assert_eq!(f.view_depth, ps.view_depth);
+            prop_assert_eq!(f.scales, ps.scales);
+        }
+    }
 }
