@@ -9,6 +9,7 @@
 //! Gaussian chain ratio 0.09, rel-L2 1.5e-4, bias 1.2e-4. The defaults are 10-25× above the worst
 //! observed values, and the broken variants fail them.
 
+use bbsplat::billboards::planar_textures;
 use bbsplat::gradcheck::{GradReport, GradTolerance, StepRule, WorstObserved, check_vjp, compare, numerical_gradient};
 use bbsplat::model::{initial_alpha, sigmoid};
 use bbsplat::rng::Rng;
@@ -53,18 +54,6 @@ fn rgba(alpha: &[f32], colour: &[f32]) -> Vec<[f32; 4]> {
         .collect()
 }
 
-/// Planar alpha and colour gradients of RGBA texel gradients (inverse of [`rgba`]).
-fn planar(d: &[[f32; 4]]) -> (Vec<f32>, Vec<f32>) {
-    let alpha = d.iter().map(|t| t[3]).collect();
-    let colour = (0..3 * N * T)
-        .map(|j| {
-            let (i, ch, k) = (j / (3 * T), (j / T) % 3, j % T);
-            d[i * T + k][ch]
-        })
-        .collect();
-    (alpha, colour)
-}
-
 fn loss(case: &Case, x: &[f32]) -> f64 {
     let (alpha, colour) = activate(case, x);
     let tex = rgba(&alpha, &colour);
@@ -80,7 +69,7 @@ fn analytic(case: &Case, broken: Option<&str>) -> Vec<f64> {
     let mut d = vec![[0.0; 4]; N * T];
     texture_regulariser(&tex, &case.alpha0, &case.impact, SIGMA, LAMBDA_TEX, &mut d);
     opacity_regulariser(&tex, LAMBDA_OP, &mut d);
-    let (da, dc) = planar(&d);
+    let (da, dc) = planar_textures(&d, T);
     let mut out = vec![0.0f32; 4 * N * T];
     let (oa, oc) = out.split_at_mut(N * T);
     if broken == Some("ignore mask") {
