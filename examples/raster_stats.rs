@@ -71,7 +71,7 @@ fn main() {
         mix(&out.impact);
         mix(&g1.sh);
         // Planar order (alpha, then colour by channel): the checksum of the planar layout.
-        let (d_alpha, d_colour) = planar_textures(&g1.textures, 256);
+        let (d_alpha, d_colour) = planar_textures(&g1.textures, set.texels());
         mix(&d_alpha);
         mix(&d_colour);
         mix(&g1.positions.iter().flat_map(|p| p.to_array()).collect::<Vec<_>>());
