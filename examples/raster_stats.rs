@@ -3,13 +3,14 @@
 //! `cargo run --release --example raster_stats -- 256 50000`
 //!
 //! `raster_stats 256 50000 loop 20` only runs 20 forward+backward calls after one warm-up and
-//! prints their mean (a steady harness for `perf record` and `valgrind`); `loopf` the same for
-//! the forward alone.
+//! prints their mean (a steady harness for `perf record` and `valgrind`), recycling the render's
+//! storage with `render_with` as the trainer does; `loopfresh` the same with fresh storage every
+//! call (`render`); `loopf` the forward alone.
 use bbsplat::billboards::{RandomSceneConfig, planar_textures, random_scene, random_scene_camera};
 use bbsplat::raster::backward::ImageGradients;
 use bbsplat::raster::binning::bin;
 use bbsplat::raster::preprocess::preprocess;
-use bbsplat::raster::{RenderGradients, RenderSettings, render, render_backward};
+use bbsplat::raster::{RenderBuffers, RenderGradients, RenderSettings, render, render_backward, render_with};
 use bbsplat::report::process_cpu_ms as cpu_ms;
 use std::time::Instant;
 
@@ -36,23 +37,34 @@ fn main() {
         );
         return;
     }
-    if args.get(3).map(String::as_str) == Some("loop") {
+    let mode = args.get(3).map(String::as_str);
+    if mode == Some("loop") || mode == Some("loopfresh") {
         let calls: usize = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(20);
         let d_rgb = vec![1e-3f32; (size * size * 3) as usize];
-        let mut grads = RenderGradients::zeros(n, 16);
+        let mut grads = RenderGradients::zeros(n, set.texture_size);
+        // `loop` recycles the render's storage as the trainer does; `loopfresh` allocates it
+        // afresh every call.
+        let recycle = mode == Some("loop");
+        let mut buffers = RenderBuffers::default();
         let mut once = || {
-            let out = render(&set, &cam, &settings);
+            let out = if recycle {
+                render_with(&set, &cam, &settings, std::mem::take(&mut buffers))
+            } else {
+                render(&set, &cam, &settings)
+            };
             let ig = ImageGradients {
                 rgb: &d_rgb,
                 alpha: None,
                 depth: None,
             };
-            render_backward(&set, &out, &ig, &mut grads).len()
+            let touched = render_backward(&set, &out, &ig, &mut grads).len();
+            buffers = out.into_buffers();
+            touched
         };
         let touched = once();
         // Checksum of the first call's images and gradients, to confirm bit-identical changes.
         let out = render(&set, &cam, &settings);
-        let mut g1 = RenderGradients::zeros(n, 16);
+        let mut g1 = RenderGradients::zeros(n, set.texture_size);
         let ig = ImageGradients {
             rgb: &d_rgb,
             alpha: None,

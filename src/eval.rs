@@ -6,8 +6,8 @@
 //!   views is the arithmetic mean of the per-view values (as the reference averages them).
 //! - SSIM: the training SSIM (11×11 Gaussian window, σ = 1.5, zero "same" padding,
 //!   `C1 = 0.01²`, `C2 = 0.03²`), mean over the map and channels.
-//! - Render time: wall-clock milliseconds of [`render`] (the full forward pass with its auxiliary
-//!   outputs), per view.
+//! - Render time: wall-clock milliseconds of [`render_with`] (the full forward pass with its
+//!   auxiliary outputs, on storage recycled from the previous view), per view.
 //!
 //! ```
 //! use bbsplat::eval::image_metrics;
@@ -20,7 +20,7 @@ use crate::camera::Camera;
 use crate::loss::LossError;
 use crate::loss::psnr::{psnr_u8, quantize_u8};
 use crate::loss::ssim::{Padding, ssim};
-use crate::raster::{BillboardSet, RenderSettings, render};
+use crate::raster::{BillboardSet, RenderBuffers, RenderSettings, render_with};
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
@@ -129,13 +129,16 @@ pub fn evaluate_views<'a>(
     mut on_render: impl FnMut(&EvalView<'a>, &[f32]),
 ) -> Result<EvalReport, LossError> {
     let mut out = Vec::new();
+    // Storage recycled from view to view, as a viewer would (see `RenderBuffers`).
+    let mut buffers = RenderBuffers::default();
     for view in views {
         let start = Instant::now();
-        let rendered = render(set, view.camera, settings);
+        let rendered = render_with(set, view.camera, settings, std::mem::take(&mut buffers));
         let render_ms = start.elapsed().as_secs_f64() * 1e3;
         let (w, h) = (view.camera.width as usize, view.camera.height as usize);
         let m = image_metrics(&rendered.rgb, view.rgb, w, h)?;
         on_render(&view, &rendered.rgb);
+        buffers = rendered.into_buffers();
         out.push(ViewMetrics {
             name: view.name.to_string(),
             psnr: m.psnr,

@@ -51,14 +51,33 @@ fn total_order_key(x: f32) -> u32 {
     if bits >> 31 == 1 { !bits } else { bits | 0x8000_0000 }
 }
 
+/// Scratch of [`bin_into`]: per-tile counts and cursors and the sort keys, kept between calls
+/// so that their storage is reused.
+#[derive(Clone, Debug, Default)]
+pub struct BinScratch {
+    tile_counts: Vec<u32>,
+    cursor: Vec<u32>,
+    keys: Vec<u64>,
+}
+
 /// Bins the prepared billboards of an image of `width × height` pixels.
 pub fn bin(prepared: &[Option<Prepared>], width: u32, height: u32) -> TileBins {
+    let mut bins = TileBins::default();
+    bin_into(prepared, width, height, &mut bins, &mut BinScratch::default());
+    bins
+}
+
+/// [`bin`] into `bins`, reusing the storage of `bins` and `scratch` (every value is
+/// overwritten: the result does not depend on what they held).
+pub fn bin_into(prepared: &[Option<Prepared>], width: u32, height: u32, bins: &mut TileBins, scratch: &mut BinScratch) {
     let tiles_x = width.div_ceil(TILE_SIZE);
     let tiles_y = height.div_ceil(TILE_SIZE);
     let n_tiles = (tiles_x * tiles_y) as usize;
+    bins.tiles_x = tiles_x;
+    bins.tiles_y = tiles_y;
     // Count entries per tile and per billboard.
-    let mut tile_counts = vec![0u32; n_tiles + 1];
-    let mut billboard_offsets = vec![0u32; prepared.len() + 1];
+    let tile_counts = refill(&mut scratch.tile_counts, n_tiles + 1, 0);
+    let billboard_offsets = refill(&mut bins.billboard_offsets, prepared.len() + 1, 0);
     for (b, p) in prepared.iter().enumerate() {
         if let Some(p) = p {
             let (lo, hi) = tile_rect(p);
@@ -70,7 +89,7 @@ pub fn bin(prepared: &[Option<Prepared>], width: u32, height: u32) -> TileBins {
             billboard_offsets[b + 1] = (hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1);
         }
     }
-    let mut tile_offsets = vec![0u32; n_tiles + 1];
+    let tile_offsets = refill(&mut bins.tile_offsets, n_tiles + 1, 0);
     for t in 0..n_tiles {
         tile_offsets[t + 1] = tile_offsets[t] + tile_counts[t];
     }
@@ -82,8 +101,10 @@ pub fn bin(prepared: &[Option<Prepared>], width: u32, height: u32) -> TileBins {
     // prepared record once and in sequence; sorting each tile's (depth, index) keys gives
     // exactly the stable depth order of an index-ordered scatter. Comparing integers gathered
     // here, rather than loading scattered records inside the sort, keeps the sort in cache.
-    let mut keys = vec![0u64; total];
-    let mut cursor: Vec<u32> = tile_offsets[..n_tiles].to_vec();
+    let keys = refill(&mut scratch.keys, total, 0);
+    scratch.cursor.clear();
+    scratch.cursor.extend_from_slice(&tile_offsets[..n_tiles]);
+    let cursor = &mut scratch.cursor;
     for (b, p) in prepared.iter().enumerate() {
         if let Some(p) = p {
             let key = (u64::from(total_order_key(p.depth)) << 32) | b as u64;
@@ -98,29 +119,31 @@ pub fn bin(prepared: &[Option<Prepared>], width: u32, height: u32) -> TileBins {
         }
     }
     let mut slices: Vec<&mut [u64]> = Vec::with_capacity(n_tiles);
-    let mut rest = keys.as_mut_slice();
-    for t in 0..n_tiles {
-        let (head, tail) = rest.split_at_mut(tile_counts[t] as usize);
+    let mut rest = &mut keys[..];
+    for &count in &tile_counts[..n_tiles] {
+        let (head, tail) = rest.split_at_mut(count as usize);
         slices.push(head);
         rest = tail;
     }
     slices.into_par_iter().for_each(|s| s.sort_unstable());
-    let entries: Vec<u32> = keys.iter().map(|&k| k as u32).collect();
+    bins.entries.clear();
+    bins.entries.extend(keys.iter().map(|&k| k as u32));
     // Billboard-major index, each billboard's entries in tile order.
-    let mut billboard_entries = vec![0u32; total];
-    let mut bcursor: Vec<u32> = billboard_offsets[..prepared.len()].to_vec();
-    for (e, &b) in entries.iter().enumerate() {
+    let billboard_entries = refill(&mut bins.billboard_entries, total, 0);
+    let bcursor = &mut scratch.cursor;
+    bcursor.clear();
+    bcursor.extend_from_slice(&billboard_offsets[..prepared.len()]);
+    for (e, &b) in bins.entries.iter().enumerate() {
         billboard_entries[bcursor[b as usize] as usize] = e as u32;
         bcursor[b as usize] += 1;
     }
-    TileBins {
-        tiles_x,
-        tiles_y,
-        tile_offsets,
-        entries,
-        billboard_offsets,
-        billboard_entries,
-    }
+}
+
+/// `v` cleared and refilled with `len` copies of `value`, keeping its storage.
+pub(crate) fn refill<T: Clone>(v: &mut Vec<T>, len: usize, value: T) -> &mut [T] {
+    v.clear();
+    v.resize(len, value);
+    v
 }
 
 #[cfg(test)]

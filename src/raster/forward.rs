@@ -1,7 +1,7 @@
 //! Tiled forward pass: front-to-back compositing of every pixel over its tile's list.
 
-use super::binning::{TileBins, bin};
-use super::preprocess::{Prepared, preprocess};
+use super::binning::{BinScratch, TileBins, bin_into, refill};
+use super::preprocess::{Prepared, preprocess_into};
 use super::{BillboardSet, RenderSettings, TILE_SIZE};
 use crate::camera::Camera;
 use crate::stages::bilinear::{self, BilinearTaps};
@@ -31,6 +31,8 @@ pub struct ForwardState {
     pub blended_offsets: Vec<u32>,
     /// Per tile: the tile-major rank of its first pixel (the pixel counts of the tiles before it).
     pub tile_pixel_base: Vec<u32>,
+    /// The forward pass's temporaries, kept for [`RenderOutput::into_buffers`].
+    pub(crate) spare: ForwardSpare,
 }
 
 impl ForwardState {
@@ -87,7 +89,7 @@ pub struct RenderStats {
 }
 
 /// Per-pixel values a tile produces.
-#[derive(Clone, Copy, Default)]
+#[derive(Clone, Copy, Debug, Default)]
 struct PixelOut {
     rgb: Vec3,
     alpha: f32,
@@ -425,23 +427,123 @@ pub(crate) fn tile_pixels(bins: &TileBins, t: usize, width: u32, height: u32) ->
 /// Renders the billboards seen by `camera`.
 ///
 /// Deterministic: the same inputs give bit-identical outputs for any number of rayon threads.
+/// Allocates every buffer afresh; a caller rendering many views should recycle them with
+/// [`render_with`].
 ///
 /// # Panics
 /// When the slices of `set` have inconsistent lengths (see [`BillboardSet::assert_consistent`]).
 pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings) -> RenderOutput {
+    render_with(set, camera, settings, RenderBuffers::default())
+}
+
+/// The storage of a [`RenderOutput`] and of the forward pass's temporaries, handed back by
+/// [`RenderOutput::into_buffers`] for the next [`render_with`] call.
+///
+/// Holds no result: every value a render produces is written afresh, so recycling changes no
+/// bit of any output (tested). What it saves is the memory traffic of fresh allocations: the
+/// per-billboard records, tile lists and images of a render are several megabytes, and memory
+/// freed between calls is commonly returned to the kernel by the allocator, so that a fresh
+/// render pays a page fault and a page clear for every 4 KiB it writes (`docs/perf.md`).
+#[derive(Clone, Debug, Default)]
+pub struct RenderBuffers {
+    images: [Vec<f32>; 6],
+    impact: Vec<f32>,
+    visible: Vec<bool>,
+    prepared: Vec<Option<Prepared>>,
+    bins: TileBins,
+    blended_slots: Vec<u32>,
+    blended_offsets: Vec<u32>,
+    tile_pixel_base: Vec<u32>,
+    spare: ForwardSpare,
+}
+
+/// Temporaries of the forward pass, kept with its output so that [`RenderBuffers`] can hand
+/// them to the next render.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct ForwardSpare {
+    bin_scratch: BinScratch,
+    entry_impact: Vec<f32>,
+    /// Per tile: its pixels' outputs and the slots they blended.
+    tiles: Vec<(Vec<PixelOut>, Vec<u32>)>,
+    tile_blended_base: Vec<u32>,
+}
+
+impl RenderOutput {
+    /// The output's storage, for the next [`render_with`]; its values are discarded.
+    pub fn into_buffers(self) -> RenderBuffers {
+        let state = self.state;
+        RenderBuffers {
+            images: [
+                self.rgb,
+                self.alpha,
+                self.depth,
+                self.median_depth,
+                self.normal,
+                state.final_transmittance,
+            ],
+            impact: self.impact,
+            visible: self.visible,
+            prepared: state.prepared,
+            bins: state.bins,
+            blended_slots: state.blended_slots,
+            blended_offsets: state.blended_offsets,
+            tile_pixel_base: state.tile_pixel_base,
+            spare: state.spare,
+        }
+    }
+}
+
+/// [`render`] into recycled storage (see [`RenderBuffers`]): bit-identical outputs, fewer
+/// fresh pages.
+///
+/// ```
+/// use bbsplat::billboards::{RandomSceneConfig, random_scene, random_scene_camera};
+/// use bbsplat::raster::{RenderBuffers, RenderSettings, render, render_with};
+/// let scene = random_scene(&RandomSceneConfig::benchmark(200, 32, 32));
+/// let (set, camera, settings) = (scene.as_set(), random_scene_camera(32, 32), RenderSettings::default());
+/// let mut buffers = RenderBuffers::default();
+/// for _ in 0..3 {
+///     let out = render_with(&set, &camera, &settings, buffers);
+///     assert_eq!(out.rgb, render(&set, &camera, &settings).rgb);
+///     buffers = out.into_buffers();
+/// }
+/// ```
+///
+/// # Panics
+/// When the slices of `set` have inconsistent lengths (see [`BillboardSet::assert_consistent`]).
+pub fn render_with(
+    set: &BillboardSet<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    buffers: RenderBuffers,
+) -> RenderOutput {
     set.assert_consistent();
+    let RenderBuffers {
+        images: [mut rgb, mut alpha, mut depth, mut median_depth, mut normal, mut final_transmittance],
+        mut impact,
+        mut visible,
+        mut prepared,
+        mut bins,
+        mut blended_slots,
+        mut blended_offsets,
+        mut tile_pixel_base,
+        mut spare,
+    } = buffers;
     let (w, h) = (camera.width, camera.height);
     let n_pix = camera.pixel_count();
-    let prepared = preprocess(set, camera, settings);
-    let bins = bin(&prepared, w, h);
+    preprocess_into(set, camera, settings, &mut prepared);
+    bin_into(&prepared, w, h, &mut bins, &mut spare.bin_scratch);
     let n_tiles = bins.tile_count();
     let half_side = crate::stages::splat_transform::support_half_side(set.texture_size);
-    let mut entry_impact = vec![0.0f32; bins.entries.len()];
-    let impact_chunks = split_by_lengths(&mut entry_impact, (0..n_tiles).map(|t| bins.tile_range(t).len()));
-    let tiles: Vec<(Vec<PixelOut>, Vec<u32>)> = impact_chunks
+    refill(&mut spare.entry_impact, bins.entries.len(), 0.0);
+    let impact_chunks = split_by_lengths(&mut spare.entry_impact, (0..n_tiles).map(|t| bins.tile_range(t).len()));
+    let tiles = &mut spare.tiles;
+    tiles.resize_with(n_tiles, Default::default);
+    impact_chunks
         .into_par_iter()
+        .zip(tiles.par_iter_mut())
         .enumerate()
-        .map(|(t, impact)| {
+        .for_each(|(t, (impact, (pixels, blended_slots)))| {
             let list = &bins.entries[bins.tile_range(t)];
             let rect @ (i0, j0, i1, j1) = tile_pixels(&bins, t, w, h);
             let tw = (i1 - i0) as usize;
@@ -450,8 +552,8 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
             lists.build(&local_spans(&prepared, list, (i0, j0), half_side));
             let own = |q: usize| lists.of((q % tw) as u32, (q / tw) as u32);
             let mut candidates = TileCandidates::default();
-            let mut pixels = Vec::with_capacity(n_q);
-            let mut blended_slots = Vec::new();
+            pixels.clear();
+            blended_slots.clear();
             let mut first = 0;
             while first < n_q {
                 let end = candidates.build(set, &prepared, list, rect, first, own);
@@ -464,35 +566,35 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
                         own(q),
                         candidates.of(q),
                         impact,
-                        &mut blended_slots,
+                        blended_slots,
                     ));
                 }
                 first = end;
             }
-            (pixels, blended_slots)
-        })
-        .collect();
+        });
+    let tiles = &spare.tiles;
     // Tile-major prefix sums, serial over tiles only: each tile's first pixel rank and first
     // blended slot.
-    let mut tile_pixel_base = Vec::with_capacity(n_tiles);
-    let mut tile_blended_base = Vec::with_capacity(n_tiles);
+    tile_pixel_base.clear();
+    let tile_blended_base = &mut spare.tile_blended_base;
+    tile_blended_base.clear();
     let (mut pixel_count, mut blended_count) = (0u32, 0u32);
-    for (pixels, slots) in &tiles {
+    for (pixels, slots) in tiles {
         tile_pixel_base.push(pixel_count);
         tile_blended_base.push(blended_count);
         pixel_count += pixels.len() as u32;
         blended_count += slots.len() as u32;
     }
     // Blended slots and per-pixel offsets, tile by tile in parallel (disjoint ranges).
-    let mut blended_slots = vec![0u32; blended_count as usize];
-    let mut blended_offsets = vec![0u32; n_pix + 1];
+    refill(&mut blended_slots, blended_count as usize, 0);
+    refill(&mut blended_offsets, n_pix + 1, 0);
     let slot_chunks = split_by_lengths(&mut blended_slots, tiles.iter().map(|(_, s)| s.len()));
     let offset_chunks = split_by_lengths(&mut blended_offsets[1..], tiles.iter().map(|(p, _)| p.len()));
     let evaluated_pairs: u64 = slot_chunks
         .into_par_iter()
         .zip(offset_chunks)
-        .zip(&tiles)
-        .zip(&tile_blended_base)
+        .zip(tiles)
+        .zip(&*tile_blended_base)
         .map(|(((slot_chunk, offset_chunk), (pixels, slots)), &base)| {
             slot_chunk.copy_from_slice(slots);
             let mut end = base;
@@ -503,11 +605,18 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
             pixels.iter().map(|px| u64::from(px.evaluated)).sum::<u64>()
         })
         .sum();
-    // Images, one band of tile rows per task.
+    // Images, one band of tile rows per task; every pixel is written.
     let band = TILE_SIZE as usize * w as usize;
-    let (mut rgb, mut alpha, mut depth) = (vec![0.0; n_pix * 3], vec![0.0; n_pix], vec![0.0; n_pix]);
-    let (mut median_depth, mut normal) = (vec![0.0; n_pix], vec![0.0; n_pix * 3]);
-    let mut final_transmittance = vec![1.0; n_pix];
+    for (image, channels) in [
+        (&mut rgb, 3),
+        (&mut alpha, 1),
+        (&mut depth, 1),
+        (&mut median_depth, 1),
+        (&mut normal, 3),
+        (&mut final_transmittance, 1),
+    ] {
+        refill(image, n_pix * channels, 0.0);
+    }
     (
         rgb.par_chunks_mut(3 * band),
         alpha.par_chunks_mut(band),
@@ -535,7 +644,19 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
                 }
             }
         });
-    let mut out = RenderOutput {
+    // Per-billboard impact: entries summed in tile order (fixed, thread-independent).
+    refill(&mut impact, set.len(), 0.0);
+    let entry_impact = &spare.entry_impact;
+    impact.par_iter_mut().enumerate().for_each(|(b, imp)| {
+        let r = bins.billboard_offsets[b] as usize..bins.billboard_offsets[b + 1] as usize;
+        *imp = bins.billboard_entries[r]
+            .iter()
+            .map(|&e| entry_impact[e as usize])
+            .sum();
+    });
+    visible.clear();
+    visible.extend(prepared.iter().map(Option::is_some));
+    RenderOutput {
         width: w,
         height: h,
         rgb,
@@ -543,8 +664,8 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
         depth,
         median_depth,
         normal,
-        impact: vec![0.0; set.len()],
-        visible: prepared.iter().map(Option::is_some).collect(),
+        impact,
+        visible,
         stats: RenderStats {
             tile_entries: bins.entries.len() as u64,
             evaluated_pairs,
@@ -553,23 +674,13 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
         state: ForwardState {
             camera: *camera,
             settings: *settings,
-            prepared: Vec::new(),
-            bins: TileBins::default(),
+            prepared,
+            bins,
             final_transmittance,
             blended_slots,
             blended_offsets,
             tile_pixel_base,
+            spare,
         },
-    };
-    // Per-billboard impact: entries summed in tile order (fixed, thread-independent).
-    out.impact.par_iter_mut().enumerate().for_each(|(b, imp)| {
-        let r = bins.billboard_offsets[b] as usize..bins.billboard_offsets[b + 1] as usize;
-        *imp = bins.billboard_entries[r]
-            .iter()
-            .map(|&e| entry_impact[e as usize])
-            .sum();
-    });
-    out.state.prepared = prepared;
-    out.state.bins = bins;
-    out
+    }
 }

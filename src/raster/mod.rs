@@ -29,7 +29,7 @@ use crate::stages::composite::CompositeParams;
 use glam::{Vec2, Vec3};
 
 pub use backward::{RenderGradients, render_backward};
-pub use forward::{ForwardState, RenderOutput, RenderStats, render};
+pub use forward::{ForwardState, RenderBuffers, RenderOutput, RenderStats, render, render_with};
 
 /// Side of a square screen tile in pixels.
 pub const TILE_SIZE: u32 = 16;

@@ -46,8 +46,20 @@ pub fn prepare_one(set: &BillboardSet<'_>, i: usize, camera: &Camera, settings: 
 
 /// Prepares every billboard in parallel; entry `i` belongs to billboard `i`.
 pub fn preprocess(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings) -> Vec<Option<Prepared>> {
+    let mut prepared = Vec::new();
+    preprocess_into(set, camera, settings, &mut prepared);
+    prepared
+}
+
+/// [`preprocess`] into `prepared`, reusing its storage (its old values are all replaced).
+pub fn preprocess_into(
+    set: &BillboardSet<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    prepared: &mut Vec<Option<Prepared>>,
+) {
     (0..set.len())
         .into_par_iter()
         .map(|i| prepare_one(set, i, camera, settings))
-        .collect()
+        .collect_into_vec(prepared);
 }

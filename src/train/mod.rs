@@ -34,7 +34,7 @@ use crate::loss::TrainingLoss;
 use crate::loss::psnr::psnr_u8;
 use crate::model::{Model, initial_alpha, logit, sigmoid};
 use crate::raster::backward::ImageGradients;
-use crate::raster::{RenderGradients, RenderSettings, SH_FLOATS, render, render_backward};
+use crate::raster::{RenderBuffers, RenderGradients, RenderSettings, SH_FLOATS, render, render_backward, render_with};
 use crate::rng::Rng;
 use adam::{AdamGroup, AdamParams};
 pub use checkpoint::CheckpointError;
@@ -285,6 +285,8 @@ pub struct Trainer {
     shape: Vec<f32>,
     /// Gaussian-mode opacity logits (empty in full-texture mode).
     opacity_logits: Vec<f32>,
+    /// The storage of the last step's render, recycled by the next (values never carried over).
+    render_buffers: RenderBuffers,
 }
 
 fn adam_groups(n: usize, t: usize) -> [AdamGroup; group::COUNT] {
@@ -346,6 +348,7 @@ impl Trainer {
             alpha0,
             shape,
             opacity_logits,
+            render_buffers: RenderBuffers::default(),
         };
         if config.texture_mode == TextureMode::Gaussian {
             for b in 0..n {
@@ -442,7 +445,8 @@ impl Trainer {
         let view = &views[vi];
         let cam = &view.camera;
         let settings = self.settings();
-        let out = render(&self.activated.as_set(), cam, &settings);
+        let buffers = std::mem::take(&mut self.render_buffers);
+        let out = render_with(&self.activated.as_set(), cam, &settings, buffers);
         let loss = TrainingLoss::default()
             .evaluate(&out.rgb, &view.rgb, cam.width as usize, cam.height as usize, 3)
             .expect("sizes validated above");
@@ -474,6 +478,7 @@ impl Trainer {
         } else {
             0.0
         };
+        self.render_buffers = out.into_buffers();
         let lr = learning_rates(self.step, self.config.iterations, self.config.extent);
         let updated = match self.config.adam {
             AdamMode::Dense => {
