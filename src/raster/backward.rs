@@ -6,9 +6,9 @@
 //! by `1 − α`: with `B` the normalised colour behind entry `i` (starting at the background),
 //! `∂L/∂α_i = T_i · Σ_ch g_ch (f_i,ch − B_ch)` and `B ← α_i f_i + (1 − α_i) B`.
 //!
-//! Gradients are first accumulated per tile entry (one (tile, billboard) pair) in the tile's
-//! scratch, then summed per billboard over its entries in tile order, so the result does not
-//! depend on how rayon schedules tiles. Texture gradients are summed per (entry, texel) as the
+//! Gradients are first accumulated per tile entry (one (tile, billboard) pair) in a record at
+//! the entry's global index, then summed per billboard over its entries in tile order, so the
+//! result does not depend on how rayon schedules tiles. Texture gradients are summed per (entry, texel) as the
 //! pixels produce them, in a per-thread accumulator whose sums list only the touched cells, and
 //! handed on sparse per entry (only the texels some pixel of the tile touched); see `TexelSums`.
 
@@ -95,12 +95,26 @@ struct Blended {
     colour: Vec3,
 }
 
-/// Per-entry geometric gradients accumulated over a tile's pixels.
+/// What the tile pass leaves for one entry (one (tile, billboard) pair), stored at the entry's
+/// global index so that the per-billboard reduction reaches it with one read (one cache line)
+/// from the billboard-major entry index: the geometric gradients accumulated over the tile's
+/// pixels and where its texel gradients are.
 #[derive(Clone, Copy)]
-struct EntryGrad {
+#[repr(C, align(64))]
+struct EntryRecord {
     transform: SplatTransform,
     rgb: Vec3,
+    /// The tile; its texel gradients are `tiles[tile].texels[texels.0..texels.1]`.
+    tile: u32,
+    texels: (u32, u32),
 }
+
+const EMPTY_RECORD: EntryRecord = EntryRecord {
+    transform: ZERO_TRANSFORM,
+    rgb: Vec3::ZERO,
+    tile: 0,
+    texels: (0, 0),
+};
 
 const ZERO_TRANSFORM: SplatTransform = SplatTransform {
     tu: Vec3::ZERO,
@@ -114,12 +128,9 @@ fn add_transform(acc: &mut SplatTransform, d: &SplatTransform) {
     acc.tw += d.tw;
 }
 
-/// What one tile hands to the per-billboard reduction.
+/// What one tile hands to the per-billboard reduction besides its entries' records.
 struct TileGrads {
-    geometry: Vec<EntryGrad>,
-    /// Texture gradients of entry `k` are `texels[tex_offsets[k]..tex_offsets[k + 1]]`.
-    tex_offsets: Vec<u32>,
-    /// (texel index, `[∂r, ∂g, ∂b, ∂alpha]`).
+    /// (texel index, `[∂r, ∂g, ∂b, ∂alpha]`), grouped by entry (see [`EntryRecord::texels`]).
     texels: Vec<(u32, [f32; 4])>,
     background: Vec3,
 }
@@ -254,6 +265,7 @@ fn backward_tile(
     out: &RenderOutput,
     grads_in: &ImageGradients<'_>,
     tile: usize,
+    records: &mut [EntryRecord],
     scratch: &mut Scratch,
     sums: &mut TexelSums,
 ) -> TileGrads {
@@ -267,13 +279,11 @@ fn backward_tile(
     let ts = set.texture_size;
     let width = out.width;
     let (i0, j0, i1, j1) = tile_pixels(bins, tile, width, out.height);
-    let mut geometry = vec![
-        EntryGrad {
-            transform: ZERO_TRANSFORM,
-            rgb: Vec3::ZERO
-        };
-        list.len()
-    ];
+    debug_assert_eq!(records.len(), list.len());
+    records.fill(EntryRecord {
+        tile: tile as u32,
+        ..EMPTY_RECORD
+    });
     let mut background = Vec3::ZERO;
     sums.start(list.len(), ts * ts);
     let bg = settings.background;
@@ -353,20 +363,18 @@ fn backward_tile(
                 );
                 let pr = prepared[b].as_ref().expect("blended entries are prepared");
                 let d_t = intersect_vjp(&pr.transform, px, py, du, dv, w * g_depth);
-                let eg = &mut geometry[bl.slot as usize];
-                add_transform(&mut eg.transform, &d_t);
-                eg.rgb += d_colour;
+                let rec = &mut records[bl.slot as usize];
+                add_transform(&mut rec.transform, &d_t);
+                rec.rgb += d_colour;
             }
         }
         first = end;
     }
-    let (tex_offsets, texels_out) = sums.finish(list.len());
-    TileGrads {
-        geometry,
-        tex_offsets,
-        texels: texels_out,
-        background,
+    let (tex_offsets, texels) = sums.finish(list.len());
+    for (rec, span) in records.iter_mut().zip(tex_offsets.windows(2)) {
+        rec.texels = (span[0], span[1]);
     }
+    TileGrads { texels, background }
 }
 
 /// Back-propagates image gradients to every billboard parameter and the background, adding
@@ -401,39 +409,31 @@ pub fn render_backward(
     let state = &out.state;
     let bins = &state.bins;
     let n_tiles = bins.tile_count();
-    let tiles: Vec<TileGrads> = (0..n_tiles)
+    let mut records = vec![EMPTY_RECORD; bins.entries.len()];
+    let tiles: Vec<TileGrads> = split_by_lengths(&mut records, (0..n_tiles).map(|t| bins.tile_range(t).len()))
         .into_par_iter()
-        .map_init(Scratch::default, |scratch, t| {
-            TEXEL_SUMS.with_borrow_mut(|sums| backward_tile(set, out, image_grads, t, scratch, sums))
+        .enumerate()
+        .map_init(Scratch::default, |scratch, (t, records)| {
+            TEXEL_SUMS.with_borrow_mut(|sums| backward_tile(set, out, image_grads, t, records, scratch, sums))
         })
         .collect();
     for tg in &tiles {
         grads.background += tg.background;
     }
-    // Tile of each entry, for the billboard-major reduction.
-    let mut entry_tile = vec![0u32; bins.entries.len()];
-    for (t, chunk) in split_by_lengths(&mut entry_tile, (0..n_tiles).map(|t| bins.tile_range(t).len()))
-        .into_iter()
-        .enumerate()
-    {
-        chunk.fill(t as u32);
-    }
     let texels = set.texels();
     let camera = &state.camera;
     let centre = camera.centre();
     let degree = state.settings.sh_degree;
-    // Where the entries of billboard `b` left their tile results.
-    let entry_results = |b: usize| {
+    // The records of the entries of billboard `b`, in tile order.
+    let entry_records = |b: usize| {
         let r = bins.billboard_offsets[b] as usize..bins.billboard_offsets[b + 1] as usize;
-        bins.billboard_entries[r].iter().map(|&e| {
-            let t = entry_tile[e as usize] as usize;
-            (&tiles[t], e as usize - bins.tile_offsets[t] as usize)
-        })
+        bins.billboard_entries[r].iter().map(|&e| &records[e as usize])
     };
-    // Billboards are reduced in chunks, each chunk in index order by one task. The tile results
+    let texels_of = |rec: &EntryRecord| &tiles[rec.tile as usize].texels[rec.texels.0 as usize..rec.texels.1 as usize];
+    // Billboards are reduced in chunks, each chunk in index order by one task. The entry records
     // and gradient rows a billboard reads are scattered (billboards are not in screen order), so
-    // each step prefetches them a few billboards ahead: the tile records 12 ahead, the texel lists
-    // 8 ahead, the gradient rows and SH coefficients 4 ahead. Prefetches change no value.
+    // each step prefetches them a few billboards ahead: the entry records 12 ahead, the texel
+    // lists 8 ahead, the gradient rows and SH coefficients 4 ahead. Prefetches change no value.
     const CHUNK: usize = 256;
     let touched: Vec<Vec<u32>> = (
         grads.positions.par_chunks_mut(CHUNK),
@@ -450,24 +450,22 @@ pub fn render_backward(
             let mut touched = Vec::new();
             for lb in 0..len {
                 if lb + 12 < len {
-                    for (tg, k) in entry_results(b0 + lb + 12) {
-                        prefetch_ref(&tg.geometry[k]);
-                        prefetch_ref(&tg.tex_offsets[k]);
+                    for rec in entry_records(b0 + lb + 12) {
+                        prefetch_ref(rec);
                     }
                 }
                 if lb + 8 < len {
-                    for (tg, k) in entry_results(b0 + lb + 8) {
-                        let start = tg.tex_offsets[k] as usize;
-                        if start < tg.tex_offsets[k + 1] as usize {
-                            prefetch_ref(&tg.texels[start]);
+                    for rec in entry_records(b0 + lb + 8) {
+                        if let Some(first) = texels_of(rec).first() {
+                            prefetch_ref(first);
                         }
                     }
                 }
                 if lb + 4 < len {
                     let la = lb + 4;
                     let mut any = false;
-                    for (tg, k) in entry_results(b0 + la) {
-                        for &(idx, _) in &tg.texels[tg.tex_offsets[k] as usize..tg.tex_offsets[k + 1] as usize] {
+                    for rec in entry_records(b0 + la) {
+                        for &(idx, _) in texels_of(rec) {
                             prefetch(d_tex, la * texels + idx as usize);
                             any = true;
                         }
@@ -485,14 +483,14 @@ pub fn render_backward(
                 let mut d_t = ZERO_TRANSFORM;
                 let mut d_rgb = Vec3::ZERO;
                 let mut any = false;
-                for (tg, k) in entry_results(b) {
-                    let tex = &tg.texels[tg.tex_offsets[k] as usize..tg.tex_offsets[k + 1] as usize];
+                for rec in entry_records(b) {
+                    let tex = texels_of(rec);
                     if tex.is_empty() {
                         continue;
                     }
                     any = true;
-                    add_transform(&mut d_t, &tg.geometry[k].transform);
-                    d_rgb += tg.geometry[k].rgb;
+                    add_transform(&mut d_t, &rec.transform);
+                    d_rgb += rec.rgb;
                     for &(idx, v) in tex {
                         let d = &mut d_tex[idx as usize];
                         for c in 0..4 {
