@@ -246,8 +246,7 @@ fn basis_for(degree: u32, position: Vec3, camera_centre: Vec3, basis: &mut [f32;
 fn raw_colour(n: usize, coeffs: &[f32], basis: &[f32; 16]) -> [f32; 3] {
     assert!(coeffs.len() >= 3 * n, "need 3·(degree + 1)² coefficients");
     let mut raw = [0.5f32; 3];
-    for (k, &b) in basis[..n].iter().enumerate() {
-        let c = &coeffs[3 * k..3 * k + 3];
+    for (c, &b) in coeffs[..3 * n].chunks_exact(3).zip(&basis[..n]) {
         raw[0] += b * c[0];
         raw[1] += b * c[1];
         raw[2] += b * c[2];
@@ -304,23 +303,21 @@ pub fn sh_colour_vjp(
     let raw = raw_colour(n, coeffs, &basis);
     assert!(d_coeffs.len() >= 3 * n, "need 3·(degree + 1)² coefficient gradients");
     let g = [0, 1, 2].map(|c| if raw[c] < 0.0 { 0.0 } else { d_rgb[c] });
-    for (k, &b) in basis[..n].iter().enumerate() {
-        let d = &mut d_coeffs[3 * k..3 * k + 3];
+    // One pass over the coefficients: `∂L/∂coeffs[3k + c] += Yₖ·g_c` and
+    // `∂L/∂Yₖ = Σ_c g_c·coeffs[3k + c]`.
+    let mut d_basis = [0.0f32; 16];
+    let rows = coeffs[..3 * n].chunks_exact(3).zip(d_coeffs[..3 * n].chunks_exact_mut(3));
+    for (((c, d), &b), db) in rows.zip(&basis[..n]).zip(&mut d_basis[..n]) {
         d[0] += b * g[0];
         d[1] += b * g[1];
         d[2] += b * g[2];
+        *db = g[0] * c[0] + g[1] * c[1] + g[2] * c[2];
     }
     let Some((dir, len)) = view else {
         return Vec3::ZERO;
     };
     if degree == 0 {
         return Vec3::ZERO;
-    }
-    // ∂L/∂Yₖ = Σ_c g_c·coeffs[3k + c].
-    let mut d_basis = [0.0f32; 16];
-    for (k, db) in d_basis[1..n].iter_mut().enumerate() {
-        let c = &coeffs[3 * (k + 1)..3 * (k + 1) + 3];
-        *db = g[0] * c[0] + g[1] * c[1] + g[2] * c[2];
     }
     let d_dir = sh_basis_vjp(degree, dir, &d_basis);
     // dir = d/|d|: ∂dir/∂d = (I − dir dirᵀ)/|d|.
