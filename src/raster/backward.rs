@@ -8,9 +8,10 @@
 //!
 //! Gradients are first accumulated per tile entry (one (tile, billboard) pair) in a record at
 //! the entry's global index, then summed per billboard over its entries in tile order, so the
-//! result does not depend on how rayon schedules tiles. Texture gradients are summed per (entry, texel) as the
-//! pixels produce them, in a per-thread accumulator whose sums list only the touched cells, and
-//! handed on sparse per entry (only the texels some pixel of the tile touched); see `TexelSums`.
+//! result does not depend on how rayon schedules tiles. Texture gradients are summed per
+//! (entry, texel) as the pixels produce them, in a per-thread accumulator whose sums list only
+//! the touched cells, and handed on sparse per entry (only the texels some pixel of the tile
+//! touched); see `TexelSums`.
 
 use super::forward::{RenderOutput, TileCandidates, prefetch, prefetch_ref, split_by_lengths, tile_pixels};
 use super::preprocess::Prepared;
