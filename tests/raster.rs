@@ -6,7 +6,9 @@ use bbsplat::camera::Camera;
 use bbsplat::gradcheck::{GradTolerance, compare, directional_derivative, random_weights};
 use bbsplat::raster::backward::ImageGradients;
 use bbsplat::raster::reference::render_reference;
-use bbsplat::raster::{RenderBuffers, RenderGradients, RenderOutput, RenderSettings, render, render_backward, render_with};
+use bbsplat::raster::{
+    RenderBuffers, RenderGradients, RenderOutput, RenderSettings, render, render_backward, render_with,
+};
 use bbsplat::rng::Rng;
 use bbsplat::stages::composite::CompositeParams;
 use bbsplat::strategies::seeded_config;
@@ -606,7 +608,14 @@ fn bit_identical_across_runs_and_thread_counts() {
 
 /// Every value a render reports (images, impact, visibility, counters), as bits.
 fn render_bits(out: &RenderOutput) -> Vec<u32> {
-    let images = [&out.rgb, &out.alpha, &out.depth, &out.median_depth, &out.normal, &out.impact];
+    let images = [
+        &out.rgb,
+        &out.alpha,
+        &out.depth,
+        &out.median_depth,
+        &out.normal,
+        &out.impact,
+    ];
     let mut bits: Vec<u32> = images.iter().flat_map(|v| v.iter().map(|x| x.to_bits())).collect();
     bits.extend(out.visible.iter().map(|&v| u32::from(v)));
     let stats = out.stats;

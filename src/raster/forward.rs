@@ -519,7 +519,15 @@ pub fn render_with(
 ) -> RenderOutput {
     set.assert_consistent();
     let RenderBuffers {
-        images: [mut rgb, mut alpha, mut depth, mut median_depth, mut normal, mut final_transmittance],
+        images:
+            [
+                mut rgb,
+                mut alpha,
+                mut depth,
+                mut median_depth,
+                mut normal,
+                mut final_transmittance,
+            ],
         mut impact,
         mut visible,
         mut prepared,

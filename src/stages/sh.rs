@@ -306,7 +306,9 @@ pub fn sh_colour_vjp(
     // One pass over the coefficients: `∂L/∂coeffs[3k + c] += Yₖ·g_c` and
     // `∂L/∂Yₖ = Σ_c g_c·coeffs[3k + c]`.
     let mut d_basis = [0.0f32; 16];
-    let rows = coeffs[..3 * n].chunks_exact(3).zip(d_coeffs[..3 * n].chunks_exact_mut(3));
+    let rows = coeffs[..3 * n]
+        .chunks_exact(3)
+        .zip(d_coeffs[..3 * n].chunks_exact_mut(3));
     for (((c, d), &b), db) in rows.zip(&basis[..n]).zip(&mut d_basis[..n]) {
         d[0] += b * g[0];
         d[1] += b * g[1];
