@@ -58,7 +58,9 @@ fn main() {
                 depth: None,
             };
             let touched = render_backward(&set, &out, &ig, &mut grads).len();
-            buffers = out.into_buffers();
+            if recycle {
+                buffers = out.into_buffers();
+            }
             touched
         };
         let touched = once();

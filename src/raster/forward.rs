@@ -446,6 +446,7 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
 /// render pays a page fault and a page clear for every 4 KiB it writes (`docs/perf.md`).
 #[derive(Clone, Debug, Default)]
 pub struct RenderBuffers {
+    /// rgb, alpha, depth, median depth, normal, final transmittance.
     images: [Vec<f32>; 6],
     impact: Vec<f32>,
     visible: Vec<bool>,
