@@ -1,5 +1,5 @@
 //! Allocation of the large per-billboard arrays (textures, their gradients and optimiser
-//! moments) with a transparent-huge-page hint.
+//! moments) with a transparent-huge-page hint, and the reset of recycled buffers (`refill`).
 //!
 //! The rasterizer reads and writes these arrays at scattered rows: a 16×16 texture is 1 KiB per
 //! channel, so every billboard a pixel touches is a different 4 KiB page, and at 50 000
@@ -69,6 +69,14 @@ fn advise_range(start: usize, len: usize) {
 
 #[cfg(not(target_os = "linux"))]
 fn advise_range(_start: usize, _len: usize) {}
+
+/// `v` cleared and refilled with `len` copies of `value`, keeping its storage (no allocation
+/// when its capacity suffices): how the rasterizer's recycled buffers are reset.
+pub(crate) fn refill<T: Clone>(v: &mut Vec<T>, len: usize, value: T) -> &mut [T] {
+    v.clear();
+    v.resize(len, value);
+    v
+}
 
 #[cfg(test)]
 mod tests {

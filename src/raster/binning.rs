@@ -2,6 +2,7 @@
 
 use super::TILE_SIZE;
 use super::preprocess::Prepared;
+use crate::memory::refill;
 use rayon::prelude::*;
 
 /// Per-tile lists of billboards and the billboard-major index of the same entries.
@@ -137,13 +138,6 @@ pub fn bin_into(prepared: &[Option<Prepared>], width: u32, height: u32, bins: &m
         billboard_entries[bcursor[b as usize] as usize] = e as u32;
         bcursor[b as usize] += 1;
     }
-}
-
-/// `v` cleared and refilled with `len` copies of `value`, keeping its storage.
-pub(crate) fn refill<T: Clone>(v: &mut Vec<T>, len: usize, value: T) -> &mut [T] {
-    v.clear();
-    v.resize(len, value);
-    v
 }
 
 #[cfg(test)]

@@ -1,9 +1,10 @@
 //! Tiled forward pass: front-to-back compositing of every pixel over its tile's list.
 
-use super::binning::{BinScratch, TileBins, bin_into, refill};
+use super::binning::{BinScratch, TileBins, bin_into};
 use super::preprocess::{Prepared, preprocess_into};
 use super::{BillboardSet, RenderSettings, TILE_SIZE};
 use crate::camera::Camera;
+use crate::memory::refill;
 use crate::stages::bilinear::{self, BilinearTaps};
 use crate::stages::ray_plane::intersect;
 use crate::stages::splat_transform::{pixel_range, support_quad};
