@@ -441,10 +441,11 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
 /// [`RenderOutput::into_buffers`] for the next [`render_with`] call.
 ///
 /// Holds no result: every value a render produces is written afresh, so recycling changes no
-/// bit of any output (tested). What it saves is the memory traffic of fresh allocations: the
-/// per-billboard records, tile lists and images of a render are several megabytes, and memory
-/// freed between calls is commonly returned to the kernel by the allocator, so that a fresh
-/// render pays a page fault and a page clear for every 4 KiB it writes (`docs/perf.md`).
+/// bit of any output (tested). What it saves is fresh allocations: the per-billboard records,
+/// tile lists and images of a render are several megabytes, and whether the allocator keeps
+/// freed memory between calls or returns it to the kernel (a page fault and a page clear per
+/// 4 KiB on the next call) depends on the process: measured about 2000 faults per call in one
+/// harness and none in another (`docs/perf.md`). Recycled buffers do not fault in either.
 #[derive(Clone, Debug, Default)]
 pub struct RenderBuffers {
     /// rgb, alpha, depth, median depth, normal, final transmittance.
