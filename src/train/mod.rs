@@ -34,7 +34,7 @@ use crate::loss::TrainingLoss;
 use crate::loss::psnr::psnr_u8;
 use crate::model::{Model, initial_alpha, logit, sigmoid};
 use crate::raster::backward::ImageGradients;
-use crate::raster::{RenderBuffers, RenderGradients, RenderSettings, SH_FLOATS, render, render_backward, render_with};
+use crate::raster::{RenderBuffers, RenderGradients, RenderSettings, SH_FLOATS, render_backward, render_with};
 use crate::rng::Rng;
 use adam::{AdamGroup, AdamParams};
 pub use checkpoint::CheckpointError;
@@ -680,9 +680,20 @@ impl Trainer {
             sh_degree: self.config.sh_degree,
             ..Default::default()
         };
+        let mut buffers = RenderBuffers::default();
         let total: f64 = views
             .iter()
-            .map(|v| psnr_u8(&render(&self.activated.as_set(), &v.camera, &settings).rgb, &v.rgb).unwrap_or(f64::NAN))
+            .map(|v| {
+                let out = render_with(
+                    &self.activated.as_set(),
+                    &v.camera,
+                    &settings,
+                    std::mem::take(&mut buffers),
+                );
+                let psnr = psnr_u8(&out.rgb, &v.rgb).unwrap_or(f64::NAN);
+                buffers = out.into_buffers();
+                psnr
+            })
             .sum();
         total / views.len().max(1) as f64
     }
