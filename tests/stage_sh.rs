@@ -10,7 +10,8 @@
 
 use bbsplat::gradcheck::{GradReport, GradTolerance, StepRule, check_vjp, compare, numerical_gradient, random_weights};
 use bbsplat::stages::sh::{
-    self, SH_C0, SH_FLOATS, SH_MIN_DISTANCE, rgb_to_sh, sh_basis, sh_coeff_count, sh_colour, sh_colour_vjp, sh_to_rgb,
+    self, SH_C0, SH_FLOATS, SH_MIN_DISTANCE, rgb_to_sh, sh_basis, sh_coeff_count, sh_colour, sh_colour_vjp,
+    sh_colour_vjp_clamped, sh_to_rgb,
 };
 use bbsplat::strategies;
 use glam::{DVec3, Vec3};
@@ -648,4 +649,33 @@ fn measure_tolerances() {
     }
     println!("sh, probe atol 1e-5 rtol 1e-4: {worst:?}");
     println!("sh near, probe atol 1e-5 rtol 1e-4: {worst_near:?}");
+}
+
+proptest! {
+    #![proptest_config(strategies::seeded_config(512))]
+
+    /// The rasterizer's backward passes the clamp flags its forward kept to
+    /// `sh_colour_vjp_clamped`: it must give `sh_colour_vjp`'s bits for every degree, with
+    /// clamped channels (DC down to −4), at the camera position (degenerate direction) and far
+    /// away.
+    #[test]
+    fn clamped_vjp_equals_the_full_vjp_bit_for_bit(
+        degree in 0u32..=3,
+        dc in proptest::collection::vec(-4.0f32..1.0, 3),
+        rest in proptest::collection::vec(-0.5f32..0.5, SH_FLOATS - 3),
+        dir in strategies::direction(),
+        dist in prop_oneof![Just(0.0f32), 0.0f32..1e-3, 0.1f32..1e4],
+        d_rgb in proptest::array::uniform3(-1.0f32..1.0),
+    ) {
+        let coeffs: Vec<f32> = dc.into_iter().chain(rest).collect();
+        let (centre, d_rgb) = (Vec3::new(0.5, -1.0, 2.0), Vec3::from_array(d_rgb));
+        let position = centre + dir * dist;
+        let clamped = sh_colour(degree, &coeffs, position, centre).clamped;
+        let (mut a, mut b) = (vec![0.25f32; SH_FLOATS], vec![0.25f32; SH_FLOATS]);
+        let dp_a = sh_colour_vjp_clamped(degree, &coeffs, position, centre, clamped, d_rgb, &mut a);
+        let dp_b = sh_colour_vjp(degree, &coeffs, position, centre, d_rgb, &mut b);
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        prop_assert_eq!(bits(&dp_a.to_array()), bits(&dp_b.to_array()));
+        prop_assert_eq!(bits(&a), bits(&b));
+    }
 }

@@ -12,7 +12,7 @@ use bbsplat::stages::ray_plane::intersect;
 use bbsplat::stages::rotation::quat_to_rotation;
 use bbsplat::stages::splat_transform::{
     NEAR_PLANE, ProjectedSplat, ScreenBounds, SplatGrads, SplatTransform, project_splat, project_splat_vjp,
-    splat_frame, square_screen_bounds, support_half_side, support_quad,
+    project_splat_vjp_visible, splat_frame, square_screen_bounds, support_half_side, support_quad,
 };
 use bbsplat::strategies::{BillboardPose, billboard_in_front, camera, identity_camera, seeded_config};
 use glam::{DMat3, DVec2, DVec3, Mat3, Vec2, Vec3};
@@ -1043,6 +1043,31 @@ proptest! {
             prop_assert_eq!(f.normal_sign, ps.normal_sign);
             prop_assert_eq!(f.view_depth, ps.view_depth);
             prop_assert_eq!(f.scales, ps.scales);
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(seeded_config(512))]
+
+    /// The rasterizer's backward calls `project_splat_vjp_visible` with the normal sign its
+    /// forward kept: for every pose the frame accepts (anywhere around the camera, so some face
+    /// away and some are culled) it gives `project_splat_vjp`'s bits, normal gradient included.
+    #[test]
+    fn visible_vjp_equals_the_full_vjp_bit_for_bit(
+        cam in camera(),
+        p in (-8.0f32..8.0, -8.0f32..8.0, -8.0f32..8.0),
+        s in (-3.0f32..1.0, -3.0f32..1.0),
+        q in bbsplat::strategies::quaternion(),
+        w in proptest::collection::vec(-1.0f32..1.0, 12),
+    ) {
+        let (p, s) = (Vec3::new(p.0, p.1, p.2), Vec2::new(s.0, s.1));
+        let (d_t, d_n) = cotangent(&cam, &w);
+        if let Some(frame) = splat_frame(p, s, q, &cam) {
+            let full = project_splat_vjp(p, s, q, &cam, &d_t, d_n);
+            let visible = project_splat_vjp_visible(s, q, frame.normal_sign, &cam, &d_t, d_n);
+            let bits = |g: SplatGrads| grads_to_vec(g).iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            prop_assert_eq!(bits(visible), bits(full));
         }
     }
 }

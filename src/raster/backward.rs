@@ -19,8 +19,8 @@ use super::{BillboardSet, SH_FLOATS};
 use crate::stages::bilinear::BilinearTaps;
 use crate::stages::composite::ClampGradient;
 use crate::stages::ray_plane::intersect_vjp;
-use crate::stages::sh::sh_colour_vjp;
-use crate::stages::splat_transform::{SplatTransform, project_splat_vjp};
+use crate::stages::sh::sh_colour_vjp_clamped;
+use crate::stages::splat_transform::{SplatTransform, project_splat_vjp_visible};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
@@ -502,16 +502,29 @@ pub fn render_backward(
                 if !any {
                     continue;
                 }
-                let sg = project_splat_vjp(
-                    set.positions[b],
+                // An entry exists only for a billboard its forward prepared (not culled).
+                let prepared = state.prepared[b]
+                    .as_ref()
+                    .expect("a billboard with tile entries was prepared");
+                let normal_sign = if prepared.normal_flipped { -1.0 } else { 1.0 };
+                let sg = project_splat_vjp_visible(
                     set.log_scales[b],
                     set.quaternions[b],
+                    normal_sign,
                     camera,
                     &d_t,
                     Vec3::ZERO,
                 );
                 let d_sh = &mut d_sh[lb * SH_FLOATS..(lb + 1) * SH_FLOATS];
-                let d_pos_sh = sh_colour_vjp(degree, set.sh_of(b), set.positions[b], centre, d_rgb, d_sh);
+                let d_pos_sh = sh_colour_vjp_clamped(
+                    degree,
+                    set.sh_of(b),
+                    set.positions[b],
+                    centre,
+                    prepared.sh_clamped,
+                    d_rgb,
+                    d_sh,
+                );
                 d_pos[lb] += sg.d_position + d_pos_sh;
                 d_scale[lb] += sg.d_log_scales;
                 for (q, dq) in d_quat[lb].iter_mut().zip(sg.d_quaternion) {

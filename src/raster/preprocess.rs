@@ -18,6 +18,12 @@ pub struct Prepared {
     pub depth: f32,
     /// SH colour (`Σ + 0.5`, clamped at 0), added to the sampled colour texture.
     pub rgb: Vec3,
+    /// Per channel: the SH colour was clamped to 0 ([`crate::stages::sh::ShColour::clamped`]),
+    /// kept for the backward pass.
+    pub sh_clamped: [bool; 3],
+    /// The plane's normal was flipped to face the camera (`normal_sign = −1` of
+    /// [`crate::stages::splat_transform::SplatFrame`]), kept for the backward pass.
+    pub normal_flipped: bool,
     /// First pixel column and row whose centre lies in the screen box (inclusive).
     pub pixel_min: [u32; 2],
     /// Last pixel column and row whose centre lies in the screen box (inclusive).
@@ -33,12 +39,14 @@ pub fn prepare_one(set: &BillboardSet<'_>, i: usize, camera: &Camera, settings: 
     let rect = square_screen_bounds(&projected.transform, support_half_side(set.texture_size))?
         .pixel_rect(camera.width, camera.height)?;
     let (pixel_min, pixel_max) = ([rect.x_min, rect.y_min], [rect.x_max - 1, rect.y_max - 1]);
-    let rgb = sh_colour(settings.sh_degree, set.sh_of(i), position, camera.centre()).rgb;
+    let colour = sh_colour(settings.sh_degree, set.sh_of(i), position, camera.centre());
     Some(Prepared {
         transform: projected.transform,
         normal: projected.normal_view,
         depth: projected.view_depth,
-        rgb,
+        rgb: colour.rgb,
+        sh_clamped: colour.clamped,
+        normal_flipped: projected.normal_sign < 0.0,
         pixel_min,
         pixel_max,
     })

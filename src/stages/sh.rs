@@ -301,8 +301,56 @@ pub fn sh_colour_vjp(
     let view = basis_for(degree, position, camera_centre, &mut basis);
     let n = if view.is_some() { sh_coeff_count(degree) } else { 1 };
     let raw = raw_colour(n, coeffs, &basis);
+    colour_vjp(degree, coeffs, &basis, view, raw.map(|r| r < 0.0), d_rgb, d_coeffs)
+}
+
+/// [`sh_colour_vjp`] given the forward's clamp flags ([`ShColour::clamped`] of the same
+/// arguments) instead of re-evaluating the colour: the same values bit for bit, one pass over the
+/// coefficients fewer. The rasterizer's backward calls it with the flags its forward kept.
+///
+/// # Panics
+/// If `degree > 3` or `coeffs`/`d_coeffs` are too short.
+///
+/// ```
+/// use bbsplat::stages::sh::{sh_colour, sh_colour_vjp, sh_colour_vjp_clamped, SH_FLOATS};
+/// use glam::Vec3;
+/// let coeffs: Vec<f32> = (0..SH_FLOATS).map(|k| ((k * 7) % 11) as f32 * 0.1 - 0.5).collect();
+/// let (p, eye, d_rgb) = (Vec3::new(0.3, -0.2, 1.0), Vec3::ZERO, Vec3::new(1.0, -2.0, 0.5));
+/// let (mut a, mut b) = ([0.0f32; SH_FLOATS], [0.0f32; SH_FLOATS]);
+/// let clamped = sh_colour(3, &coeffs, p, eye).clamped;
+/// let dp = sh_colour_vjp_clamped(3, &coeffs, p, eye, clamped, d_rgb, &mut a);
+/// assert_eq!(dp, sh_colour_vjp(3, &coeffs, p, eye, d_rgb, &mut b));
+/// assert_eq!(a, b);
+/// ```
+pub fn sh_colour_vjp_clamped(
+    degree: u32,
+    coeffs: &[f32],
+    position: Vec3,
+    camera_centre: Vec3,
+    clamped: [bool; 3],
+    d_rgb: Vec3,
+    d_coeffs: &mut [f32],
+) -> Vec3 {
+    let mut basis = [0.0; 16];
+    let view = basis_for(degree, position, camera_centre, &mut basis);
+    colour_vjp(degree, coeffs, &basis, view, clamped, d_rgb, d_coeffs)
+}
+
+/// The chain of [`sh_colour_vjp`] after the basis and the clamp flags are known.
+#[inline]
+fn colour_vjp(
+    degree: u32,
+    coeffs: &[f32],
+    basis: &[f32; 16],
+    view: Option<(Vec3, f32)>,
+    clamped: [bool; 3],
+    d_rgb: Vec3,
+    d_coeffs: &mut [f32],
+) -> Vec3 {
+    let n = if view.is_some() { sh_coeff_count(degree) } else { 1 };
+    assert!(coeffs.len() >= 3 * n, "need 3·(degree + 1)² coefficients");
     assert!(d_coeffs.len() >= 3 * n, "need 3·(degree + 1)² coefficient gradients");
-    let g = [0, 1, 2].map(|c| if raw[c] < 0.0 { 0.0 } else { d_rgb[c] });
+    let g = [0, 1, 2].map(|c| if clamped[c] { 0.0 } else { d_rgb[c] });
     // One pass over the coefficients: `∂L/∂coeffs[3k + c] += Yₖ·g_c` and
     // `∂L/∂Yₖ = Σ_c g_c·coeffs[3k + c]`.
     let mut d_basis = [0.0f32; 16];

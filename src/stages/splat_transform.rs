@@ -369,6 +369,70 @@ pub fn project_splat_vjp(
     let Some((frame, g)) = frame_with_geometry(position, log_scales, quaternion, camera) else {
         return SplatGrads::default();
     };
+    axes_vjp(
+        g.rotation,
+        g.scales,
+        quaternion,
+        frame.normal_sign,
+        camera,
+        d_transform,
+        d_normal_view,
+    )
+}
+
+/// [`project_splat_vjp`] for a billboard already known to pass [`splat_frame`]'s culling (the
+/// frame exists), given the frame's `normal_sign`: the same values bit for bit, without
+/// recomputing the frame (view point, `T`, checks). The rasterizer's backward calls it for every
+/// billboard that reached a pixel; what it skips is most of [`project_splat_vjp`]'s cost.
+///
+/// Its result is meaningless (not zero) for a billboard that [`splat_frame`] culls.
+///
+/// ```
+/// use bbsplat::camera::Camera;
+/// use bbsplat::stages::splat_transform::{project_splat_vjp, project_splat_vjp_visible, splat_frame, SplatTransform};
+/// use glam::{Vec2, Vec3};
+/// let cam = Camera::look_at(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, Vec3::Y, 100.0, 100.0, 64, 48);
+/// let (p, s, q) = (Vec3::new(0.1, 0.2, 0.3), Vec2::new(-1.0, -0.5), [0.9, 0.1, -0.3, 0.2]);
+/// let frame = splat_frame(p, s, q, &cam).unwrap();
+/// let d_t = SplatTransform { tu: Vec3::X, tv: Vec3::Y, tw: Vec3::ONE };
+/// let full = project_splat_vjp(p, s, q, &cam, &d_t, Vec3::X);
+/// assert_eq!(project_splat_vjp_visible(s, q, frame.normal_sign, &cam, &d_t, Vec3::X), full);
+/// ```
+#[inline]
+pub fn project_splat_vjp_visible(
+    log_scales: Vec2,
+    quaternion: [f32; 4],
+    normal_sign: f32,
+    camera: &Camera,
+    d_transform: &SplatTransform,
+    d_normal_view: Vec3,
+) -> SplatGrads {
+    // The same calls as `geometry`, so the same bits.
+    let rotation = quat_to_rotation(quaternion);
+    let scales = Vec2::new(log_scales.x.exp(), log_scales.y.exp());
+    axes_vjp(
+        rotation,
+        scales,
+        quaternion,
+        normal_sign,
+        camera,
+        d_transform,
+        d_normal_view,
+    )
+}
+
+/// The chain of [`project_splat_vjp`] from `∂L/∂T` and `∂L/∂normal_view` back to position,
+/// log-scales and quaternion, given the forward's rotation and scales.
+#[inline]
+fn axes_vjp(
+    rotation: Mat3,
+    scales: Vec2,
+    quaternion: [f32; 4],
+    normal_sign: f32,
+    camera: &Camera,
+    d_transform: &SplatTransform,
+    d_normal_view: Vec3,
+) -> SplatGrads {
     let SplatTransform { tu: du, tv: dv, tw: dw } = *d_transform;
     // T = K·M with M = [a | b | c]: ∂L/∂M = Kᵀ·∂L/∂T. Row 0 of ∂L/∂M is fx·du, row 1 fy·dv,
     // row 2 cx·du + cy·dv + dw; column j of M is a, b, c.
@@ -379,14 +443,14 @@ pub fn project_splat_vjp(
     let wt = camera.rotation.transpose();
     let (da_world, db_world) = (wt * da, wt * db);
     let d_rotation = Mat3::from_cols(
-        da_world * g.scales.x,
-        db_world * g.scales.y,
-        wt * d_normal_view * frame.normal_sign,
+        da_world * scales.x,
+        db_world * scales.y,
+        wt * d_normal_view * normal_sign,
     );
-    let d_scales = Vec2::new(da_world.dot(g.rotation.x_axis), db_world.dot(g.rotation.y_axis));
+    let d_scales = Vec2::new(da_world.dot(rotation.x_axis), db_world.dot(rotation.y_axis));
     SplatGrads {
         d_position: wt * dc,
-        d_log_scales: d_scales * g.scales,
+        d_log_scales: d_scales * scales,
         d_quaternion: quat_to_rotation_vjp(quaternion, d_rotation),
     }
 }
