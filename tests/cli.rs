@@ -375,3 +375,43 @@ fn coarse_to_fine_resumes_across_the_switch_bit_for_bit() {
     assert!(!ok && err.contains("--coarse-until"), "{err}");
     std::fs::remove_dir_all(&root).ok();
 }
+
+/// `--lr-scale` sets every learning-rate factor, `--lr-position/-sh/-shape/-texture` override one
+/// group; the checkpoint keeps them. Negative or non-numeric factors are refused by name.
+#[test]
+fn learning_rate_flags_reach_the_trainer() {
+    let root = temp("lr");
+    let data = export_demo(&root, 24, 100);
+    let (d, out) = (data.to_str().unwrap(), root.join("run").to_str().unwrap().to_string());
+    run_ok(&tiny_train_args(
+        d,
+        &out,
+        &[
+            "--lr-scale",
+            "2",
+            "--lr-texture",
+            "3",
+            "--lr-sh",
+            "0.5",
+            "--stop-after",
+            "1",
+        ],
+    ));
+    let trainer = bbsplat::train::Trainer::load_checkpoint(&root.join("run/checkpoint.bin")).unwrap();
+    assert_eq!(
+        trainer.config().lr_scales,
+        bbsplat::train::LearningRateScales {
+            position: 2.0,
+            sh: 0.5,
+            shape: 2.0,
+            texture: 3.0,
+        }
+    );
+    for (flag, value) in [("--lr-scale", "-1"), ("--lr-position", "nan"), ("--lr-shape", "fast")] {
+        let arg = format!("{flag}={value}");
+        let (ok, err) = run(&tiny_train_args(d, &out, &[&arg]));
+        assert!(!ok, "{arg} accepted");
+        assert!(err.contains(flag) && err.contains(value), "{arg}: {err}");
+    }
+    std::fs::remove_dir_all(&root).ok();
+}

@@ -4,9 +4,10 @@
 
 use bbsplat::demo::{DemoConfig, generate};
 use bbsplat::model::Model;
-use bbsplat::train::checkpoint::{MAGIC, VERSION};
+use bbsplat::train::checkpoint::{MAGIC, OLDEST_VERSION, VERSION};
 use bbsplat::train::{
-    AdamMode, CheckpointError, TextureMode, TrainConfig, TrainError, TrainView, Trainer, scene_extent,
+    AdamMode, CheckpointError, LearningRateScales, TextureMode, TrainConfig, TrainError, TrainView, Trainer,
+    scene_extent,
 };
 use glam::Vec3;
 use std::path::PathBuf;
@@ -44,6 +45,13 @@ fn setup(adam: AdamMode, texture_mode: TextureMode) -> (Trainer, Vec<TrainView>)
         relocate_every: 3,
         adam,
         texture_mode,
+        // Not the defaults: a resumed run that lost them would drift from the straight one.
+        lr_scales: LearningRateScales {
+            position: 1.5,
+            sh: 0.75,
+            shape: 1.25,
+            texture: 2.0,
+        },
         ..TrainConfig::default()
     };
     (Trainer::new(model, config), views)
@@ -119,6 +127,71 @@ fn fnv1a(data: &[u8]) -> u64 {
     h
 }
 
+/// Byte offset of the learning-rate multipliers in a version-2 checkpoint (after magic, version,
+/// length, iterations, SH degree, background, seed, extent, three regulariser settings, three
+/// mode bytes and `relocate_every`).
+const LR_SCALES_AT: usize = 8 + 4 + 8 + 8 + 4 + 12 + 8 + 4 + 12 + 3 + 8;
+
+/// `bytes` with the header's length and the checksum recomputed.
+fn resealed(mut bytes: Vec<u8>) -> Vec<u8> {
+    let len = bytes.len();
+    bytes[12..20].copy_from_slice(&(len as u64).to_le_bytes());
+    let sum = fnv1a(&bytes[..len - 8]);
+    bytes[len - 8..].copy_from_slice(&sum.to_le_bytes());
+    bytes
+}
+
+#[test]
+fn version_1_checkpoints_load_with_the_reference_learning_rates() {
+    let (mut tr, views) = setup(AdamMode::Dense, TextureMode::Full);
+    tr.step(&views).unwrap();
+    let v2 = tr.checkpoint_bytes();
+    let stored: Vec<f32> = v2[LR_SCALES_AT..LR_SCALES_AT + 16]
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+        .collect();
+    assert_eq!(
+        stored,
+        [1.5, 0.75, 1.25, 2.0],
+        "the multipliers sit where this test expects"
+    );
+    // The same state as version 1 wrote it: no multipliers.
+    let mut v1 = v2.clone();
+    v1.drain(LR_SCALES_AT..LR_SCALES_AT + 16);
+    v1[8..12].copy_from_slice(&OLDEST_VERSION.to_le_bytes());
+    let v1 = resealed(v1);
+    let path = PathBuf::from("old.ckpt");
+    let old = Trainer::from_checkpoint_bytes(&v1, &path).unwrap();
+    assert_eq!(old.config().lr_scales, LearningRateScales::REFERENCE);
+    assert_eq!(
+        *old.config(),
+        TrainConfig {
+            lr_scales: LearningRateScales::REFERENCE,
+            ..*tr.config()
+        }
+    );
+    assert_eq!(old.step_index(), tr.step_index());
+    // Everything else is the same state: written again with the original multipliers, it is
+    // the version-2 file byte for byte.
+    let mut again = old.checkpoint_bytes();
+    for (k, x) in [1.5f32, 0.75, 1.25, 2.0].iter().enumerate() {
+        again[LR_SCALES_AT + 4 * k..LR_SCALES_AT + 4 * k + 4].copy_from_slice(&x.to_le_bytes());
+    }
+    assert_eq!(resealed(again), v2);
+    // A negative or NaN multiplier is refused.
+    for bad_value in [-1.0f32, f32::NAN] {
+        let mut bad = v2.clone();
+        bad[LR_SCALES_AT + 4..LR_SCALES_AT + 8].copy_from_slice(&bad_value.to_le_bytes());
+        let err = Trainer::from_checkpoint_bytes(&resealed(bad), &path)
+            .err()
+            .expect("must fail");
+        assert!(
+            matches!(&err, CheckpointError::Inconsistent { what, .. } if what.contains("learning-rate")),
+            "{err}"
+        );
+    }
+}
+
 #[test]
 fn truncated_files_are_reported_as_truncated() {
     let bytes = small_checkpoint();
@@ -188,7 +261,7 @@ fn corrupted_files_give_typed_errors() {
 
     // A huge billboard count with a valid checksum does not allocate or panic.
     let mut bad = bytes.clone();
-    let order_len_at = 8 + 4 + 8 + 8 + 4 + 12 + 8 + 4 + 12 + 3 + 8 + 8 + 32;
+    let order_len_at = LR_SCALES_AT + 16 + 8 + 32;
     let k = u64::from_le_bytes(bad[order_len_at..order_len_at + 8].try_into().unwrap()) as usize;
     let n_at = order_len_at + 8 + 8 * k;
     bad[n_at..n_at + 8].copy_from_slice(&u64::MAX.to_le_bytes());

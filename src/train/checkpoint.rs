@@ -1,13 +1,13 @@
 //! Training checkpoints: everything needed to continue a run bit for bit.
 //!
-//! # Format (version 1)
+//! # Format (version 2)
 //!
 //! Little-endian, no padding. `T = TS²`, `n` = number of billboards.
 //!
 //! | field | type | notes |
 //! |---|---|---|
 //! | magic | 8 bytes | `BBSPLCKP` |
-//! | version | u32 | 1 |
+//! | version | u32 | 2 (version 1, without the learning-rate multipliers, is still read) |
 //! | file length | u64 | total bytes including the checksum |
 //! | iterations | u64 | [`TrainConfig::iterations`] |
 //! | sh_degree | u32 | ≤ 3 |
@@ -19,6 +19,7 @@
 //! | texture mode | u8 | 0 full, 1 Gaussian |
 //! | relocate | u8 | 0 / 1 |
 //! | relocate_every | u64 | |
+//! | learning-rate multipliers | 4 × f32 | [`super::LearningRateScales`] in field order; absent in version 1 (read as all 1) |
 //! | step | u64 | steps done |
 //! | RNG state | 4 × u64 | [`crate::rng::Rng::state`] |
 //! | order length `k`, order | u64, `k` × u64 | view indices still on the shuffled stack (popped from the end) |
@@ -44,7 +45,7 @@
 //! allocates more than the file's size.
 
 use super::adam::AdamGroup;
-use super::{AdamMode, TextureMode, TrainConfig, Trainer, adam_groups, group};
+use super::{AdamMode, LearningRateScales, TextureMode, TrainConfig, Trainer, adam_groups, group};
 use crate::model::Model;
 use crate::raster::SH_FLOATS;
 use crate::rng::Rng;
@@ -55,8 +56,12 @@ use thiserror::Error;
 
 /// File magic.
 pub const MAGIC: [u8; 8] = *b"BBSPLCKP";
-/// Format version written and read.
-pub const VERSION: u32 = 1;
+/// Format version written (and the newest read).
+pub const VERSION: u32 = 2;
+
+/// Oldest format version still read: version 1 lacks the learning-rate multipliers, read as
+/// [`super::LearningRateScales::REFERENCE`].
+pub const OLDEST_VERSION: u32 = 1;
 
 /// What went wrong reading or writing a checkpoint; every variant names the file.
 #[derive(Debug, Error)]
@@ -78,13 +83,13 @@ pub enum CheckpointError {
         path: PathBuf,
     },
     /// Written by another format version.
-    #[error("checkpoint {path}: format version {found} is not supported (this build reads version {supported})")]
+    #[error("checkpoint {path}: format version {found} is not supported (this build reads versions {oldest} to {supported})", oldest = OLDEST_VERSION)]
     UnsupportedVersion {
         /// The checkpoint path.
         path: PathBuf,
         /// Version in the file.
         found: u32,
-        /// Version this build reads.
+        /// Newest version this build reads.
         supported: u32,
     },
     /// The file ends before its stated length.
@@ -327,6 +332,7 @@ fn encode_into<S: Sink>(tr: &Trainer, len: u64, sink: &mut S) {
     });
     w.u8(c.relocate as u8);
     w.u64(c.relocate_every as u64);
+    w.f32s(&c.lr_scales.to_array());
     w.u64(tr.step as u64);
     for s in tr.rng.state() {
         w.u64(s);
@@ -382,7 +388,7 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
         });
     }
     let version = u32::from_le_bytes(data[8..12].try_into().expect("4 bytes"));
-    if version != VERSION {
+    if !(OLDEST_VERSION..=VERSION).contains(&version) {
         return Err(CheckpointError::UnsupportedVersion {
             path: p(),
             found: version,
@@ -443,6 +449,21 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
     };
     let relocate = r.flag("relocate")?;
     let relocate_every = r.u64("relocate_every")? as usize;
+    let lr_scales = if version >= 2 {
+        let what = "learning-rate multipliers";
+        let scales = LearningRateScales {
+            position: r.f32(what)?,
+            sh: r.f32(what)?,
+            shape: r.f32(what)?,
+            texture: r.f32(what)?,
+        };
+        if !scales.to_array().iter().all(|x| x.is_finite() && *x >= 0.0) {
+            return Err(r.inconsistent(format!("learning-rate multipliers {scales:?} are not finite and ≥ 0")));
+        }
+        scales
+    } else {
+        LearningRateScales::REFERENCE
+    };
     let config = TrainConfig {
         iterations,
         sh_degree,
@@ -456,6 +477,7 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
         texture_mode,
         relocate,
         relocate_every,
+        lr_scales,
     };
     let step = r.u64("step")? as usize;
     let rng = Rng::from_state([r.u64("RNG")?, r.u64("RNG")?, r.u64("RNG")?, r.u64("RNG")?]);
