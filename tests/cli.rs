@@ -397,7 +397,7 @@ fn learning_rate_flags_reach_the_trainer() {
             "1",
         ],
     ));
-    let trainer = bbsplat::train::Trainer::load_checkpoint(&root.join("run/checkpoint.bin")).unwrap();
+    let trainer = bbsplat::train::Trainer::load_checkpoint(root.join("run/checkpoint.bin")).unwrap();
     assert_eq!(
         trainer.config().lr_scales,
         bbsplat::train::LearningRateScales {
