@@ -1020,6 +1020,18 @@ fn support_quad_refuses_near_and_steep_squares() {
     );
 }
 
+/// A camera and a billboard pose (position, log-scales, quaternion) anywhere in a 16-unit cube
+/// around the origin: in front of the camera, behind it, edge-on, some culled.
+fn pose_anywhere() -> impl Strategy<Value = (Camera, Vec3, Vec2, [f32; 4])> {
+    (
+        camera(),
+        (-8.0f32..8.0, -8.0f32..8.0, -8.0f32..8.0),
+        (-3.0f32..1.0, -3.0f32..1.0),
+        bbsplat::strategies::quaternion(),
+    )
+        .prop_map(|(cam, p, s, q)| (cam, Vec3::new(p.0, p.1, p.2), Vec2::new(s.0, s.1), q))
+}
+
 proptest! {
     #![proptest_config(seeded_config(512))]
 
@@ -1027,13 +1039,7 @@ proptest! {
     /// same culling (behind the near plane, edge-on) on poses anywhere around the camera,
     /// including behind it.
     #[test]
-    fn splat_frame_matches_project_splat(
-        cam in camera(),
-        p in (-8.0f32..8.0, -8.0f32..8.0, -8.0f32..8.0),
-        s in (-3.0f32..1.0, -3.0f32..1.0),
-        q in bbsplat::strategies::quaternion(),
-    ) {
-        let (p, s) = (Vec3::new(p.0, p.1, p.2), Vec2::new(s.0, s.1));
+    fn splat_frame_matches_project_splat((cam, p, s, q) in pose_anywhere()) {
         let frame = splat_frame(p, s, q, &cam);
         let projected = project_splat(p, s, q, &cam);
         prop_assert_eq!(frame.is_some(), projected.is_some());
@@ -1055,13 +1061,9 @@ proptest! {
     /// away and some are culled) it gives `project_splat_vjp`'s bits, normal gradient included.
     #[test]
     fn visible_vjp_equals_the_full_vjp_bit_for_bit(
-        cam in camera(),
-        p in (-8.0f32..8.0, -8.0f32..8.0, -8.0f32..8.0),
-        s in (-3.0f32..1.0, -3.0f32..1.0),
-        q in bbsplat::strategies::quaternion(),
+        (cam, p, s, q) in pose_anywhere(),
         w in proptest::collection::vec(-1.0f32..1.0, 12),
     ) {
-        let (p, s) = (Vec3::new(p.0, p.1, p.2), Vec2::new(s.0, s.1));
         let (d_t, d_n) = cotangent(&cam, &w);
         if let Some(frame) = splat_frame(p, s, q, &cam) {
             let full = project_splat_vjp(p, s, q, &cam, &d_t, d_n);

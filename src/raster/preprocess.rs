@@ -71,3 +71,16 @@ pub fn preprocess_into(
         .map(|i| prepare_one(set, i, camera, settings))
         .collect_into_vec(prepared);
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The backward's two flags (`sh_clamped`, `normal_flipped`) live in what was padding:
+    /// the record every per-pixel pass reads stays 84 bytes (80 before the flags, plus the
+    /// `Option` tag, which the flags' `bool` niche now absorbs).
+    #[test]
+    fn prepared_record_stays_84_bytes() {
+        assert_eq!(size_of::<Option<Prepared>>(), 84);
+    }
+}
