@@ -70,6 +70,15 @@ fn advise_range(start: usize, len: usize) {
 #[cfg(not(target_os = "linux"))]
 fn advise_range(_start: usize, _len: usize) {}
 
+/// `v` resized to `len`, keeping the values it holds (only new slots get `value`): for
+/// recycled buffers whose every value the caller then overwrites, so that resetting them would
+/// be a wasted pass over memory.
+pub(crate) fn resize_for_overwrite<T: Clone>(v: &mut Vec<T>, len: usize, value: T) -> &mut [T] {
+    v.truncate(len);
+    v.resize(len, value);
+    v
+}
+
 /// `v` cleared and refilled with `len` copies of `value`, keeping its storage (no allocation
 /// when its capacity suffices): how the rasterizer's recycled buffers are reset.
 pub(crate) fn refill<T: Clone>(v: &mut Vec<T>, len: usize, value: T) -> &mut [T] {

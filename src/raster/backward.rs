@@ -410,7 +410,13 @@ pub fn render_backward(
     let state = &out.state;
     let bins = &state.bins;
     let n_tiles = bins.tile_count();
-    let mut records = vec![EMPTY_RECORD; bins.entries.len()];
+    // Every tile task resets its own records; this only allocates them (in parallel, as the
+    // records are several megabytes).
+    let mut records = Vec::new();
+    (0..bins.entries.len())
+        .into_par_iter()
+        .map(|_| EMPTY_RECORD)
+        .collect_into_vec(&mut records);
     let tiles: Vec<TileGrads> = split_by_lengths(&mut records, (0..n_tiles).map(|t| bins.tile_range(t).len()))
         .into_par_iter()
         .enumerate()

@@ -1,6 +1,7 @@
 //! Tile binning: which billboards each 16×16 tile must consider, in depth order.
 
 use super::TILE_SIZE;
+use super::forward::split_by_lengths;
 use super::preprocess::Prepared;
 use crate::memory::refill;
 use rayon::prelude::*;
@@ -52,13 +53,29 @@ fn total_order_key(x: f32) -> u32 {
     if bits >> 31 == 1 { !bits } else { bits | 0x8000_0000 }
 }
 
-/// Scratch of [`bin_into`]: per-tile counts and cursors and the sort keys, kept between calls
-/// so that their storage is reused.
+/// Billboards per chunk of [`bin_into`]'s parallel counting pass: at least this many, and
+/// few enough chunks that there are at most [`MAX_BIN_CHUNKS`]. The chunking depends only on the
+/// number of billboards (never on the thread count); the result does not depend on it at all,
+/// since each tile's keys are sorted afterwards.
+const MIN_BIN_CHUNK: usize = 4096;
+
+/// Upper bound on the number of chunks of [`bin_into`] (bounds the per-chunk tile counters).
+const MAX_BIN_CHUNKS: usize = 64;
+
+/// One chunk's local counting sort: its sort keys grouped by tile.
+#[derive(Clone, Debug, Default)]
+struct ChunkKeys {
+    /// Keys of tile `t` are `keys[offsets[t]..offsets[t + 1]]`, in billboard order.
+    offsets: Vec<u32>,
+    keys: Vec<u64>,
+}
+
+/// Scratch of [`bin_into`]: per-chunk keys and the billboard cursors, kept between calls so
+/// that their storage is reused.
 #[derive(Clone, Debug, Default)]
 pub struct BinScratch {
-    tile_counts: Vec<u32>,
+    chunks: Vec<ChunkKeys>,
     cursor: Vec<u32>,
-    keys: Vec<u64>,
 }
 
 /// Bins the prepared billboards of an image of `width × height` pixels.
@@ -68,47 +85,39 @@ pub fn bin(prepared: &[Option<Prepared>], width: u32, height: u32) -> TileBins {
     bins
 }
 
-/// [`bin`] into `bins`, reusing the storage of `bins` and `scratch` (every value is
-/// overwritten: the result does not depend on what they held).
-pub fn bin_into(prepared: &[Option<Prepared>], width: u32, height: u32, bins: &mut TileBins, scratch: &mut BinScratch) {
-    let tiles_x = width.div_ceil(TILE_SIZE);
-    let tiles_y = height.div_ceil(TILE_SIZE);
-    let n_tiles = (tiles_x * tiles_y) as usize;
-    bins.tiles_x = tiles_x;
-    bins.tiles_y = tiles_y;
-    // Count entries per tile and per billboard.
-    let tile_counts = refill(&mut scratch.tile_counts, n_tiles + 1, 0);
-    let billboard_offsets = refill(&mut bins.billboard_offsets, prepared.len() + 1, 0);
-    for (b, p) in prepared.iter().enumerate() {
+/// Counts and groups by tile the sort keys (depth in total order, then index) of the
+/// billboards `first..` of `prepared`, reading each record once and in sequence; writes each
+/// billboard's entry count to `entry_counts`.
+fn chunk_keys(
+    prepared: &[Option<Prepared>],
+    first: usize,
+    tiles_x: u32,
+    n_tiles: usize,
+    chunk: &mut ChunkKeys,
+    entry_counts: &mut [u32],
+) {
+    let offsets = refill(&mut chunk.offsets, n_tiles + 1, 0);
+    for (p, count) in prepared.iter().zip(entry_counts.iter_mut()) {
+        *count = 0;
         if let Some(p) = p {
             let (lo, hi) = tile_rect(p);
             for ty in lo[1]..=hi[1] {
                 for tx in lo[0]..=hi[0] {
-                    tile_counts[(ty * tiles_x + tx) as usize] += 1;
+                    offsets[(ty * tiles_x + tx) as usize + 1] += 1;
                 }
             }
-            billboard_offsets[b + 1] = (hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1);
+            *count = (hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1);
         }
     }
-    let tile_offsets = refill(&mut bins.tile_offsets, n_tiles + 1, 0);
     for t in 0..n_tiles {
-        tile_offsets[t + 1] = tile_offsets[t] + tile_counts[t];
+        offsets[t + 1] += offsets[t];
     }
-    for b in 0..prepared.len() {
-        billboard_offsets[b + 1] += billboard_offsets[b];
-    }
-    let total = tile_offsets[n_tiles] as usize;
-    // Scatter the sort keys (depth in total order, then index) in billboard order, reading each
-    // prepared record once and in sequence; sorting each tile's (depth, index) keys gives
-    // exactly the stable depth order of an index-ordered scatter. Comparing integers gathered
-    // here, rather than loading scattered records inside the sort, keeps the sort in cache.
-    let keys = refill(&mut scratch.keys, total, 0);
-    scratch.cursor.clear();
-    scratch.cursor.extend_from_slice(&tile_offsets[..n_tiles]);
-    let cursor = &mut scratch.cursor;
-    for (b, p) in prepared.iter().enumerate() {
+    let keys = refill(&mut chunk.keys, offsets[n_tiles] as usize, 0);
+    // Cursors: each tile's start, advanced as its keys arrive (the counts are rebuilt below).
+    let mut cursor = offsets[..n_tiles].to_vec();
+    for (k, p) in prepared.iter().enumerate() {
         if let Some(p) = p {
-            let key = (u64::from(total_order_key(p.depth)) << 32) | b as u64;
+            let key = (u64::from(total_order_key(p.depth)) << 32) | (first + k) as u64;
             let (lo, hi) = tile_rect(p);
             for ty in lo[1]..=hi[1] {
                 for tx in lo[0]..=hi[0] {
@@ -119,21 +128,72 @@ pub fn bin_into(prepared: &[Option<Prepared>], width: u32, height: u32, bins: &m
             }
         }
     }
-    let mut slices: Vec<&mut [u64]> = Vec::with_capacity(n_tiles);
-    let mut rest = &mut keys[..];
-    for &count in &tile_counts[..n_tiles] {
-        let (head, tail) = rest.split_at_mut(count as usize);
-        slices.push(head);
-        rest = tail;
+}
+
+/// [`bin`] into `bins`, reusing the storage of `bins` and `scratch` (every value is
+/// overwritten: the result does not depend on what they held).
+///
+/// Parallel in two passes, the result independent of the thread count: chunks of billboards
+/// each group their sort keys by tile (a local counting sort, records read in sequence), then
+/// each tile gathers its keys from the chunks and sorts them. Sorting `(depth, index)` keys gives
+/// exactly the stable depth order of an index-ordered scatter, whatever order they arrive in;
+/// comparing integers gathered here, rather than loading scattered records inside the sort,
+/// keeps the sort in cache.
+pub fn bin_into(prepared: &[Option<Prepared>], width: u32, height: u32, bins: &mut TileBins, scratch: &mut BinScratch) {
+    let tiles_x = width.div_ceil(TILE_SIZE);
+    let tiles_y = height.div_ceil(TILE_SIZE);
+    let n_tiles = (tiles_x * tiles_y) as usize;
+    bins.tiles_x = tiles_x;
+    bins.tiles_y = tiles_y;
+    let n = prepared.len();
+    let chunk_len = MIN_BIN_CHUNK.max(n.div_ceil(MAX_BIN_CHUNKS));
+    let n_chunks = n.div_ceil(chunk_len);
+    scratch.chunks.resize_with(n_chunks, ChunkKeys::default);
+    let chunks = &mut scratch.chunks[..n_chunks];
+    // Billboard `b`'s entry count goes to `billboard_offsets[b + 1]`, then a prefix sum.
+    let billboard_offsets = refill(&mut bins.billboard_offsets, n + 1, 0);
+    prepared
+        .par_chunks(chunk_len)
+        .zip(billboard_offsets[1..].par_chunks_mut(chunk_len))
+        .zip(chunks.par_iter_mut())
+        .enumerate()
+        .for_each(|(c, ((records, counts), chunk))| {
+            chunk_keys(records, c * chunk_len, tiles_x, n_tiles, chunk, counts)
+        });
+    for b in 0..n {
+        billboard_offsets[b + 1] += billboard_offsets[b];
     }
-    slices.into_par_iter().for_each(|s| s.sort_unstable());
-    bins.entries.clear();
-    bins.entries.extend(keys.iter().map(|&k| k as u32));
+    let chunks = &scratch.chunks[..n_chunks];
+    let tile_offsets = refill(&mut bins.tile_offsets, n_tiles + 1, 0);
+    for t in 0..n_tiles {
+        let count: u32 = chunks.iter().map(|ch| ch.offsets[t + 1] - ch.offsets[t]).sum();
+        tile_offsets[t + 1] = tile_offsets[t] + count;
+    }
+    let total = tile_offsets[n_tiles] as usize;
+    // Each tile: its keys from every chunk, sorted, then the billboard indices.
+    refill(&mut bins.entries, total, 0);
+    let tile_offsets = &bins.tile_offsets;
+    split_by_lengths(
+        &mut bins.entries,
+        (0..n_tiles).map(|t| (tile_offsets[t + 1] - tile_offsets[t]) as usize),
+    )
+    .into_par_iter()
+    .enumerate()
+    .for_each_init(Vec::new, |keys: &mut Vec<u64>, (t, entries)| {
+        keys.clear();
+        for ch in chunks {
+            keys.extend_from_slice(&ch.keys[ch.offsets[t] as usize..ch.offsets[t + 1] as usize]);
+        }
+        keys.sort_unstable();
+        for (e, &k) in entries.iter_mut().zip(keys.iter()) {
+            *e = k as u32;
+        }
+    });
     // Billboard-major index, each billboard's entries in tile order.
     let billboard_entries = refill(&mut bins.billboard_entries, total, 0);
     let bcursor = &mut scratch.cursor;
     bcursor.clear();
-    bcursor.extend_from_slice(&billboard_offsets[..prepared.len()]);
+    bcursor.extend_from_slice(&bins.billboard_offsets[..n]);
     for (e, &b) in bins.entries.iter().enumerate() {
         billboard_entries[bcursor[b as usize] as usize] = e as u32;
         bcursor[b as usize] += 1;
@@ -142,7 +202,97 @@ pub fn bin_into(prepared: &[Option<Prepared>], width: u32, height: u32, bins: &m
 
 #[cfg(test)]
 mod tests {
-    use super::total_order_key;
+    use super::*;
+    use crate::stages::splat_transform::SplatTransform;
+    use glam::Vec3;
+
+    /// Plain reference of [`bin`]: every tile scans every billboard in index order, then sorts
+    /// its list by (depth in total order, index); the billboard-major index walks the tiles in
+    /// order.
+    fn bin_reference(prepared: &[Option<Prepared>], width: u32, height: u32) -> TileBins {
+        let (tiles_x, tiles_y) = (width.div_ceil(TILE_SIZE), height.div_ceil(TILE_SIZE));
+        let mut bins = TileBins {
+            tiles_x,
+            tiles_y,
+            tile_offsets: vec![0],
+            ..TileBins::default()
+        };
+        let mut per_billboard: Vec<Vec<u32>> = vec![Vec::new(); prepared.len()];
+        for ty in 0..tiles_y {
+            for tx in 0..tiles_x {
+                let mut list: Vec<u32> = (0..prepared.len() as u32)
+                    .filter(|&b| {
+                        prepared[b as usize].as_ref().is_some_and(|p| {
+                            let (lo, hi) = tile_rect(p);
+                            (lo[0]..=hi[0]).contains(&tx) && (lo[1]..=hi[1]).contains(&ty)
+                        })
+                    })
+                    .collect();
+                let depth = |b: u32| prepared[b as usize].as_ref().map_or(0.0, |p| p.depth);
+                list.sort_by(|&a, &b| depth(a).total_cmp(&depth(b)).then(a.cmp(&b)));
+                for &b in &list {
+                    per_billboard[b as usize].push(bins.entries.len() as u32);
+                    bins.entries.push(b);
+                }
+                bins.tile_offsets.push(bins.entries.len() as u32);
+            }
+        }
+        bins.billboard_offsets.push(0);
+        for e in per_billboard {
+            bins.billboard_entries.extend(e);
+            bins.billboard_offsets.push(bins.billboard_entries.len() as u32);
+        }
+        bins
+    }
+
+    /// The parallel chunked binning equals the reference on scenes of one and of several
+    /// chunks (more than [`MIN_BIN_CHUNK`] billboards), with culled records, depth ties and
+    /// boxes spanning many tiles, and reused scratch gives the same result.
+    #[test]
+    fn bin_matches_the_plain_reference() {
+        let mut state = 0x9e3779b97f4a7c15u64;
+        let mut next = |m: u32| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state % u64::from(m)) as u32
+        };
+        let (mut bins, mut scratch) = (TileBins::default(), BinScratch::default());
+        for &(n, width, height) in &[
+            (0usize, 20u32, 20u32),
+            (37, 33, 17),
+            (2 * MIN_BIN_CHUNK + 123, 100, 70),
+            (300, 256, 256),
+        ] {
+            let prepared: Vec<Option<Prepared>> = (0..n)
+                .map(|_| {
+                    (next(5) != 0).then(|| {
+                        let (x0, y0) = (next(width), next(height));
+                        let (x1, y1) = ((x0 + next(40)).min(width - 1), (y0 + next(40)).min(height - 1));
+                        Prepared {
+                            transform: SplatTransform {
+                                tu: Vec3::X,
+                                tv: Vec3::Y,
+                                tw: Vec3::Z,
+                            },
+                            normal: Vec3::Z,
+                            // Few distinct depths: many ties, broken by index.
+                            depth: 2.0 + next(8) as f32 * 0.25,
+                            rgb: Vec3::ZERO,
+                            sh_clamped: [false; 3],
+                            normal_flipped: false,
+                            pixel_min: [x0, y0],
+                            pixel_max: [x1, y1],
+                        }
+                    })
+                })
+                .collect();
+            let want = bin_reference(&prepared, width, height);
+            assert_eq!(bin(&prepared, width, height), want, "{n} billboards, {width}×{height}");
+            bin_into(&prepared, width, height, &mut bins, &mut scratch);
+            assert_eq!(bins, want, "{n} billboards, {width}×{height}, recycled storage");
+        }
+    }
 
     #[test]
     fn total_order_key_sorts_like_total_cmp() {

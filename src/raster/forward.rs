@@ -4,7 +4,7 @@ use super::binning::{BinScratch, TileBins, bin_into};
 use super::preprocess::{Prepared, preprocess_into};
 use super::{BillboardSet, RenderSettings, TILE_SIZE};
 use crate::camera::Camera;
-use crate::memory::refill;
+use crate::memory::{refill, resize_for_overwrite};
 use crate::stages::bilinear::{self, BilinearTaps};
 use crate::stages::ray_plane::intersect;
 use crate::stages::splat_transform::{pixel_range, support_quad};
@@ -597,8 +597,9 @@ pub fn render_with(
         blended_count += slots.len() as u32;
     }
     // Blended slots and per-pixel offsets, tile by tile in parallel (disjoint ranges).
-    refill(&mut blended_slots, blended_count as usize, 0);
-    refill(&mut blended_offsets, n_pix + 1, 0);
+    // Both are written in full below (the tiles cover the image): not reset first.
+    resize_for_overwrite(&mut blended_slots, blended_count as usize, 0);
+    resize_for_overwrite(&mut blended_offsets, n_pix + 1, 0)[0] = 0;
     let slot_chunks = split_by_lengths(&mut blended_slots, tiles.iter().map(|(_, s)| s.len()));
     let offset_chunks = split_by_lengths(&mut blended_offsets[1..], tiles.iter().map(|(p, _)| p.len()));
     let evaluated_pairs: u64 = slot_chunks
@@ -616,7 +617,8 @@ pub fn render_with(
             pixels.iter().map(|px| u64::from(px.evaluated)).sum::<u64>()
         })
         .sum();
-    // Images, one band of tile rows per task; every pixel is written.
+    // Images, one band of tile rows per task; every pixel is written (the tiles cover the
+    // image), so recycled storage is not reset first.
     let band = TILE_SIZE as usize * w as usize;
     for (image, channels) in [
         (&mut rgb, 3),
@@ -626,7 +628,7 @@ pub fn render_with(
         (&mut normal, 3),
         (&mut final_transmittance, 1),
     ] {
-        refill(image, n_pix * channels, 0.0);
+        resize_for_overwrite(image, n_pix * channels, 0.0);
     }
     (
         rgb.par_chunks_mut(3 * band),
@@ -656,17 +658,22 @@ pub fn render_with(
             }
         });
     // Per-billboard impact: entries summed in tile order (fixed, thread-independent).
-    refill(&mut impact, set.len(), 0.0);
+    resize_for_overwrite(&mut impact, set.len(), 0.0);
+    resize_for_overwrite(&mut visible, set.len(), false);
     let entry_impact = &spare.entry_impact;
-    impact.par_iter_mut().enumerate().for_each(|(b, imp)| {
-        let r = bins.billboard_offsets[b] as usize..bins.billboard_offsets[b + 1] as usize;
-        *imp = bins.billboard_entries[r]
-            .iter()
-            .map(|&e| entry_impact[e as usize])
-            .sum();
-    });
-    visible.clear();
-    visible.extend(prepared.iter().map(Option::is_some));
+    impact
+        .par_iter_mut()
+        .zip(visible.par_iter_mut())
+        .zip(prepared.par_iter())
+        .enumerate()
+        .for_each(|(b, ((imp, vis), p))| {
+            let r = bins.billboard_offsets[b] as usize..bins.billboard_offsets[b + 1] as usize;
+            *imp = bins.billboard_entries[r]
+                .iter()
+                .map(|&e| entry_impact[e as usize])
+                .sum();
+            *vis = p.is_some();
+        });
     RenderOutput {
         width: w,
         height: h,
