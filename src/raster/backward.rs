@@ -13,7 +13,9 @@
 //! the touched cells, and handed on sparse per entry (only the texels some pixel of the tile
 //! touched); see `TexelSums`.
 
-use super::forward::{RenderOutput, TileCandidates, prefetch, prefetch_ref, split_by_lengths, tile_pixels};
+use super::forward::{
+    RenderOutput, TileCandidates, prefetch, prefetch_record, prefetch_ref, split_by_lengths, tile_pixels,
+};
 use super::preprocess::Prepared;
 use super::{BillboardSet, SH_FLOATS};
 use crate::stages::bilinear::BilinearTaps;
@@ -292,6 +294,14 @@ fn backward_tile(
     let tw = (i1 - i0) as usize;
     let n_q = tw * (j1 - j0) as usize;
     let blended_of = |q: usize| state.blended_of(tile, q);
+    // The prepared records of the tile's blended entries are scattered over the whole array and
+    // were last read by whichever thread ran this tile's forward: request them all up front so
+    // that their cache misses overlap instead of stalling the candidate loop one by one.
+    let rank = state.tile_pixel_base[tile] as usize;
+    let tile_slots = state.blended_offsets[rank] as usize..state.blended_offsets[rank + n_q] as usize;
+    for &slot in &state.blended_slots[tile_slots] {
+        prefetch_record(&prepared[list[slot as usize] as usize]);
+    }
     let mut first = 0;
     while first < n_q {
         // Hits and taps of the blended entries of a run of pixels, their texels prefetched.
