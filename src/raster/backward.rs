@@ -473,8 +473,10 @@ pub fn render_backward(
                 }
                 if lb + 8 < len {
                     for rec in entry_records(b0 + lb + 8) {
-                        if let Some(first) = texels_of(rec).first() {
+                        let tex = texels_of(rec);
+                        if let (Some(first), Some(last)) = (tex.first(), tex.last()) {
                             prefetch_ref(first);
+                            prefetch_ref(last);
                         }
                     }
                 }
