@@ -10,7 +10,7 @@
 use bbsplat::rng::Rng;
 use bbsplat::stages::bilinear::{self, taps};
 use bbsplat::stages::composite::{Blend, CompositeBackState, CompositeParams, CompositeState, Step};
-use bbsplat::stages::sh::{SH_FLOATS, sh_colour, sh_colour_vjp};
+use bbsplat::stages::sh::{SH_FLOATS, sh_colour, sh_colour_batch, sh_colour_vjp};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use glam::Vec3;
 use std::hint::black_box;
@@ -191,6 +191,14 @@ fn bench_sh(c: &mut Criterion) {
             b.iter(|| {
                 i = (i + 1) % RING;
                 black_box(sh_colour(black_box(degree), &coeffs, pos[i], centre))
+            })
+        });
+        // Four colours per iteration, interleaved (divide by 4 for the time per colour).
+        g.bench_function(format!("eval_x4_deg{degree}"), |b| {
+            b.iter(|| {
+                i = (i + 4) % (RING - 4);
+                let p = [pos[i], pos[i + 1], pos[i + 2], pos[i + 3]];
+                black_box(sh_colour_batch(black_box(degree), [&coeffs[..]; 4], p, centre))
             })
         });
         g.bench_function(format!("vjp_deg{degree}"), |b| {

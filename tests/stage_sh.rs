@@ -10,8 +10,8 @@
 
 use bbsplat::gradcheck::{GradReport, GradTolerance, StepRule, check_vjp, compare, numerical_gradient, random_weights};
 use bbsplat::stages::sh::{
-    self, SH_C0, SH_FLOATS, SH_MIN_DISTANCE, rgb_to_sh, sh_basis, sh_coeff_count, sh_colour, sh_colour_vjp,
-    sh_colour_vjp_clamped, sh_to_rgb,
+    self, SH_C0, SH_FLOATS, SH_MIN_DISTANCE, rgb_to_sh, sh_basis, sh_coeff_count, sh_colour, sh_colour_batch,
+    sh_colour_vjp, sh_colour_vjp_clamped, sh_to_rgb,
 };
 use bbsplat::strategies;
 use glam::{DVec3, Vec3};
@@ -653,6 +653,30 @@ fn measure_tolerances() {
 
 proptest! {
     #![proptest_config(strategies::seeded_config(512))]
+
+    /// The interleaved batch of four colours equals four separate calls bit for bit, including
+    /// lanes at the camera (degenerate direction: fewer coefficients, the per-lane fallback),
+    /// clamped channels and directions 1e4 away.
+    #[test]
+    fn batched_colours_equal_single_colours_bit_for_bit(
+        degree in 0u32..=3,
+        lanes in proptest::array::uniform4((
+            proptest::collection::vec(-4.0f32..1.0, 3),
+            proptest::collection::vec(-0.5f32..0.5, SH_FLOATS - 3),
+            strategies::direction(),
+            prop_oneof![1 => Just(0.0f32), 1 => 0.0f32..1e-3, 6 => 0.1f32..1e4],
+        )),
+    ) {
+        let centre = Vec3::new(0.5, -1.0, 2.0);
+        let coeffs: Vec<Vec<f32>> = lanes.iter().map(|(dc, rest, _, _)| dc.iter().chain(rest).copied().collect()).collect();
+        let positions: [Vec3; 4] = std::array::from_fn(|l| centre + lanes[l].2 * lanes[l].3);
+        let batch = sh_colour_batch(degree, std::array::from_fn(|l| coeffs[l].as_slice()), positions, centre);
+        for l in 0..4 {
+            let single = sh_colour(degree, &coeffs[l], positions[l], centre);
+            prop_assert_eq!(batch[l].rgb.to_array().map(f32::to_bits), single.rgb.to_array().map(f32::to_bits), "lane {}", l);
+            prop_assert_eq!(batch[l].clamped, single.clamped, "lane {}", l);
+        }
+    }
 
     /// The rasterizer's backward passes the clamp flags its forward kept to
     /// `sh_colour_vjp_clamped`: it must give `sh_colour_vjp`'s bits for every degree, with

@@ -263,12 +263,70 @@ pub fn sh_colour(degree: u32, coeffs: &[f32], position: Vec3, camera_centre: Vec
     let mut basis = [0.0; 16];
     let view = basis_for(degree, position, camera_centre, &mut basis);
     let n = if view.is_some() { sh_coeff_count(degree) } else { 1 };
-    let raw = raw_colour(n, coeffs, &basis);
-    let clamped = raw.map(|r| r < 0.0);
+    clamp_colour(raw_colour(n, coeffs, &basis))
+}
+
+/// `max(raw, 0)` per channel, with the clamp flags.
+#[inline]
+fn clamp_colour(raw: [f32; 3]) -> ShColour {
     ShColour {
         rgb: Vec3::from_array(raw.map(|r| if r < 0.0 { 0.0 } else { r })),
-        clamped,
+        clamped: raw.map(|r| r < 0.0),
     }
+}
+
+/// [`sh_colour`] of `L` primitives at once (`coeffs[l]` at `positions[l]`), bit for bit the same
+/// values as `L` separate calls (tested).
+///
+/// Each channel's sum over the coefficients is a chain of dependent additions; a single call
+/// waits on three such chains. Here the `L` primitives' chains are interleaved, coefficient by
+/// coefficient, so the processor works on `3·L` independent chains at once. Every primitive's
+/// own arithmetic, and so its result, is exactly that of [`sh_colour`]. When the primitives do
+/// not all use the same number of coefficients (a degenerate view direction falls back to
+/// degree 0), it is `L` separate calls.
+///
+/// # Panics
+/// If `degree > 3` or a coefficient slice is too short.
+///
+/// ```
+/// use bbsplat::stages::sh::{sh_colour, sh_colour_batch, SH_FLOATS};
+/// use glam::Vec3;
+/// let a: Vec<f32> = (0..SH_FLOATS).map(|k| (k as f32 * 0.37).sin()).collect();
+/// let b: Vec<f32> = (0..SH_FLOATS).map(|k| (k as f32 * 0.11).cos()).collect();
+/// let (pa, pb, eye) = (Vec3::new(1.0, 2.0, 3.0), Vec3::new(-1.0, 0.5, 2.0), Vec3::ZERO);
+/// let both = sh_colour_batch(3, [&a, &b], [pa, pb], eye);
+/// assert_eq!(both, [sh_colour(3, &a, pa, eye), sh_colour(3, &b, pb, eye)]);
+/// ```
+pub fn sh_colour_batch<const L: usize>(
+    degree: u32,
+    coeffs: [&[f32]; L],
+    positions: [Vec3; L],
+    camera_centre: Vec3,
+) -> [ShColour; L] {
+    let mut basis = [[0.0f32; 16]; L];
+    let mut counts = [1usize; L];
+    for l in 0..L {
+        let view = basis_for(degree, positions[l], camera_centre, &mut basis[l]);
+        counts[l] = if view.is_some() { sh_coeff_count(degree) } else { 1 };
+    }
+    let n = counts[0];
+    if counts.iter().any(|&m| m != n) {
+        return std::array::from_fn(|l| clamp_colour(raw_colour(counts[l], coeffs[l], &basis[l])));
+    }
+    for c in &coeffs {
+        assert!(c.len() >= 3 * n, "need 3·(degree + 1)² coefficients");
+    }
+    let mut raw = [[0.5f32; 3]; L];
+    for k in 0..n {
+        for l in 0..L {
+            let c = &coeffs[l][3 * k..3 * k + 3];
+            let b = basis[l][k];
+            raw[l][0] += b * c[0];
+            raw[l][1] += b * c[1];
+            raw[l][2] += b * c[2];
+        }
+    }
+    raw.map(clamp_colour)
 }
 
 /// Vector-Jacobian product of [`sh_colour`] for `d_rgb = ∂L/∂rgb`: **adds** `∂L/∂coeffs` into
