@@ -68,6 +68,8 @@ struct ChunkKeys {
     /// Keys of tile `t` are `keys[offsets[t]..offsets[t + 1]]`, in billboard order.
     offsets: Vec<u32>,
     keys: Vec<u64>,
+    /// Per-tile write cursors of the scatter.
+    cursor: Vec<u32>,
 }
 
 /// Scratch of [`bin_into`]: per-chunk keys and the billboard cursors, kept between calls so
@@ -113,8 +115,10 @@ fn chunk_keys(
         offsets[t + 1] += offsets[t];
     }
     let keys = refill(&mut chunk.keys, offsets[n_tiles] as usize, 0);
-    // Cursors: each tile's start, advanced as its keys arrive (the counts are rebuilt below).
-    let mut cursor = offsets[..n_tiles].to_vec();
+    // Cursors: each tile's start, advanced as its keys arrive.
+    let cursor = &mut chunk.cursor;
+    cursor.clear();
+    cursor.extend_from_slice(&offsets[..n_tiles]);
     for (k, p) in prepared.iter().enumerate() {
         if let Some(p) = p {
             let key = (u64::from(total_order_key(p.depth)) << 32) | (first + k) as u64;
@@ -250,13 +254,8 @@ mod tests {
     /// boxes spanning many tiles, and reused scratch gives the same result.
     #[test]
     fn bin_matches_the_plain_reference() {
-        let mut state = 0x9e3779b97f4a7c15u64;
-        let mut next = |m: u32| {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state % u64::from(m)) as u32
-        };
+        let mut rng = crate::rng::Rng::new(0x9e37_79b9);
+        let mut next = |m: u32| rng.below(u64::from(m)) as u32;
         let (mut bins, mut scratch) = (TileBins::default(), BinScratch::default());
         for &(n, width, height) in &[
             (0usize, 20u32, 20u32),
