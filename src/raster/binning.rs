@@ -3,7 +3,7 @@
 use super::TILE_SIZE;
 use super::forward::split_by_lengths;
 use super::preprocess::Prepared;
-use crate::memory::refill;
+use crate::memory::{refill, resize_for_overwrite};
 use rayon::prelude::*;
 
 /// Per-tile lists of billboards and the billboard-major index of the same entries.
@@ -114,7 +114,8 @@ fn chunk_keys(
     for t in 0..n_tiles {
         offsets[t + 1] += offsets[t];
     }
-    let keys = refill(&mut chunk.keys, offsets[n_tiles] as usize, 0);
+    // Every key slot is written by the scatter below: no reset.
+    let keys = resize_for_overwrite(&mut chunk.keys, offsets[n_tiles] as usize, 0);
     // Cursors: each tile's start, advanced as its keys arrive.
     let cursor = &mut chunk.cursor;
     cursor.clear();
@@ -174,8 +175,9 @@ pub fn bin_into(prepared: &[Option<Prepared>], width: u32, height: u32, bins: &m
         tile_offsets[t + 1] = tile_offsets[t] + count;
     }
     let total = tile_offsets[n_tiles] as usize;
-    // Each tile: its keys from every chunk, sorted, then the billboard indices.
-    refill(&mut bins.entries, total, 0);
+    // Each tile: its keys from every chunk, sorted, then the billboard indices (every entry is
+    // written: no reset).
+    resize_for_overwrite(&mut bins.entries, total, 0);
     let tile_offsets = &bins.tile_offsets;
     split_by_lengths(
         &mut bins.entries,
@@ -193,8 +195,8 @@ pub fn bin_into(prepared: &[Option<Prepared>], width: u32, height: u32, bins: &m
             *e = k as u32;
         }
     });
-    // Billboard-major index, each billboard's entries in tile order.
-    let billboard_entries = refill(&mut bins.billboard_entries, total, 0);
+    // Billboard-major index, each billboard's entries in tile order (every slot is written).
+    let billboard_entries = resize_for_overwrite(&mut bins.billboard_entries, total, 0);
     let bcursor = &mut scratch.cursor;
     bcursor.clear();
     bcursor.extend_from_slice(&bins.billboard_offsets[..n]);

@@ -84,7 +84,8 @@ pub fn preprocess(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSett
 ///
 /// Each task takes [`PREPROCESS_CHUNK`] billboards: first their geometry, then the SH colours
 /// of those that survived, [`SH_BATCH`] at a time ([`sh_colour_batch`], whose interleaved
-/// dependency chains run about twice as fast as one colour after another). Every record equals
+/// dependency chains take 21.8 ns a colour against 36.5 ns one at a time, `cargo bench --bench
+/// appearance -- eval`). Every record equals
 /// [`prepare_one`]'s bit for bit (tested).
 pub fn preprocess_into(
     set: &BillboardSet<'_>,

@@ -296,6 +296,7 @@ fn clamp_colour(raw: [f32; 3]) -> ShColour {
 /// let (pa, pb, eye) = (Vec3::new(1.0, 2.0, 3.0), Vec3::new(-1.0, 0.5, 2.0), Vec3::ZERO);
 /// let both = sh_colour_batch(3, [&a, &b], [pa, pb], eye);
 /// assert_eq!(both, [sh_colour(3, &a, pa, eye), sh_colour(3, &b, pb, eye)]);
+/// assert_eq!(sh_colour_batch::<0>(3, [], [], eye), []); // an empty batch is fine
 /// ```
 pub fn sh_colour_batch<const L: usize>(
     degree: u32,
@@ -309,7 +310,8 @@ pub fn sh_colour_batch<const L: usize>(
         let view = basis_for(degree, positions[l], camera_centre, &mut basis[l]);
         counts[l] = if view.is_some() { sh_coeff_count(degree) } else { 1 };
     }
-    let n = counts[0];
+    // (`L = 0`: nothing to evaluate; the loops below are empty.)
+    let n = counts.first().copied().unwrap_or(1);
     if counts.iter().any(|&m| m != n) {
         return std::array::from_fn(|l| clamp_colour(raw_colour(counts[l], coeffs[l], &basis[l])));
     }
