@@ -9,4 +9,6 @@ pub mod composite;
 pub mod ray_plane;
 pub mod rotation;
 pub mod sh;
+#[cfg(target_arch = "x86_64")]
+mod sh_sse;
 pub mod splat_transform;

@@ -315,19 +315,10 @@ pub fn sh_colour_batch<const L: usize>(
     if counts.iter().any(|&m| m != n) {
         return std::array::from_fn(|l| clamp_colour(raw_colour(counts[l], coeffs[l], &basis[l])));
     }
-    for c in &coeffs {
-        assert!(c.len() >= 3 * n, "need 3·(degree + 1)² coefficients");
-    }
-    let mut raw = [[0.5f32; 3]; L];
-    for k in 0..n {
-        for l in 0..L {
-            let c = &coeffs[l][3 * k..3 * k + 3];
-            let b = basis[l][k];
-            raw[l][0] += b * c[0];
-            raw[l][1] += b * c[1];
-            raw[l][2] += b * c[2];
-        }
-    }
+    #[cfg(target_arch = "x86_64")]
+    let raw = super::sh_sse::raw_colours(n, coeffs, &basis);
+    #[cfg(not(target_arch = "x86_64"))]
+    let raw = raw_colours_scalar(n, coeffs, &basis);
     raw.map(clamp_colour)
 }
 
@@ -396,6 +387,67 @@ pub fn sh_colour_vjp_clamped(
     colour_vjp(degree, coeffs, &basis, view, clamped, d_rgb, d_coeffs)
 }
 
+/// The coefficient part of [`colour_vjp`] for the first `n` basis functions: adds `Yₖ·g_c` to
+/// `d_coeffs[3k + c]` and sets `d_basis[k] = (g₀·coeffs[3k] + g₁·coeffs[3k + 1]) +
+/// g₂·coeffs[3k + 2]` for `k < n`. On x86-64 the SSE kernel of `sh_sse` (bit-identical to
+/// [`coefficient_pass_scalar`], tested), elsewhere the scalar reference.
+#[inline]
+fn coefficient_pass(
+    n: usize,
+    coeffs: &[f32],
+    basis: &[f32; 16],
+    g: [f32; 3],
+    d_coeffs: &mut [f32],
+    d_basis: &mut [f32; 16],
+) {
+    #[cfg(target_arch = "x86_64")]
+    super::sh_sse::coefficient_pass(n, coeffs, basis, g, d_coeffs, d_basis);
+    #[cfg(not(target_arch = "x86_64"))]
+    coefficient_pass_scalar(n, coeffs, basis, g, d_coeffs, d_basis);
+}
+
+/// The plain scalar reference of the batched raw colours (`sh_sse::raw_colours` on x86-64): per
+/// primitive and channel `0.5 + Σₖ basis[k]·coeffs[3k + c]`, in increasing `k`, the primitives'
+/// sums advancing together.
+#[cfg_attr(target_arch = "x86_64", allow(dead_code))]
+fn raw_colours_scalar<const L: usize>(n: usize, coeffs: [&[f32]; L], basis: &[[f32; 16]; L]) -> [[f32; 3]; L] {
+    for c in &coeffs {
+        assert!(c.len() >= 3 * n, "need 3·(degree + 1)² coefficients");
+    }
+    let mut raw = [[0.5f32; 3]; L];
+    for k in 0..n {
+        for l in 0..L {
+            let c = &coeffs[l][3 * k..3 * k + 3];
+            let b = basis[l][k];
+            raw[l][0] += b * c[0];
+            raw[l][1] += b * c[1];
+            raw[l][2] += b * c[2];
+        }
+    }
+    raw
+}
+
+/// The plain scalar reference of [`coefficient_pass`].
+#[cfg_attr(target_arch = "x86_64", allow(dead_code))]
+fn coefficient_pass_scalar(
+    n: usize,
+    coeffs: &[f32],
+    basis: &[f32; 16],
+    g: [f32; 3],
+    d_coeffs: &mut [f32],
+    d_basis: &mut [f32; 16],
+) {
+    let rows = coeffs[..3 * n]
+        .chunks_exact(3)
+        .zip(d_coeffs[..3 * n].chunks_exact_mut(3));
+    for (((c, d), &b), db) in rows.zip(&basis[..n]).zip(&mut d_basis[..n]) {
+        d[0] += b * g[0];
+        d[1] += b * g[1];
+        d[2] += b * g[2];
+        *db = g[0] * c[0] + g[1] * c[1] + g[2] * c[2];
+    }
+}
+
 /// The chain of [`sh_colour_vjp`] after the basis and the clamp flags are known.
 #[inline]
 fn colour_vjp(
@@ -414,15 +466,7 @@ fn colour_vjp(
     // One pass over the coefficients: `∂L/∂coeffs[3k + c] += Yₖ·g_c` and
     // `∂L/∂Yₖ = Σ_c g_c·coeffs[3k + c]`.
     let mut d_basis = [0.0f32; 16];
-    let rows = coeffs[..3 * n]
-        .chunks_exact(3)
-        .zip(d_coeffs[..3 * n].chunks_exact_mut(3));
-    for (((c, d), &b), db) in rows.zip(&basis[..n]).zip(&mut d_basis[..n]) {
-        d[0] += b * g[0];
-        d[1] += b * g[1];
-        d[2] += b * g[2];
-        *db = g[0] * c[0] + g[1] * c[1] + g[2] * c[2];
-    }
+    coefficient_pass(n, coeffs, basis, g, d_coeffs, &mut d_basis);
     let Some((dir, len)) = view else {
         return Vec3::ZERO;
     };
@@ -432,4 +476,97 @@ fn colour_vjp(
     let d_dir = sh_basis_vjp(degree, dir, &d_basis);
     // dir = d/|d|: ∂dir/∂d = (I − dir dirᵀ)/|d|.
     (d_dir - dir * dir.dot(d_dir)) / len
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+
+    /// A float drawn to exercise rounding and the special values: mostly ordinary magnitudes of
+    /// both signs, sometimes ±0, a subnormal, a huge value, ±∞ or a NaN with a payload.
+    fn any_float(rng: &mut Rng) -> f32 {
+        match rng.below(24) {
+            0 => -0.0,
+            1 => 0.0,
+            2 => f32::from_bits(0x0000_0123 | (rng.below(2) as u32) << 31),
+            3 => 3.0e38 * if rng.below(2) == 0 { 1.0 } else { -1.0 },
+            4 => f32::INFINITY,
+            5 => f32::NEG_INFINITY,
+            6 => f32::from_bits(0x7fc0_0000 | rng.below(1 << 22) as u32 | (rng.below(2) as u32) << 31),
+            _ => rng.range(-3.0, 3.0) * 10f32.powi(rng.below(7) as i32 - 3),
+        }
+    }
+
+    /// The bits of each float, every NaN mapped to one value: Rust leaves the payload of a NaN
+    /// result unspecified (the compiler may swap the operands of a commutative operation), so
+    /// only "is NaN" is comparable there.
+    fn bits(v: &[f32]) -> Vec<u32> {
+        v.iter()
+            .map(|x| if x.is_nan() { u32::MAX } else { x.to_bits() })
+            .collect()
+    }
+
+    /// The dispatched coefficient pass (SSE on x86-64) equals the scalar reference bit for bit,
+    /// for every count of basis functions (whole groups of four and remainders), on ordinary
+    /// and special inputs, and reads or writes nothing past `3n` floats.
+    #[test]
+    fn coefficient_pass_equals_the_scalar_reference_bit_for_bit() {
+        let seed = 0x5eed_c0ef;
+        let mut rng = Rng::new(seed);
+        for case in 0..4000 {
+            let n = case % 17;
+            let coeffs: Vec<f32> = (0..3 * n).map(|_| any_float(&mut rng)).collect();
+            let basis: [f32; 16] = std::array::from_fn(|_| any_float(&mut rng));
+            let g = [0; 3].map(|_| any_float(&mut rng));
+            let start: Vec<f32> = (0..3 * n + 5).map(|_| any_float(&mut rng)).collect();
+            let (mut d_fast, mut d_ref) = (start.clone(), start.clone());
+            let (mut db_fast, mut db_ref) = ([7.0f32; 16], [7.0f32; 16]);
+            coefficient_pass(n, &coeffs, &basis, g, &mut d_fast, &mut db_fast);
+            coefficient_pass_scalar(n, &coeffs, &basis, g, &mut d_ref, &mut db_ref);
+            assert_eq!(
+                bits(&d_fast),
+                bits(&d_ref),
+                "d_coeffs, case {case}, n = {n}, seed {seed:#x}"
+            );
+            assert_eq!(
+                bits(&db_fast),
+                bits(&db_ref),
+                "d_basis, case {case}, n = {n}, seed {seed:#x}"
+            );
+            assert_eq!(bits(&d_fast[3 * n..]), bits(&start[3 * n..]), "past 3n, case {case}");
+        }
+    }
+
+    /// The dispatched batched raw colours (SSE on x86-64) equal the scalar reference bit for
+    /// bit, for every count of basis functions, batch sizes 1 and 4, coefficient slices of
+    /// exactly `3n` floats (the last row cannot be read four floats wide) and longer ones.
+    #[test]
+    fn raw_colours_equal_the_scalar_reference_bit_for_bit() {
+        let seed = 0x5eed_c010;
+        let mut rng = Rng::new(seed);
+        for case in 0..4000 {
+            let n = case % 17;
+            let extra = rng.below(3) as usize;
+            let store: Vec<Vec<f32>> = (0..4)
+                .map(|_| (0..3 * n + extra).map(|_| any_float(&mut rng)).collect())
+                .collect();
+            let basis: [[f32; 16]; 4] = std::array::from_fn(|_| std::array::from_fn(|_| any_float(&mut rng)));
+            let coeffs = [0, 1, 2, 3].map(|l| store[l].as_slice());
+            #[cfg(target_arch = "x86_64")]
+            let fast = super::super::sh_sse::raw_colours(n, coeffs, &basis);
+            #[cfg(not(target_arch = "x86_64"))]
+            let fast = raw_colours_scalar(n, coeffs, &basis);
+            let reference = raw_colours_scalar(n, coeffs, &basis);
+            for l in 0..4 {
+                assert_eq!(
+                    bits(&fast[l]),
+                    bits(&reference[l]),
+                    "case {case}, n = {n}, lane {l}, seed {seed:#x}"
+                );
+            }
+            let one = raw_colours_scalar(n, [coeffs[2]], &[basis[2]]);
+            assert_eq!(bits(&one[0]), bits(&reference[2]), "a batch of one, case {case}");
+        }
+    }
 }
