@@ -306,8 +306,15 @@ fn backward_tile(
     while first < n_q {
         // Hits and taps of the blended entries of a run of pixels, their texels prefetched.
         let end = scratch.candidates.build(set, prepared, list, rect, first, blended_of);
+        // The pixel of `q`, advanced row-major (no division per pixel).
+        let (mut i, mut j) = (i0 + (first % tw) as u32, j0 + (first / tw) as u32);
         for q in first..end {
-            let (i, j) = (i0 + (q % tw) as u32, j0 + (q / tw) as u32);
+            if q > first {
+                i += 1;
+                if i == i1 {
+                    (i, j) = (i0, j + 1);
+                }
+            }
             let p = (j * width + i) as usize;
             let g_rgb = Vec3::from_slice(&grads_in.rgb[3 * p..3 * p + 3]);
             let g_alpha = grads_in.alpha.map_or(0.0, |a| a[p]);

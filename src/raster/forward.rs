@@ -245,8 +245,9 @@ impl TileCandidates {
         self.items.clear();
         self.offsets.push(0);
         let mut q = first;
+        // The pixel of `q`, advanced row-major (no division per pixel).
+        let (mut i, mut j) = (i0 + (first % tw) as u32, j0 + (first / tw) as u32);
         while q < n && self.items.len() < CANDIDATE_CHUNK {
-            let (i, j) = (i0 + (q % tw) as u32, j0 + (q / tw) as u32);
             let (px, py) = (i as f32 + 0.5, j as f32 + 0.5);
             for &k in slots(q) {
                 let b = list[k as usize] as usize;
@@ -273,6 +274,10 @@ impl TileCandidates {
             }
             self.offsets.push(self.items.len() as u32);
             q += 1;
+            i += 1;
+            if i == i1 {
+                (i, j) = (i0, j + 1);
+            }
         }
         q
     }
@@ -357,10 +362,11 @@ pub(crate) fn local_spans(
         .collect()
 }
 
-/// Per-pixel entry lists of one tile (per-pixel culling): the entries of pixel `p` (tile-local,
-/// row-major over 16×16) are `items[offsets[p]..offsets[p + 1]]`, in tile-list (depth) order.
-/// Built by a counting sort over the entries' spans, `O(entries + pairs)`, so that a pixel visits
-/// only the billboards whose span contains it.
+/// Per-pixel entry lists of one tile (per-pixel culling): the entries of tile-local pixel `q`
+/// (row-major over the tile's own width, as [`TileCandidates`] numbers them) are
+/// `items[offsets[q]..offsets[q + 1]]`, in tile-list (depth) order. Built by a counting sort over
+/// the entries' spans, `O(entries + pairs)`, so that a pixel visits only the billboards whose
+/// span contains it.
 #[derive(Default)]
 pub(crate) struct PixelLists {
     pub(crate) offsets: Vec<u32>,
@@ -368,29 +374,32 @@ pub(crate) struct PixelLists {
 }
 
 impl PixelLists {
-    pub(crate) fn build(&mut self, spans: &[EntrySpans]) {
-        let side = TILE_SIZE as usize;
+    /// The lists of a tile `width × height` pixels whose entries have the given spans (every
+    /// span inside the tile: the pixel boxes are clipped to the image).
+    pub(crate) fn build(&mut self, spans: &[EntrySpans], width: usize, height: usize) {
+        let pixels = width * height;
         self.offsets.clear();
-        self.offsets.resize(side * side + 1, 0);
+        self.offsets.resize(pixels + 1, 0);
         for e in spans {
             for y in e.rows[0]..=e.rows[1] {
                 let [x0, x1] = e.cols[y as usize];
+                debug_assert!((y as usize) < height && (x1 < x0 || (x1 as usize) < width));
                 for x in x0..=x1 {
-                    self.offsets[y as usize * side + x as usize + 1] += 1;
+                    self.offsets[y as usize * width + x as usize + 1] += 1;
                 }
             }
         }
-        for p in 0..side * side {
+        for p in 0..pixels {
             self.offsets[p + 1] += self.offsets[p];
         }
         self.items.clear();
-        self.items.resize(self.offsets[side * side] as usize, 0);
-        let mut cursor: Vec<u32> = self.offsets[..side * side].to_vec();
+        self.items.resize(self.offsets[pixels] as usize, 0);
+        let mut cursor: Vec<u32> = self.offsets[..pixels].to_vec();
         for (k, e) in spans.iter().enumerate() {
             for y in e.rows[0]..=e.rows[1] {
                 let [x0, x1] = e.cols[y as usize];
                 for x in x0..=x1 {
-                    let p = y as usize * side + x as usize;
+                    let p = y as usize * width + x as usize;
                     self.items[cursor[p] as usize] = k as u32;
                     cursor[p] += 1;
                 }
@@ -398,10 +407,10 @@ impl PixelLists {
         }
     }
 
+    /// The entries of tile-local pixel `q`.
     #[inline]
-    pub(crate) fn of(&self, li: u32, lj: u32) -> &[u32] {
-        let p = (lj * TILE_SIZE + li) as usize;
-        &self.items[self.offsets[p] as usize..self.offsets[p + 1] as usize]
+    pub(crate) fn of(&self, q: usize) -> &[u32] {
+        &self.items[self.offsets[q] as usize..self.offsets[q + 1] as usize]
     }
 }
 
@@ -560,8 +569,12 @@ pub fn render_with(
             let tw = (i1 - i0) as usize;
             let n_q = tw * (j1 - j0) as usize;
             let mut lists = PixelLists::default();
-            lists.build(&local_spans(&prepared, list, (i0, j0), half_side));
-            let own = |q: usize| lists.of((q % tw) as u32, (q / tw) as u32);
+            lists.build(
+                &local_spans(&prepared, list, (i0, j0), half_side),
+                tw,
+                (j1 - j0) as usize,
+            );
+            let own = |q: usize| lists.of(q);
             let mut candidates = TileCandidates::default();
             pixels.clear();
             blended_slots.clear();
@@ -645,15 +658,17 @@ pub fn render_with(
                 let t = ty * bins.tiles_x as usize + tx;
                 let (i0, _, i1, _) = tile_pixels(&bins, t, w, h);
                 let tw = (i1 - i0) as usize;
-                for (k, px) in tiles[t].0.iter().enumerate() {
-                    // Pixel index within the band.
-                    let p = (k / tw) * w as usize + i0 as usize + k % tw;
-                    rgb[3 * p..3 * p + 3].copy_from_slice(&px.rgb.to_array());
-                    alpha[p] = px.alpha;
-                    depth[p] = px.depth;
-                    median[p] = px.median;
-                    normal[3 * p..3 * p + 3].copy_from_slice(&px.normal.to_array());
-                    final_t[p] = px.final_t;
+                for (row, pixels) in tiles[t].0.chunks(tw).enumerate() {
+                    for (column, px) in pixels.iter().enumerate() {
+                        // Pixel index within the band.
+                        let p = row * w as usize + i0 as usize + column;
+                        rgb[3 * p..3 * p + 3].copy_from_slice(&px.rgb.to_array());
+                        alpha[p] = px.alpha;
+                        depth[p] = px.depth;
+                        median[p] = px.median;
+                        normal[3 * p..3 * p + 3].copy_from_slice(&px.normal.to_array());
+                        final_t[p] = px.final_t;
+                    }
                 }
             }
         });
