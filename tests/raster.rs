@@ -343,12 +343,17 @@ fn image_tolerance() -> GradTolerance {
 }
 
 fn fd_scene(seed: u64) -> (Billboards, Camera) {
+    fd_scene_with_footprint(seed, 14.0)
+}
+
+/// [`fd_scene`] with billboards about `footprint` pixels wide.
+fn fd_scene_with_footprint(seed: u64, footprint: f32) -> (Billboards, Camera) {
     let mut rng = Rng::new(seed);
     let n = 3 + rng.below(10) as usize;
     let w = 24 + rng.below(24) as u32;
     let h = 24 + rng.below(24) as u32;
     let ts = 8;
-    let mut scene = small_scene(n, w, h, ts, 14.0, (0.05, 0.9), seed);
+    let mut scene = small_scene(n, w, h, ts, footprint, (0.05, 0.9), seed);
     // Smooth textures: a bilinear interpolant has a derivative jump at each texel border equal
     // to the texels' second difference, so random texels make the loss a sum of O(1) kinks that
     // a finite-difference step keeps crossing. A Gaussian bump of alpha (faint at the edges, as
@@ -448,6 +453,33 @@ fd_banded_test!(fd_log_scales, Group::LogScales);
 fd_banded_test!(fd_quaternions, Group::Quaternions);
 fd_test!(fd_sh, Group::Sh);
 fd_test!(fd_alpha_textures, Group::Alpha);
+
+/// Texture gradients of billboards whose screen box lies inside one tile: the tile pass adds
+/// those directly to the gradient rows instead of handing them to the per-billboard reduction
+/// (the 14-pixel billboards of the other checks mostly span several tiles). Billboards about
+/// 4 pixels wide, at least one per scene inside a single tile on average (checked).
+#[test]
+fn fd_textures_of_billboards_inside_one_tile() {
+    let seeds = std::env::var("FD_SEEDS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(6u64);
+    let mut single = 0;
+    for seed in 0..seeds {
+        let (scene, cam) = fd_scene_with_footprint(seed, 4.0);
+        let s = smooth_settings(Vec3::new(0.3, 0.5, 0.7));
+        let bins = render(&scene.as_set(), &cam, &s).state.bins;
+        single += bins.billboard_offsets.windows(2).filter(|w| w[1] - w[0] == 1).count();
+        for group in [Group::Alpha, Group::Colour] {
+            check_group(&scene, &cam, &s, group, seed, &image_tolerance());
+        }
+    }
+    assert!(
+        single as u64 >= seeds,
+        "only {single} single-tile billboards in {seeds} scenes"
+    );
+}
+
 fd_test!(fd_colour_textures, Group::Colour);
 
 #[test]

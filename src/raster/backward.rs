@@ -11,10 +11,12 @@
 //! result does not depend on how rayon schedules tiles. Texture gradients are summed per
 //! (entry, texel) as the pixels produce them, in a per-thread accumulator whose sums list only
 //! the touched cells, and handed on sparse per entry (only the texels some pixel of the tile
-//! touched); see `TexelSums`.
+//! touched); see `TexelSums`. A billboard with a single tile entry (most billboards of a dense
+//! view) has nothing to sum across tiles: its tile adds the texel sums to the gradient rows
+//! itself, the same additions the reduction would make (see `SoleEntryRows`).
 
 use super::forward::{
-    RenderOutput, TileCandidates, prefetch, prefetch_record, prefetch_ref, split_by_lengths, tile_pixels,
+    RenderOutput, TileCandidates, prefetch, prefetch_ptr, prefetch_record, prefetch_ref, split_by_lengths, tile_pixels,
 };
 use super::preprocess::Prepared;
 use super::{BillboardSet, SH_FLOATS};
@@ -107,9 +109,12 @@ struct Blended {
 struct EntryRecord {
     transform: SplatTransform,
     rgb: Vec3,
-    /// The tile; its texel gradients are `tiles[tile].texels[texels.0..texels.1]`.
+    /// The tile; its texel gradients are `tiles[tile].texels[texels.0..texels.1]` (empty when
+    /// the tile added them to the billboard's gradient row itself, see [`SoleEntryRows`]).
     tile: u32,
     texels: (u32, u32),
+    /// Some pixel of the tile blended this entry (it has gradients to reduce).
+    blended: bool,
 }
 
 const EMPTY_RECORD: EntryRecord = EntryRecord {
@@ -117,7 +122,61 @@ const EMPTY_RECORD: EntryRecord = EntryRecord {
     rgb: Vec3::ZERO,
     tile: 0,
     texels: (0, 0),
+    blended: false,
 };
+
+/// The texture-gradient rows of the billboards with exactly one tile entry, written by the
+/// tile pass directly.
+///
+/// The per-billboard reduction sums a billboard's entries in tile order; with a single entry
+/// that sum is just `row[texel] += value` per touched texel, the same floating-point additions
+/// whoever performs them. Letting the entry's own tile perform them skips writing the texel
+/// sums to a list and reading them back (for most billboards of a dense view: 0.9 entries per
+/// billboard in the benchmark). The rows of such billboards are disjoint between tiles (each
+/// belongs to the one tile holding its entry), so tiles running in parallel never touch the
+/// same row, and the reduction does not touch them.
+struct SoleEntryRows {
+    /// Start of `RenderGradients::textures`.
+    rows: *mut [f32; 4],
+    /// Texels per billboard (`TS²`).
+    texels: usize,
+    /// Number of billboards.
+    len: usize,
+}
+
+// SAFETY: the pointer is only dereferenced through `SoleEntryRows::add`, whose callers (the
+// tile tasks) each write the rows of their own sole-entry billboards only, disjoint between
+// tasks (see the type's documentation); the buffer outlives the tile pass, during which nothing
+// else accesses it.
+unsafe impl Sync for SoleEntryRows {}
+unsafe impl Send for SoleEntryRows {}
+
+impl SoleEntryRows {
+    /// `row[texel] += value` for billboard `b`'s texture gradients.
+    ///
+    /// # Safety
+    /// `b` has exactly one tile entry and the caller is the task of the tile holding it.
+    #[inline]
+    unsafe fn add(&self, b: usize, texel: u32, value: [f32; 4]) {
+        assert!(
+            b < self.len && (texel as usize) < self.texels,
+            "texel gradient out of range"
+        );
+        // SAFETY: in bounds (checked above); exclusive by the caller's contract.
+        let d = unsafe { &mut *self.rows.add(b * self.texels + texel as usize) };
+        for c in 0..4 {
+            d[c] += value[c];
+        }
+    }
+
+    /// Hints the CPU to fetch billboard `b`'s gradient of `texel` (no effect on values).
+    #[inline]
+    fn prefetch(&self, b: usize, texel: u32) {
+        if b < self.len && (texel as usize) < self.texels {
+            prefetch_ptr(self.rows.wrapping_add(b * self.texels + texel as usize).cast::<u8>());
+        }
+    }
+}
 
 const ZERO_TRANSFORM: SplatTransform = SplatTransform {
     tu: Vec3::ZERO,
@@ -201,25 +260,34 @@ impl TexelSums {
         }
     }
 
-    /// The touched cells grouped by slot (a stable counting sort: first-touch order within a
-    /// slot), resetting them for the next tile. Returns `(offsets, texels)`: the texels of slot
-    /// `k` are `texels[offsets[k]..offsets[k + 1]]`.
-    fn finish(&mut self, slots: usize) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
+    /// The touched cells of the slots `k` with `keep(k)` grouped by slot (a stable counting
+    /// sort: first-touch order within a slot), resetting all cells for the next tile. Returns
+    /// `(offsets, texels)`: the texels of slot `k` are `texels[offsets[k]..offsets[k + 1]]`
+    /// (empty for a slot not kept).
+    fn finish(&mut self, slots: usize, keep: impl Fn(usize) -> bool) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
         let mut offsets = vec![0u32; slots + 1];
         for &(slot, _) in &self.cells {
             offsets[slot as usize + 1] += 1;
+        }
+        for k in 0..slots {
+            if !keep(k) {
+                offsets[k + 1] = 0;
+            }
         }
         for k in 0..slots {
             offsets[k + 1] += offsets[k];
         }
         self.cursor.clear();
         self.cursor.extend_from_slice(&offsets[..slots]);
-        let mut out = vec![(0u32, [0.0f32; 4]); self.cells.len()];
+        let mut out = vec![(0u32, [0.0f32; 4]); offsets[slots] as usize];
         for (&(slot, texel), &sum) in self.cells.iter().zip(&self.sums) {
+            self.cell_of[slot as usize * self.texels + texel as usize] = UNTOUCHED;
+            if offsets[slot as usize] == offsets[slot as usize + 1] {
+                continue;
+            }
             let c = &mut self.cursor[slot as usize];
             out[*c as usize] = (texel, sum);
             *c += 1;
-            self.cell_of[slot as usize * self.texels + texel as usize] = UNTOUCHED;
         }
         self.cells.clear();
         self.sums.clear();
@@ -269,6 +337,7 @@ fn backward_tile(
     grads_in: &ImageGradients<'_>,
     tile: usize,
     records: &mut [EntryRecord],
+    sole_rows: &SoleEntryRows,
     scratch: &mut Scratch,
     sums: &mut TexelSums,
 ) -> TileGrads {
@@ -388,7 +457,27 @@ fn backward_tile(
         }
         first = end;
     }
-    let (tex_offsets, texels) = sums.finish(list.len());
+    // An entry whose billboard has no other entry adds its texel sums to the billboard's
+    // gradient row here (prefetched first, so that the row misses overlap); the others go to
+    // the reduction.
+    let sole = |k: usize| {
+        let b = list[k] as usize;
+        bins.billboard_offsets[b + 1] - bins.billboard_offsets[b] == 1
+    };
+    for &(slot, texel) in &sums.cells {
+        if sole(slot as usize) {
+            sole_rows.prefetch(list[slot as usize] as usize, texel);
+        }
+    }
+    for (&(slot, texel), &sum) in sums.cells.iter().zip(&sums.sums) {
+        let k = slot as usize;
+        records[k].blended = true;
+        if sole(k) {
+            // SAFETY: billboard `list[k]` has exactly one entry, this tile's slot `k`.
+            unsafe { sole_rows.add(list[k] as usize, texel, sum) };
+        }
+    }
+    let (tex_offsets, texels) = sums.finish(list.len(), |k| !sole(k));
     for (rec, span) in records.iter_mut().zip(tex_offsets.windows(2)) {
         rec.texels = (span[0], span[1]);
     }
@@ -434,17 +523,28 @@ pub fn render_backward(
         .into_par_iter()
         .map(|_| EMPTY_RECORD)
         .collect_into_vec(&mut records);
+    let texels = set.texels();
+    assert_eq!(
+        grads.textures.len(),
+        set.len() * texels,
+        "gradient buffers must match the billboard set"
+    );
+    let sole_rows = SoleEntryRows {
+        rows: grads.textures.as_mut_ptr(),
+        texels,
+        len: set.len(),
+    };
     let tiles: Vec<TileGrads> = split_by_lengths(&mut records, (0..n_tiles).map(|t| bins.tile_range(t).len()))
         .into_par_iter()
         .enumerate()
         .map_init(Scratch::default, |scratch, (t, records)| {
-            TEXEL_SUMS.with_borrow_mut(|sums| backward_tile(set, out, image_grads, t, records, scratch, sums))
+            TEXEL_SUMS
+                .with_borrow_mut(|sums| backward_tile(set, out, image_grads, t, records, &sole_rows, scratch, sums))
         })
         .collect();
     for tg in &tiles {
         grads.background += tg.background;
     }
-    let texels = set.texels();
     let camera = &state.camera;
     let centre = camera.centre();
     let degree = state.settings.sh_degree;
@@ -510,10 +610,10 @@ pub fn render_backward(
                 let mut d_rgb = Vec3::ZERO;
                 let mut any = false;
                 for rec in entry_records(b) {
-                    let tex = texels_of(rec);
-                    if tex.is_empty() {
+                    if !rec.blended {
                         continue;
                     }
+                    let tex = texels_of(rec);
                     any = true;
                     add_transform(&mut d_t, &rec.transform);
                     d_rgb += rec.rgb;
@@ -574,7 +674,7 @@ mod tests {
         let mut sums = TexelSums::default();
         sums.start(2, 4);
         sums.add(1, 3, [-0.0, 1.0, -0.0, 2.0]);
-        let (offsets, out) = sums.finish(2);
+        let (offsets, out) = sums.finish(2, |_| true);
         assert_eq!(offsets, [0, 0, 1]);
         let bits = out[0].1.map(f32::to_bits);
         assert_eq!(
@@ -591,6 +691,35 @@ mod tests {
         );
         let log = [(1u32, 3u32, [-0.0f32, 1.0, -0.0, 2.0])];
         assert_eq!(texel_sums_reference(&log, 2).1[0].1.map(f32::to_bits), bits);
+    }
+
+    /// Slots not kept by `finish` come out empty (their tile wrote them to the gradient rows);
+    /// the kept ones are unchanged, and every cell is reset either way.
+    #[test]
+    fn texel_sums_leave_out_the_slots_not_kept() {
+        let log = [
+            (0u32, 1u32, [1.0f32; 4]),
+            (1, 2, [2.0; 4]),
+            (2, 0, [3.0; 4]),
+            (1, 3, [4.0; 4]),
+            (0, 1, [5.0; 4]),
+        ];
+        let mut sums = TexelSums::default();
+        for keep_odd in [false, true] {
+            sums.start(3, 4);
+            for &(slot, texel, g) in &log {
+                sums.add(slot, texel, g);
+            }
+            let (offsets, out) = sums.finish(3, |k| (k % 2 == 1) == keep_odd);
+            assert!(sums.cell_of.iter().all(|&c| c == UNTOUCHED) && sums.cells.is_empty());
+            if keep_odd {
+                assert_eq!(offsets, [0, 0, 2, 2]);
+                assert_eq!(out, [(2, [2.0; 4]), (3, [4.0; 4])]);
+            } else {
+                assert_eq!(offsets, [0, 1, 1, 2]);
+                assert_eq!(out, [(1, [6.0; 4]), (0, [3.0; 4])]);
+            }
+        }
     }
 
     /// The accumulator gives, slot by slot, the same (texel, sum) set as the sort-based
@@ -617,7 +746,7 @@ mod tests {
             for &(slot, texel, g) in &log {
                 sums.add(slot, texel, g);
             }
-            let (offsets, out) = sums.finish(slots);
+            let (offsets, out) = sums.finish(slots, |_| true);
             assert!(sums.cell_of.iter().all(|&c| c == UNTOUCHED) && sums.cells.is_empty());
             let (ref_offsets, ref_out) = texel_sums_reference(&log, slots);
             assert_eq!(offsets, ref_offsets);

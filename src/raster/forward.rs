@@ -184,7 +184,7 @@ pub(crate) fn prefetch_ref<T>(r: &T) {
 
 /// Hints the CPU to fetch the cache line holding address `p`; `p` is never dereferenced.
 #[inline(always)]
-fn prefetch_ptr(p: *const u8) {
+pub(crate) fn prefetch_ptr(p: *const u8) {
     #[cfg(target_arch = "x86_64")]
     // SAFETY: a prefetch is only a hint: it never faults, whatever the address, and reads nothing
     // the program can observe.
