@@ -315,11 +315,7 @@ pub fn sh_colour_batch<const L: usize>(
     if counts.iter().any(|&m| m != n) {
         return std::array::from_fn(|l| clamp_colour(raw_colour(counts[l], coeffs[l], &basis[l])));
     }
-    #[cfg(target_arch = "x86_64")]
-    let raw = super::sh_sse::raw_colours(n, coeffs, &basis);
-    #[cfg(not(target_arch = "x86_64"))]
-    let raw = raw_colours_scalar(n, coeffs, &basis);
-    raw.map(clamp_colour)
+    raw_colours(n, coeffs, &basis).map(clamp_colour)
 }
 
 /// Vector-Jacobian product of [`sh_colour`] for `d_rgb = ∂L/∂rgb`: **adds** `∂L/∂coeffs` into
@@ -387,26 +383,15 @@ pub fn sh_colour_vjp_clamped(
     colour_vjp(degree, coeffs, &basis, view, clamped, d_rgb, d_coeffs)
 }
 
-/// The coefficient part of [`colour_vjp`] for the first `n` basis functions: adds `Yₖ·g_c` to
-/// `d_coeffs[3k + c]` and sets `d_basis[k] = (g₀·coeffs[3k] + g₁·coeffs[3k + 1]) +
-/// g₂·coeffs[3k + 2]` for `k < n`. On x86-64 the SSE kernel of `sh_sse` (bit-identical to
-/// [`coefficient_pass_scalar`], tested), elsewhere the scalar reference.
-#[inline]
-fn coefficient_pass(
-    n: usize,
-    coeffs: &[f32],
-    basis: &[f32; 16],
-    g: [f32; 3],
-    d_coeffs: &mut [f32],
-    d_basis: &mut [f32; 16],
-) {
-    #[cfg(target_arch = "x86_64")]
-    super::sh_sse::coefficient_pass(n, coeffs, basis, g, d_coeffs, d_basis);
-    #[cfg(not(target_arch = "x86_64"))]
-    coefficient_pass_scalar(n, coeffs, basis, g, d_coeffs, d_basis);
-}
+// The coefficient part of `colour_vjp` and the batched raw colours of `sh_colour_batch`: on
+// x86-64 the SSE kernels of `sh_sse` (bit-identical to the scalar references below, tested),
+// elsewhere those references.
+#[cfg(target_arch = "x86_64")]
+use super::sh_sse::{coefficient_pass, raw_colours};
+#[cfg(not(target_arch = "x86_64"))]
+use {coefficient_pass_scalar as coefficient_pass, raw_colours_scalar as raw_colours};
 
-/// The plain scalar reference of the batched raw colours (`sh_sse::raw_colours` on x86-64): per
+/// The plain scalar reference of the batched raw colours (the SSE `raw_colours` on x86-64): per
 /// primitive and channel `0.5 + Σₖ basis[k]·coeffs[3k + c]`, in increasing `k`, the primitives'
 /// sums advancing together.
 #[cfg_attr(target_arch = "x86_64", allow(dead_code))]
@@ -427,7 +412,9 @@ fn raw_colours_scalar<const L: usize>(n: usize, coeffs: [&[f32]; L], basis: &[[f
     raw
 }
 
-/// The plain scalar reference of [`coefficient_pass`].
+/// The plain scalar reference of the VJP's coefficient pass (the SSE `coefficient_pass` on
+/// x86-64): adds `Yₖ·g_c` to `d_coeffs[3k + c]` and sets `d_basis[k] = (g₀·coeffs[3k] +
+/// g₁·coeffs[3k + 1]) + g₂·coeffs[3k + 2]` for `k < n`.
 #[cfg_attr(target_arch = "x86_64", allow(dead_code))]
 fn coefficient_pass_scalar(
     n: usize,
@@ -553,10 +540,7 @@ mod tests {
                 .collect();
             let basis: [[f32; 16]; 4] = std::array::from_fn(|_| std::array::from_fn(|_| any_float(&mut rng)));
             let coeffs = [0, 1, 2, 3].map(|l| store[l].as_slice());
-            #[cfg(target_arch = "x86_64")]
-            let fast = super::super::sh_sse::raw_colours(n, coeffs, &basis);
-            #[cfg(not(target_arch = "x86_64"))]
-            let fast = raw_colours_scalar(n, coeffs, &basis);
+            let fast = raw_colours(n, coeffs, &basis);
             let reference = raw_colours_scalar(n, coeffs, &basis);
             for l in 0..4 {
                 assert_eq!(
