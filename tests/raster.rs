@@ -816,3 +816,27 @@ fn clearing_the_reported_rows_restores_zero_gradients() {
     g.background = Vec3::ZERO;
     assert_eq!(g, RenderGradients::zeros(scene.len(), scene.texture_size));
 }
+
+/// The tile pass writes the texture gradients of single-entry billboards in place, which is
+/// only race-free while the tiles' entry ranges partition the entries: a forward output whose
+/// (public) bins were altered so that two tiles share entries is refused with a clear panic
+/// before any tile runs.
+#[test]
+#[should_panic(expected = "the tiles' entry ranges must partition the entries in order")]
+fn backward_refuses_overlapping_tile_ranges() {
+    let scene = small_scene(200, 64, 48, 8, 10.0, (0.2, 0.9), 3);
+    let cam = random_scene_camera(64, 48);
+    let mut out = render(&scene.as_set(), &cam, &settings(Vec3::ZERO));
+    let offsets = &mut out.state.bins.tile_offsets;
+    assert!(offsets[2] > 0, "the scene puts entries in the first tiles");
+    offsets[1] = offsets[2]; // tile 0 now overlaps tile 1's entries
+    offsets[2] = 0;
+    let d_rgb = vec![1e-3f32; 3 * cam.pixel_count()];
+    let mut g = RenderGradients::zeros(scene.len(), scene.texture_size);
+    let grads_in = ImageGradients {
+        rgb: &d_rgb,
+        alpha: None,
+        depth: None,
+    };
+    render_backward(&scene.as_set(), &out, &grads_in, &mut g);
+}

@@ -15,6 +15,7 @@
 //! view) has nothing to sum across tiles: its tile adds the texel sums to the gradient rows
 //! itself, the same additions the reduction would make (see `SoleEntryRows`).
 
+use super::binning::TileBins;
 use super::forward::{
     RenderOutput, TileCandidates, prefetch, prefetch_ptr, prefetch_record, prefetch_ref, split_by_lengths, tile_pixels,
 };
@@ -145,17 +146,29 @@ struct SoleEntryRows {
 }
 
 // SAFETY: the pointer is only dereferenced through `SoleEntryRows::add`, whose callers (the
-// tile tasks) each write the rows of their own sole-entry billboards only, disjoint between
-// tasks (see the type's documentation); the buffer outlives the tile pass, during which nothing
-// else accesses it.
+// tile tasks) each write only rows that `owns` gives them: one entry per billboard passes, and
+// the tile ranges are disjoint, so no two tasks write the same row. The buffer outlives the tile
+// pass, during which nothing else accesses it.
 unsafe impl Sync for SoleEntryRows {}
 unsafe impl Send for SoleEntryRows {}
 
 impl SoleEntryRows {
+    /// Whether the task processing global entry `entry` (of billboard `b`) writes `b`'s row: `b`
+    /// has exactly one entry and it is `entry`. At most one entry passes for each billboard
+    /// (the one `billboard_entries` names), whatever the bins hold, so with disjoint tile
+    /// ranges (checked by [`render_backward`]) at most one task writes each row.
+    #[inline]
+    fn owns(&self, bins: &TileBins, b: u32, entry: usize) -> bool {
+        let b = b as usize;
+        let (start, end) = (bins.billboard_offsets[b], bins.billboard_offsets[b + 1]);
+        end.wrapping_sub(start) == 1 && bins.billboard_entries[start as usize] as usize == entry
+    }
+
     /// `row[texel] += value` for billboard `b`'s texture gradients.
     ///
     /// # Safety
-    /// `b` has exactly one tile entry and the caller is the task of the tile holding it.
+    /// [`SoleEntryRows::owns`] holds for `b` and an entry that the caller's task alone
+    /// processes, during the tile pass.
     #[inline]
     unsafe fn add(&self, b: usize, texel: u32, value: [f32; 4]) {
         assert!(
@@ -202,6 +215,9 @@ struct TileGrads {
 struct Scratch {
     blended: Vec<Blended>,
     candidates: TileCandidates,
+    /// Per tile-list slot: the tile writes the entry's texture gradients itself (see
+    /// [`SoleEntryRows`]).
+    sole: Vec<bool>,
 }
 
 /// Per-tile texture-gradient sums over (entry slot, texel) cells, reused by every tile a
@@ -344,7 +360,7 @@ fn backward_tile(
     let state = &out.state;
     let bins = &state.bins;
     let range = bins.tile_range(tile);
-    let list = &bins.entries[range];
+    let list = &bins.entries[range.clone()];
     let prepared: &[Option<Prepared>] = &state.prepared;
     let settings = &state.settings;
     let params = &settings.composite;
@@ -460,24 +476,28 @@ fn backward_tile(
     // An entry whose billboard has no other entry adds its texel sums to the billboard's
     // gradient row here (prefetched first, so that the row misses overlap); the others go to
     // the reduction.
-    let sole = |k: usize| {
-        let b = list[k] as usize;
-        bins.billboard_offsets[b + 1] - bins.billboard_offsets[b] == 1
-    };
+    let sole = &mut scratch.sole;
+    sole.clear();
+    sole.extend(
+        list.iter()
+            .enumerate()
+            .map(|(k, &b)| sole_rows.owns(bins, b, range.start + k)),
+    );
     for &(slot, texel) in &sums.cells {
-        if sole(slot as usize) {
+        if sole[slot as usize] {
             sole_rows.prefetch(list[slot as usize] as usize, texel);
         }
     }
     for (&(slot, texel), &sum) in sums.cells.iter().zip(&sums.sums) {
         let k = slot as usize;
         records[k].blended = true;
-        if sole(k) {
-            // SAFETY: billboard `list[k]` has exactly one entry, this tile's slot `k`.
+        if sole[k] {
+            // SAFETY: `owns` holds for entry `range.start + k`, and this task is the only one
+            // processing it.
             unsafe { sole_rows.add(list[k] as usize, texel, sum) };
         }
     }
-    let (tex_offsets, texels) = sums.finish(list.len(), |k| !sole(k));
+    let (tex_offsets, texels) = sums.finish(list.len(), |k| !sole[k]);
     for (rec, span) in records.iter_mut().zip(tex_offsets.windows(2)) {
         rec.texels = (span[0], span[1]);
     }
@@ -491,7 +511,9 @@ fn backward_tile(
 /// Deterministic: bit-identical for any number of rayon threads.
 ///
 /// # Panics
-/// When the gradient images do not match the render's size or `grads` does not match `set`.
+/// When the gradient images do not match the render's size, `grads` does not match `set`, or
+/// the output's tile bins were altered so that the tiles' entry ranges no longer partition the
+/// entries in order.
 pub fn render_backward(
     set: &BillboardSet<'_>,
     out: &RenderOutput,
@@ -528,6 +550,15 @@ pub fn render_backward(
         grads.textures.len(),
         set.len() * texels,
         "gradient buffers must match the billboard set"
+    );
+    // The tile tasks write the rows of single-entry billboards themselves; that each row has
+    // one writer rests on the tiles' entry ranges being disjoint (`SoleEntryRows::owns`).
+    assert!(
+        bins.tile_offsets.len() == n_tiles + 1
+            && bins.tile_offsets[0] == 0
+            && bins.tile_offsets.windows(2).all(|w| w[0] <= w[1])
+            && bins.tile_offsets[n_tiles] as usize == bins.entries.len(),
+        "the tiles' entry ranges must partition the entries in order"
     );
     let sole_rows = SoleEntryRows {
         rows: grads.textures.as_mut_ptr(),
