@@ -469,6 +469,7 @@ fn backward_tile(
                 let rec = &mut records[bl.slot as usize];
                 add_transform(&mut rec.transform, &d_t);
                 rec.rgb += d_colour;
+                rec.blended = true;
             }
         }
         first = end;
@@ -490,7 +491,6 @@ fn backward_tile(
     }
     for (&(slot, texel), &sum) in sums.cells.iter().zip(&sums.sums) {
         let k = slot as usize;
-        records[k].blended = true;
         if sole[k] {
             // SAFETY: `owns` holds for entry `range.start + k`, and this task is the only one
             // processing it.

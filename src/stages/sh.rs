@@ -413,16 +413,16 @@ fn raw_colours_scalar<const L: usize>(n: usize, coeffs: [&[f32]; L], basis: &[[f
 }
 
 /// The plain scalar reference of the VJP's coefficient pass (the SSE `coefficient_pass` on
-/// x86-64): adds `Yₖ·g_c` to `d_coeffs[3k + c]` and sets `d_basis[k] = (g₀·coeffs[3k] +
+/// x86-64, which also uses it for the basis functions left over after its groups of four):
+/// adds `Yₖ·g_c` to `d_coeffs[3k + c]` and sets `d_basis[k] = (g₀·coeffs[3k] +
 /// g₁·coeffs[3k + 1]) + g₂·coeffs[3k + 2]` for `k < n`.
-#[cfg_attr(target_arch = "x86_64", allow(dead_code))]
-fn coefficient_pass_scalar(
+pub(super) fn coefficient_pass_scalar(
     n: usize,
     coeffs: &[f32],
-    basis: &[f32; 16],
+    basis: &[f32],
     g: [f32; 3],
     d_coeffs: &mut [f32],
-    d_basis: &mut [f32; 16],
+    d_basis: &mut [f32],
 ) {
     let rows = coeffs[..3 * n]
         .chunks_exact(3)
@@ -523,6 +523,15 @@ mod tests {
             );
             assert_eq!(bits(&d_fast[3 * n..]), bits(&start[3 * n..]), "past 3n, case {case}");
         }
+    }
+
+    /// More basis functions than the 16 of degree 3 are refused before any read (the SSE pass
+    /// loads four basis values at a time from the 16-value array).
+    #[test]
+    #[should_panic(expected = "at most 16 basis functions")]
+    fn coefficient_pass_refuses_more_than_16_basis_functions() {
+        let (coeffs, mut d) = ([0.5f32; 60], [0.0f32; 60]);
+        coefficient_pass(20, &coeffs, &[0.25; 16], [1.0; 3], &mut d, &mut [0.0; 16]);
     }
 
     /// The dispatched batched raw colours (SSE on x86-64) equal the scalar reference bit for

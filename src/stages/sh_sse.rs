@@ -24,7 +24,7 @@ macro_rules! shuffle {
 /// The coefficient pass of the SH backward for the first `n` basis functions: for `k < n` and
 /// each channel `c`, `d_coeffs[3k + c] += basis[k] · g[c]`, and `d_basis[k] = (g[0]·coeffs[3k] +
 /// g[1]·coeffs[3k + 1]) + g[2]·coeffs[3k + 2]`. Groups of four basis functions are done in SSE,
-/// the rest (`n mod 4`) in scalar code.
+/// the rest (`n mod 4`) by the scalar reference.
 ///
 /// # Panics
 /// When `coeffs` or `d_coeffs` holds fewer than `3n` floats or `n > 16`.
@@ -37,11 +37,13 @@ pub(crate) fn coefficient_pass(
     d_coeffs: &mut [f32],
     d_basis: &mut [f32; 16],
 ) {
+    assert!(n <= 16, "at most 16 basis functions");
     let (coeffs, d_coeffs) = (&coeffs[..3 * n], &mut d_coeffs[..3 * n]);
     let groups = n / 4;
     // SAFETY: SSE is always available on x86-64. Group `j` reads and writes floats
     // `12j..12j + 12` of `coeffs` and `d_coeffs` (within their `3n` floats as `4(j + 1) ≤ n`) and
-    // floats `4j..4j + 4` of `basis` and `d_basis` (within 16); unaligned loads and stores.
+    // floats `4j..4j + 4` of `basis` and `d_basis` (within 16 as `n ≤ 16`, asserted); unaligned
+    // loads and stores.
     unsafe {
         // The channel pattern of floats 0..4, 4..8 and 8..12 of a group.
         let g0 = _mm_set_ps(g[0], g[2], g[1], g[0]);
@@ -74,13 +76,16 @@ pub(crate) fn coefficient_pass(
             );
         }
     }
-    for k in 4 * groups..n {
-        let b = basis[k];
-        d_coeffs[3 * k] += b * g[0];
-        d_coeffs[3 * k + 1] += b * g[1];
-        d_coeffs[3 * k + 2] += b * g[2];
-        d_basis[k] = g[0] * coeffs[3 * k] + g[1] * coeffs[3 * k + 1] + g[2] * coeffs[3 * k + 2];
-    }
+    // The last `n mod 4` basis functions: the scalar reference itself.
+    let done = 4 * groups;
+    super::sh::coefficient_pass_scalar(
+        n - done,
+        &coeffs[3 * done..],
+        &basis[done..],
+        g,
+        &mut d_coeffs[3 * done..],
+        &mut d_basis[done..],
+    );
 }
 
 /// The raw colours of `L` primitives with `n` basis functions each: per primitive and channel
