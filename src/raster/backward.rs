@@ -12,8 +12,8 @@
 //! (entry, texel) as the pixels produce them, in a per-thread accumulator whose sums list only
 //! the touched cells, and handed on sparse per entry (only the texels some pixel of the tile
 //! touched); see `TexelSums`. A billboard with a single tile entry (most billboards of a dense
-//! view) has nothing to sum across tiles: its tile adds the texel sums to the gradient rows
-//! itself, the same additions the reduction would make (see `SoleEntryRows`).
+//! view) has nothing to sum across tiles: its tile adds each texel contribution straight to the
+//! billboard's gradient row as the pixels produce it (see `SoleEntryRows`).
 
 use super::binning::TileBins;
 use super::forward::{
@@ -129,13 +129,18 @@ const EMPTY_RECORD: EntryRecord = EntryRecord {
 /// The texture-gradient rows of the billboards with exactly one tile entry, written by the
 /// tile pass directly.
 ///
-/// The per-billboard reduction sums a billboard's entries in tile order; with a single entry
-/// that sum is just `row[texel] += value` per touched texel, the same floating-point additions
-/// whoever performs them. Letting the entry's own tile perform them skips writing the texel
-/// sums to a list and reading them back (for most billboards of a dense view: 0.9 entries per
-/// billboard in the benchmark). The rows of such billboards are disjoint between tiles (each
-/// belongs to the one tile holding its entry), so tiles running in parallel never touch the
-/// same row, and the reduction does not touch them.
+/// A billboard with a single entry has nothing to sum across tiles, so its tile adds each
+/// texel contribution to the row the moment a pixel produces it, in pixel order, instead of
+/// summing them per (entry, texel) in [`TexelSums`] and handing the sums on (most billboards of
+/// a dense view: 0.9 entries per billboard in the benchmark). The rows of such billboards are
+/// disjoint between tiles (each belongs to the one tile holding its entry), so tiles running in
+/// parallel never touch the same row, and the reduction does not touch them.
+///
+/// Rounding: into a zero row (a fresh [`RenderGradients`]) this gives the sums bit for bit
+/// (`((0 + g₁) + g₂) + …` equals `0 + ((g₁ + g₂) + …)` in IEEE arithmetic, signed zeros
+/// included); into a row that already holds other views' gradients, the view's contributions
+/// are added one at a time rather than as one sum. Either way the order is fixed (pixel order),
+/// so the result does not depend on the thread count.
 struct SoleEntryRows {
     /// Start of `RenderGradients::textures`.
     rows: *mut [f32; 4],
@@ -215,8 +220,8 @@ struct TileGrads {
 struct Scratch {
     blended: Vec<Blended>,
     candidates: TileCandidates,
-    /// Per tile-list slot: the tile writes the entry's texture gradients itself (see
-    /// [`SoleEntryRows`]).
+    /// Per tile-list slot: the tile adds the entry's texture gradients to its billboard's row
+    /// itself (see [`SoleEntryRows`]).
     sole: Vec<bool>,
 }
 
@@ -276,34 +281,25 @@ impl TexelSums {
         }
     }
 
-    /// The touched cells of the slots `k` with `keep(k)` grouped by slot (a stable counting
-    /// sort: first-touch order within a slot), resetting all cells for the next tile. Returns
-    /// `(offsets, texels)`: the texels of slot `k` are `texels[offsets[k]..offsets[k + 1]]`
-    /// (empty for a slot not kept).
-    fn finish(&mut self, slots: usize, keep: impl Fn(usize) -> bool) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
+    /// The touched cells grouped by slot (a stable counting sort: first-touch order within a
+    /// slot), resetting them for the next tile. Returns `(offsets, texels)`: the texels of slot
+    /// `k` are `texels[offsets[k]..offsets[k + 1]]`.
+    fn finish(&mut self, slots: usize) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
         let mut offsets = vec![0u32; slots + 1];
         for &(slot, _) in &self.cells {
             offsets[slot as usize + 1] += 1;
-        }
-        for k in 0..slots {
-            if !keep(k) {
-                offsets[k + 1] = 0;
-            }
         }
         for k in 0..slots {
             offsets[k + 1] += offsets[k];
         }
         self.cursor.clear();
         self.cursor.extend_from_slice(&offsets[..slots]);
-        let mut out = vec![(0u32, [0.0f32; 4]); offsets[slots] as usize];
+        let mut out = vec![(0u32, [0.0f32; 4]); self.cells.len()];
         for (&(slot, texel), &sum) in self.cells.iter().zip(&self.sums) {
-            self.cell_of[slot as usize * self.texels + texel as usize] = UNTOUCHED;
-            if offsets[slot as usize] == offsets[slot as usize + 1] {
-                continue;
-            }
             let c = &mut self.cursor[slot as usize];
             out[*c as usize] = (texel, sum);
             *c += 1;
+            self.cell_of[slot as usize * self.texels + texel as usize] = UNTOUCHED;
         }
         self.cells.clear();
         self.sums.clear();
@@ -375,6 +371,23 @@ fn backward_tile(
     let mut background = Vec3::ZERO;
     sums.start(list.len(), ts * ts);
     let bg = settings.background;
+    // The entries whose billboard has no other entry: their texel gradients go straight to the
+    // billboard's gradient row, which is prefetched with the texels of each candidate.
+    let sole = &mut scratch.sole;
+    sole.clear();
+    sole.extend(
+        list.iter()
+            .enumerate()
+            .map(|(k, &b)| sole_rows.owns(bins, b, range.start + k)),
+    );
+    let sole: &[bool] = sole;
+    let prefetch_sole_row = |k: u32, taps: &BilinearTaps| {
+        if sole[k as usize] {
+            for &texel in taps.indices() {
+                sole_rows.prefetch(list[k as usize] as usize, texel);
+            }
+        }
+    };
     let rect = (i0, j0, i1, j1);
     let tw = (i1 - i0) as usize;
     let n_q = tw * (j1 - j0) as usize;
@@ -390,7 +403,9 @@ fn backward_tile(
     let mut first = 0;
     while first < n_q {
         // Hits and taps of the blended entries of a run of pixels, their texels prefetched.
-        let end = scratch.candidates.build(set, prepared, list, rect, first, blended_of);
+        let end = scratch
+            .candidates
+            .build(set, prepared, list, rect, first, blended_of, prefetch_sole_row);
         // The pixel of `q`, advanced row-major (no division per pixel).
         let (mut i, mut j) = (i0 + (first % tw) as u32, j0 + (first / tw) as u32);
         for q in first..end {
@@ -459,11 +474,17 @@ fn backward_tile(
                 let d_colour = g_rgb * w;
                 let b = bl.billboard as usize;
                 let slot = bl.slot;
-                let (du, dv) = bl.taps.vjp_rgba(
-                    set.texture_of(b),
-                    [d_colour.x, d_colour.y, d_colour.z, d_tex_alpha],
-                    |texel, g| sums.add(slot, texel, g),
-                );
+                let d_rgba = [d_colour.x, d_colour.y, d_colour.z, d_tex_alpha];
+                let (du, dv) = if sole[slot as usize] {
+                    // SAFETY: `owns` holds for entry `range.start + slot`, and this task is the
+                    // only one processing it.
+                    bl.taps.vjp_rgba(set.texture_of(b), d_rgba, |texel, g| unsafe {
+                        sole_rows.add(b, texel, g)
+                    })
+                } else {
+                    bl.taps
+                        .vjp_rgba(set.texture_of(b), d_rgba, |texel, g| sums.add(slot, texel, g))
+                };
                 let pr = prepared[b].as_ref().expect("blended entries are prepared");
                 let d_t = intersect_vjp(&pr.transform, px, py, du, dv, w * g_depth);
                 let rec = &mut records[bl.slot as usize];
@@ -474,30 +495,8 @@ fn backward_tile(
         }
         first = end;
     }
-    // An entry whose billboard has no other entry adds its texel sums to the billboard's
-    // gradient row here (prefetched first, so that the row misses overlap); the others go to
-    // the reduction.
-    let sole = &mut scratch.sole;
-    sole.clear();
-    sole.extend(
-        list.iter()
-            .enumerate()
-            .map(|(k, &b)| sole_rows.owns(bins, b, range.start + k)),
-    );
-    for &(slot, texel) in &sums.cells {
-        if sole[slot as usize] {
-            sole_rows.prefetch(list[slot as usize] as usize, texel);
-        }
-    }
-    for (&(slot, texel), &sum) in sums.cells.iter().zip(&sums.sums) {
-        let k = slot as usize;
-        if sole[k] {
-            // SAFETY: `owns` holds for entry `range.start + k`, and this task is the only one
-            // processing it.
-            unsafe { sole_rows.add(list[k] as usize, texel, sum) };
-        }
-    }
-    let (tex_offsets, texels) = sums.finish(list.len(), |k| !sole[k]);
+    // The texel sums of the other entries go to the reduction.
+    let (tex_offsets, texels) = sums.finish(list.len());
     for (rec, span) in records.iter_mut().zip(tex_offsets.windows(2)) {
         rec.texels = (span[0], span[1]);
     }
@@ -705,7 +704,7 @@ mod tests {
         let mut sums = TexelSums::default();
         sums.start(2, 4);
         sums.add(1, 3, [-0.0, 1.0, -0.0, 2.0]);
-        let (offsets, out) = sums.finish(2, |_| true);
+        let (offsets, out) = sums.finish(2);
         assert_eq!(offsets, [0, 0, 1]);
         let bits = out[0].1.map(f32::to_bits);
         assert_eq!(
@@ -722,35 +721,6 @@ mod tests {
         );
         let log = [(1u32, 3u32, [-0.0f32, 1.0, -0.0, 2.0])];
         assert_eq!(texel_sums_reference(&log, 2).1[0].1.map(f32::to_bits), bits);
-    }
-
-    /// Slots not kept by `finish` come out empty (their tile wrote them to the gradient rows);
-    /// the kept ones are unchanged, and every cell is reset either way.
-    #[test]
-    fn texel_sums_leave_out_the_slots_not_kept() {
-        let log = [
-            (0u32, 1u32, [1.0f32; 4]),
-            (1, 2, [2.0; 4]),
-            (2, 0, [3.0; 4]),
-            (1, 3, [4.0; 4]),
-            (0, 1, [5.0; 4]),
-        ];
-        let mut sums = TexelSums::default();
-        for keep_odd in [false, true] {
-            sums.start(3, 4);
-            for &(slot, texel, g) in &log {
-                sums.add(slot, texel, g);
-            }
-            let (offsets, out) = sums.finish(3, |k| (k % 2 == 1) == keep_odd);
-            assert!(sums.cell_of.iter().all(|&c| c == UNTOUCHED) && sums.cells.is_empty());
-            if keep_odd {
-                assert_eq!(offsets, [0, 0, 2, 2]);
-                assert_eq!(out, [(2, [2.0; 4]), (3, [4.0; 4])]);
-            } else {
-                assert_eq!(offsets, [0, 1, 1, 2]);
-                assert_eq!(out, [(1, [6.0; 4]), (0, [3.0; 4])]);
-            }
-        }
     }
 
     /// The accumulator gives, slot by slot, the same (texel, sum) set as the sort-based
@@ -777,7 +747,7 @@ mod tests {
             for &(slot, texel, g) in &log {
                 sums.add(slot, texel, g);
             }
-            let (offsets, out) = sums.finish(slots, |_| true);
+            let (offsets, out) = sums.finish(slots);
             assert!(sums.cell_of.iter().all(|&c| c == UNTOUCHED) && sums.cells.is_empty());
             let (ref_offsets, ref_out) = texel_sums_reference(&log, slots);
             assert_eq!(offsets, ref_offsets);

@@ -227,7 +227,10 @@ impl TileCandidates {
     /// Fills the candidates of the tile-local pixels `first..` of the tile `(i0, j0, i1, j1)`,
     /// stopping after the pixel that brings the run to [`CANDIDATE_CHUNK`] candidates or at the
     /// tile's end; returns the end of the run (exclusive). Pixel `q` considers the tile-list
-    /// slots `slots(q)`, in order.
+    /// slots `slots(q)`, in order. `also(slot, taps)` is called for every candidate, where its
+    /// texels are prefetched (the backward pass prefetches gradient rows there; it must not
+    /// change any value).
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn build<'a>(
         &mut self,
         set: &BillboardSet<'_>,
@@ -236,6 +239,7 @@ impl TileCandidates {
         (i0, j0, i1, j1): (u32, u32, u32, u32),
         first: usize,
         slots: impl Fn(usize) -> &'a [u32],
+        also: impl Fn(u32, &BilinearTaps),
     ) -> usize {
         let ts = set.texture_size;
         let tw = (i1 - i0) as usize;
@@ -266,6 +270,7 @@ impl TileCandidates {
                 for &ix in taps.indices() {
                     prefetch(texture, ix as usize);
                 }
+                also(k, &taps);
                 self.items.push(Candidate {
                     slot: k,
                     depth: hit.depth,
@@ -580,7 +585,7 @@ pub fn render_with(
             blended_slots.clear();
             let mut first = 0;
             while first < n_q {
-                let end = candidates.build(set, &prepared, list, rect, first, own);
+                let end = candidates.build(set, &prepared, list, rect, first, own, |_, _| {});
                 for q in first..end {
                     pixels.push(shade_pixel(
                         set,
