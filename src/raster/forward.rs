@@ -324,47 +324,46 @@ pub(crate) fn local_spans(
     list: &[u32],
     (i0, j0): (u32, u32),
     half_side: f32,
-) -> Vec<EntrySpans> {
+    spans: &mut Vec<EntrySpans>,
+) {
     let last = TILE_SIZE - 1;
-    list.iter()
-        .enumerate()
-        .map(|(k, &b)| {
-            // The records are scattered over the prepared array: fetch a few entries ahead.
-            if let Some(&ahead) = list.get(k + 8) {
-                prefetch_record(&prepared[ahead as usize]);
-            }
-            let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
-            let lo = |v: u32, o: u32| v.saturating_sub(o).min(last) as u8;
-            let hi = |v: u32, o: u32| if v < o { 0 } else { (v - o).min(last) as u8 };
-            // A box entirely left of / above the tile cannot be binned here; keep it exact anyway.
-            let (x0, y0) = (lo(p.pixel_min[0], i0), lo(p.pixel_min[1], j0));
-            let (x1, y1) = (hi(p.pixel_max[0], i0), hi(p.pixel_max[1], j0));
-            let mut spans = EntrySpans {
-                rows: [y0, y1],
-                cols: [[x0, x1]; TILE_SIZE as usize],
-            };
-            let wide = p.pixel_max[0] - p.pixel_min[0] + 1 >= QUAD_MIN_COLUMNS;
-            if let Some(quad) = wide.then(|| support_quad(&p.transform, half_side)).flatten() {
-                for y in y0..=y1 {
-                    let py = (j0 + u32::from(y)) as f32 + 0.5;
-                    spans.cols[y as usize] = match quad.row_span(py) {
-                        // Columns whose centres lie in [lo, hi], within the box.
-                        Some((lo, hi)) => {
-                            let (first, end) = pixel_range(lo, hi, i0 + u32::from(x1) + 1);
-                            let first = first.max(i0 + u32::from(x0));
-                            if first < end {
-                                [(first - i0) as u8, (end - 1 - i0) as u8]
-                            } else {
-                                [1, 0]
-                            }
+    spans.clear();
+    spans.extend(list.iter().enumerate().map(|(k, &b)| {
+        // The records are scattered over the prepared array: fetch a few entries ahead.
+        if let Some(&ahead) = list.get(k + 8) {
+            prefetch_record(&prepared[ahead as usize]);
+        }
+        let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
+        let lo = |v: u32, o: u32| v.saturating_sub(o).min(last) as u8;
+        let hi = |v: u32, o: u32| if v < o { 0 } else { (v - o).min(last) as u8 };
+        // A box entirely left of / above the tile cannot be binned here; keep it exact anyway.
+        let (x0, y0) = (lo(p.pixel_min[0], i0), lo(p.pixel_min[1], j0));
+        let (x1, y1) = (hi(p.pixel_max[0], i0), hi(p.pixel_max[1], j0));
+        let mut spans = EntrySpans {
+            rows: [y0, y1],
+            cols: [[x0, x1]; TILE_SIZE as usize],
+        };
+        let wide = p.pixel_max[0] - p.pixel_min[0] + 1 >= QUAD_MIN_COLUMNS;
+        if let Some(quad) = wide.then(|| support_quad(&p.transform, half_side)).flatten() {
+            for y in y0..=y1 {
+                let py = (j0 + u32::from(y)) as f32 + 0.5;
+                spans.cols[y as usize] = match quad.row_span(py) {
+                    // Columns whose centres lie in [lo, hi], within the box.
+                    Some((lo, hi)) => {
+                        let (first, end) = pixel_range(lo, hi, i0 + u32::from(x1) + 1);
+                        let first = first.max(i0 + u32::from(x0));
+                        if first < end {
+                            [(first - i0) as u8, (end - 1 - i0) as u8]
+                        } else {
+                            [1, 0]
                         }
-                        None => [1, 0],
-                    };
-                }
+                    }
+                    None => [1, 0],
+                };
             }
-            spans
-        })
-        .collect()
+        }
+        spans
+    }));
 }
 
 /// Per-pixel entry lists of one tile (per-pixel culling): the entries of tile-local pixel `q`
@@ -376,6 +375,8 @@ pub(crate) fn local_spans(
 pub(crate) struct PixelLists {
     pub(crate) offsets: Vec<u32>,
     pub(crate) items: Vec<u32>,
+    /// Write cursors of [`PixelLists::build`].
+    cursor: Vec<u32>,
 }
 
 impl PixelLists {
@@ -399,7 +400,9 @@ impl PixelLists {
         }
         self.items.clear();
         self.items.resize(self.offsets[pixels] as usize, 0);
-        let mut cursor: Vec<u32> = self.offsets[..pixels].to_vec();
+        let cursor = &mut self.cursor;
+        cursor.clear();
+        cursor.extend_from_slice(&self.offsets[..pixels]);
         for (k, e) in spans.iter().enumerate() {
             for y in e.rows[0]..=e.rows[1] {
                 let [x0, x1] = e.cols[y as usize];
@@ -417,6 +420,14 @@ impl PixelLists {
     pub(crate) fn of(&self, q: usize) -> &[u32] {
         &self.items[self.offsets[q] as usize..self.offsets[q + 1] as usize]
     }
+}
+
+/// Reusable per-task scratch of the forward tile pass (every field is rebuilt per tile).
+#[derive(Default)]
+struct TileScratch {
+    spans: Vec<EntrySpans>,
+    lists: PixelLists,
+    candidates: TileCandidates,
 }
 
 /// Splits `data` into consecutive mutable chunks of the given lengths.
@@ -568,39 +579,43 @@ pub fn render_with(
         .into_par_iter()
         .zip(tiles.par_iter_mut())
         .enumerate()
-        .for_each(|(t, (impact, (pixels, blended_slots)))| {
-            let list = &bins.entries[bins.tile_range(t)];
-            let rect @ (i0, j0, i1, j1) = tile_pixels(&bins, t, w, h);
-            let tw = (i1 - i0) as usize;
-            let n_q = tw * (j1 - j0) as usize;
-            let mut lists = PixelLists::default();
-            lists.build(
-                &local_spans(&prepared, list, (i0, j0), half_side),
-                tw,
-                (j1 - j0) as usize,
-            );
-            let own = |q: usize| lists.of(q);
-            let mut candidates = TileCandidates::default();
-            pixels.clear();
-            blended_slots.clear();
-            let mut first = 0;
-            while first < n_q {
-                let end = candidates.build(set, &prepared, list, rect, first, own, |_, _| {});
-                for q in first..end {
-                    pixels.push(shade_pixel(
-                        set,
-                        settings,
-                        &prepared,
-                        list,
-                        own(q),
-                        candidates.of(q),
-                        impact,
-                        blended_slots,
-                    ));
+        .for_each_init(
+            TileScratch::default,
+            |scratch, (t, (impact, (pixels, blended_slots)))| {
+                let list = &bins.entries[bins.tile_range(t)];
+                let rect @ (i0, j0, i1, j1) = tile_pixels(&bins, t, w, h);
+                let tw = (i1 - i0) as usize;
+                let n_q = tw * (j1 - j0) as usize;
+                let TileScratch {
+                    spans,
+                    lists,
+                    candidates,
+                } = scratch;
+                local_spans(&prepared, list, (i0, j0), half_side, spans);
+                lists.build(spans, tw, (j1 - j0) as usize);
+                let lists = &*lists;
+                let own = |q: usize| lists.of(q);
+                pixels.clear();
+                blended_slots.clear();
+                let mut first = 0;
+                while first < n_q {
+                    let end = candidates.build(set, &prepared, list, rect, first, own, |_, _| {});
+                    for q in first..end {
+                        pixels.push(shade_pixel(
+                            set,
+                            settings,
+                            &prepared,
+                            list,
+                            own(q),
+                            candidates.of(q),
+                            impact,
+                            blended_slots,
+                        ));
+                    }
+                    first = end;
                 }
-                first = end;
-            }
-        });
+            },
+        );
     let tiles = &spare.tiles;
     // Tile-major prefix sums, serial over tiles only: each tile's first pixel rank and first
     // blended slot.
