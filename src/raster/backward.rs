@@ -17,7 +17,7 @@
 
 use super::binning::TileBins;
 use super::forward::{
-    RenderOutput, TileCandidates, prefetch, prefetch_ptr, prefetch_record, prefetch_ref, split_by_lengths, tile_pixels,
+    RenderOutput, TileCandidates, prefetch, prefetch_record, prefetch_ref, prefetch_taps, split_by_lengths, tile_pixels,
 };
 use super::preprocess::Prepared;
 use super::{BillboardSet, SH_FLOATS};
@@ -187,11 +187,12 @@ impl SoleEntryRows {
         }
     }
 
-    /// Hints the CPU to fetch billboard `b`'s gradient of `texel` (no effect on values).
+    /// Hints the CPU to fetch billboard `b`'s gradients of the texels `taps` reads (no effect
+    /// on values).
     #[inline]
-    fn prefetch(&self, b: usize, texel: u32) {
-        if b < self.len && (texel as usize) < self.texels {
-            prefetch_ptr(self.rows.wrapping_add(b * self.texels + texel as usize).cast::<u8>());
+    fn prefetch(&self, b: usize, taps: &BilinearTaps) {
+        if b < self.len {
+            prefetch_taps(self.rows.wrapping_add(b * self.texels), taps);
         }
     }
 }
@@ -383,9 +384,7 @@ fn backward_tile(
     let sole: &[bool] = sole;
     let prefetch_sole_row = |k: u32, taps: &BilinearTaps| {
         if sole[k as usize] {
-            for &texel in taps.indices() {
-                sole_rows.prefetch(list[k as usize] as usize, texel);
-            }
+            sole_rows.prefetch(list[k as usize] as usize, taps);
         }
     };
     let rect = (i0, j0, i1, j1);

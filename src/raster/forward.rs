@@ -182,6 +182,23 @@ pub(crate) fn prefetch_ref<T>(r: &T) {
     prefetch_ptr(std::ptr::from_ref(r).cast::<u8>());
 }
 
+/// Hints the CPU to fetch the cache lines holding the texels `taps` reads from a texture (or
+/// texture-gradient row) starting at `texels`, each line once: the two taps of a row share a
+/// line unless they straddle a 64-byte boundary, and the taps come row by row, so comparing
+/// with the previous tap's line finds every repeat. No effect on results; `texels` is never
+/// dereferenced.
+#[inline(always)]
+pub(crate) fn prefetch_taps(texels: *const [f32; 4], taps: &BilinearTaps) {
+    let mut last_line = usize::MAX;
+    for &ix in taps.indices() {
+        let p = texels.wrapping_add(ix as usize).cast::<u8>();
+        if p as usize / 64 != last_line {
+            last_line = p as usize / 64;
+            prefetch_ptr(p);
+        }
+    }
+}
+
 /// Hints the CPU to fetch the cache line holding address `p`; `p` is never dereferenced.
 #[inline(always)]
 pub(crate) fn prefetch_ptr(p: *const u8) {
@@ -266,10 +283,7 @@ impl TileCandidates {
                 };
                 // One 16-byte RGBA texel per tap: the two taps of a row share a cache line unless
                 // they straddle a 64-byte boundary (one row pair in four).
-                let texture = set.texture_of(b);
-                for &ix in taps.indices() {
-                    prefetch(texture, ix as usize);
-                }
+                prefetch_taps(set.texture_of(b).as_ptr(), &taps);
                 also(k, &taps);
                 self.items.push(Candidate {
                     slot: k,
