@@ -321,7 +321,8 @@ pub(crate) struct EntrySpans {
 /// Boxes narrower than this many pixel columns are not culled row by row (nothing to gain).
 pub const QUAD_MIN_COLUMNS: u32 = 4;
 
-/// The [`EntrySpans`] of a tile's entries: the billboard's pixel box clamped to the tile and, when
+/// The [`EntrySpans`] of a tile's entries, written to `spans` (its old contents replaced, its
+/// storage reused): the billboard's pixel box clamped to the tile and, when
 /// the box is at least [`QUAD_MIN_COLUMNS`] wide and [`support_quad`] gives the projected support
 /// square, each row narrowed to [`SupportQuad::row_span`] (pixels outside it cannot hit the
 /// texture support, so culling them changes no value). The quad is recomputed per tile entry
