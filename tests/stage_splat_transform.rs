@@ -1073,3 +1073,72 @@ proptest! {
         }
     }
 }
+
+/// `splat_frames_x4` (four billboards in the lanes of `Vec4`s) gives `splat_frame`'s frames bit
+/// for bit: ordinary billboards in front, behind and around the near plane, degenerate, tiny and
+/// non-finite quaternions, overflowing and non-finite log-scales, NaN and huge positions; two
+/// cameras. Compared through `Debug`, which tells −0.0 from 0.0.
+#[test]
+fn splat_frames_x4_equal_splat_frame_bit_for_bit() {
+    use bbsplat::rng::Rng;
+    use bbsplat::stages::splat_transform::splat_frames_x4;
+    let cams = [
+        Camera::look_at(Vec3::new(0.3, -0.2, -4.0), Vec3::ZERO, Vec3::Y, 120.0, 110.0, 64, 48),
+        Camera::look_at(
+            Vec3::new(3.0, 1.0, 2.0),
+            Vec3::new(0.1, 0.0, 0.2),
+            Vec3::Y,
+            500.0,
+            500.0,
+            400,
+            300,
+        ),
+    ];
+    let mut rng = Rng::new(0x5eed_f4a3);
+    let special = |rng: &mut Rng, ordinary: f32| match rng.below(16) {
+        0 => f32::NAN,
+        1 => f32::INFINITY,
+        2 => -f32::INFINITY,
+        3 => 0.0,
+        4 => -0.0,
+        5 => 1e30,
+        6 => 1e-30,
+        _ => ordinary,
+    };
+    let (mut some, mut none) = (0, 0);
+    for case in 0..20_000 {
+        let cam = &cams[case % 2];
+        let rare = case % 5 == 0;
+        let pick = |rng: &mut Rng, v: f32| if rare { special(rng, v) } else { v };
+        let position = |rng: &mut Rng| {
+            let depth = if rng.below(4) == 0 {
+                rng.range(-1.0, 0.5)
+            } else {
+                rng.range(0.5, 8.0)
+            };
+            let (right, up) = (rng.range(-2.0, 2.0), rng.range(-2.0, 2.0));
+            let r = cam.rotation;
+            let p = cam.centre() + depth * r.row(2) + right * r.row(0) + up * r.row(1);
+            Vec3::new(pick(rng, p.x), pick(rng, p.y), pick(rng, p.z))
+        };
+        let scales = |rng: &mut Rng| {
+            let (u, v) = (rng.range(-4.0, 1.0), rng.range(-4.0, 100.0));
+            Vec2::new(pick(rng, u), pick(rng, v))
+        };
+        let quat = |rng: &mut Rng| {
+            let q = [0; 4].map(|_| rng.range(-1.0, 1.0));
+            let tiny = rng.below(8) == 0;
+            q.map(|c| pick(rng, if tiny { c * 1e-5 } else { c }))
+        };
+        let p: [Vec3; 4] = std::array::from_fn(|_| position(&mut rng));
+        let s: [Vec2; 4] = std::array::from_fn(|_| scales(&mut rng));
+        let q: [[f32; 4]; 4] = std::array::from_fn(|_| quat(&mut rng));
+        let want = std::array::from_fn::<_, 4, _>(|l| format!("{:?}", splat_frame(p[l], s[l], q[l], cam)));
+        let got = splat_frames_x4(p, s, q, cam).map(|f| format!("{f:?}"));
+        assert_eq!(got, want, "case {case}: p {p:?} s {s:?} q {q:?}");
+        for f in &want {
+            if f == "None" { none += 1 } else { some += 1 }
+        }
+    }
+    assert!(some > 20_000 && none > 5_000, "{some} frames, {none} culled");
+}

@@ -249,6 +249,139 @@ pub fn splat_frame(position: Vec3, log_scales: Vec2, quaternion: [f32; 4], camer
     frame_with_geometry(position, log_scales, quaternion, camera).map(|(f, _)| f)
 }
 
+/// [`splat_frame`] of four billboards at once, bit for bit the same frames.
+///
+/// The four billboards are the lanes of [`glam::Vec4`] values (SSE registers on x86-64) through
+/// the quaternion's normalisation and matrix, `R_cw` times the axes and `K·[a | b | c]`: each
+/// lane performs the scalar path's IEEE operations on the same operands in the same order (lane
+/// arithmetic rounds exactly like scalar arithmetic, and nothing is fused), so the frames are
+/// identical; the square roots, exponentials and the f64 view point are taken lane by lane with
+/// the scalar functions. Degenerate quaternions give the identity rotation, as in
+/// [`crate::stages::rotation::quat_to_rotation`].
+///
+/// ```
+/// use bbsplat::camera::Camera;
+/// use bbsplat::stages::splat_transform::{splat_frame, splat_frames_x4};
+/// use glam::{Vec2, Vec3};
+/// let cam = Camera::look_at(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, Vec3::Y, 100.0, 100.0, 64, 48);
+/// // The second billboard is behind the camera, the third has a degenerate quaternion.
+/// let p = [Vec3::new(0.2, 0.1, 0.0), Vec3::new(0.0, 0.0, -5.0), Vec3::ZERO, Vec3::new(-0.3, 0.2, 1.0)];
+/// let s = [Vec2::splat(-1.0); 4];
+/// let q = [[0.9, 0.1, 0.3, 0.2], [1.0, 0.0, 0.0, 0.0], [0.0; 4], [0.1, 0.7, -0.2, 0.4]];
+/// let frames = splat_frames_x4(p, s, q, &cam);
+/// assert_eq!(frames, std::array::from_fn(|l| splat_frame(p[l], s[l], q[l], &cam)));
+/// assert!(frames[1].is_none() && frames[2].is_some());
+/// ```
+pub fn splat_frames_x4(
+    positions: [Vec3; 4],
+    log_scales: [Vec2; 4],
+    quaternions: [[f32; 4]; 4],
+    camera: &Camera,
+) -> [Option<SplatFrame>; 4] {
+    use crate::stages::rotation::QUAT_NORM_SQ_MIN;
+    use glam::Vec4;
+    // Explicit lanes throughout: `array::map` and `array::from_fn` are not always inlined, and
+    // their closures would cost more than the arithmetic they carry.
+    let q = &quaternions;
+    let component = |c: usize| Vec4::new(q[0][c], q[1][c], q[2][c], q[3][c]);
+    let (qw, qx, qy, qz) = (component(0), component(1), component(2), component(3));
+    // `quat_to_rotation`: normalise, then the unit quaternion's matrix, or the identity.
+    let n2 = qw * qw + qx * qx + qy * qy + qz * qz;
+    let unit = n2.cmpge(Vec4::splat(QUAT_NORM_SQ_MIN)) & n2.cmplt(Vec4::splat(f32::INFINITY));
+    let inv = Vec4::ONE / Vec4::new(n2.x.sqrt(), n2.y.sqrt(), n2.z.sqrt(), n2.w.sqrt());
+    let (w, x, y, z) = (qw * inv, qx * inv, qy * inv, qz * inv);
+    let (xx, yy, zz) = (x * x, y * y, z * z);
+    let (xy, xz, yz) = (x * y, x * z, y * z);
+    let (wx, wy, wz) = (w * x, w * y, w * z);
+    let two = Vec4::splat(2.0);
+    let pick = |v: Vec4, identity: f32| Vec4::select(unit, v, Vec4::splat(identity));
+    // Columns of the rotation, component by component.
+    let col = [
+        [
+            pick(Vec4::ONE - two * (yy + zz), 1.0),
+            pick(two * (xy + wz), 0.0),
+            pick(two * (xz - wy), 0.0),
+        ],
+        [
+            pick(two * (xy - wz), 0.0),
+            pick(Vec4::ONE - two * (xx + zz), 1.0),
+            pick(two * (yz + wx), 0.0),
+        ],
+        [
+            pick(two * (xz + wy), 0.0),
+            pick(two * (yz - wx), 0.0),
+            pick(Vec4::ONE - two * (xx + yy), 1.0),
+        ],
+    ];
+    let ls = &log_scales;
+    let sx = Vec4::new(ls[0].x.exp(), ls[1].x.exp(), ls[2].x.exp(), ls[3].x.exp());
+    let sy = Vec4::new(ls[0].y.exp(), ls[1].y.exp(), ls[2].y.exp(), ls[3].y.exp());
+    // `R_cw · v` as glam's `Mat3 * Vec3` computes it: `(x_axis·v.x + y_axis·v.y) + z_axis·v.z`.
+    let r = camera.rotation;
+    let rotate = |v: &[Vec4; 3], i: usize| r.x_axis[i] * v[0] + r.y_axis[i] * v[1] + r.z_axis[i] * v[2];
+    let a = [
+        rotate(&col[0], 0) * sx,
+        rotate(&col[0], 1) * sx,
+        rotate(&col[0], 2) * sx,
+    ];
+    let b = [
+        rotate(&col[1], 0) * sy,
+        rotate(&col[1], 1) * sy,
+        rotate(&col[1], 2) * sy,
+    ];
+    let n = [rotate(&col[2], 0), rotate(&col[2], 1), rotate(&col[2], 2)];
+    let c = [
+        view_point(camera, positions[0]),
+        view_point(camera, positions[1]),
+        view_point(camera, positions[2]),
+        view_point(camera, positions[3]),
+    ];
+    let cx = Vec4::new(c[0].x, c[1].x, c[2].x, c[3].x);
+    let cy = Vec4::new(c[0].y, c[1].y, c[2].y, c[3].y);
+    let cz = Vec4::new(c[0].z, c[1].z, c[2].z, c[3].z);
+    // `transform_of`: tu = fx·(a.x, b.x, c.x) + cx·tw, tv = fy·(a.y, b.y, c.y) + cy·tw.
+    let tu = [
+        camera.fx * a[0] + camera.cx * a[2],
+        camera.fx * b[0] + camera.cx * b[2],
+        camera.fx * cx + camera.cx * cz,
+    ];
+    let tv = [
+        camera.fy * a[1] + camera.cy * a[2],
+        camera.fy * b[1] + camera.cy * b[2],
+        camera.fy * cy + camera.cy * cz,
+    ];
+    let lane = |v: &[Vec4; 3], l: usize| Vec3::new(v[0][l], v[1][l], v[2][l]);
+    let frame = |l: usize| {
+        let c = c[l];
+        if c.z.is_nan() || c.z <= NEAR_PLANE {
+            return None;
+        }
+        let transform = SplatTransform {
+            tu: lane(&tu, l),
+            tv: lane(&tv, l),
+            tw: Vec3::new(a[2][l], b[2][l], c.z),
+        };
+        let n = lane(&n, l);
+        let SplatTransform { tu, tv, tw } = transform;
+        if !(tu.is_finite() && tv.is_finite() && tw.is_finite() && n.is_finite()) {
+            return None;
+        }
+        let cos_theta = -n.dot(c);
+        if cos_theta == 0.0 {
+            return None;
+        }
+        let normal_sign = if cos_theta > 0.0 { 1.0 } else { -1.0 };
+        Some(SplatFrame {
+            transform,
+            normal_view: n * normal_sign,
+            normal_sign,
+            view_depth: c.z,
+            scales: Vec2::new(sx[l], sy[l]),
+        })
+    };
+    [frame(0), frame(1), frame(2), frame(3)]
+}
+
 /// [`splat_frame`], also returning the intermediate geometry for the backward pass.
 #[inline]
 fn frame_with_geometry(
