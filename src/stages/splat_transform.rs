@@ -361,23 +361,7 @@ pub fn splat_frames_x4(
             tv: lane(&tv, l),
             tw: Vec3::new(a[2][l], b[2][l], c.z),
         };
-        let n = lane(&n, l);
-        let SplatTransform { tu, tv, tw } = transform;
-        if !(tu.is_finite() && tv.is_finite() && tw.is_finite() && n.is_finite()) {
-            return None;
-        }
-        let cos_theta = -n.dot(c);
-        if cos_theta == 0.0 {
-            return None;
-        }
-        let normal_sign = if cos_theta > 0.0 { 1.0 } else { -1.0 };
-        Some(SplatFrame {
-            transform,
-            normal_view: n * normal_sign,
-            normal_sign,
-            view_depth: c.z,
-            scales: Vec2::new(sx[l], sy[l]),
-        })
+        checked_frame(transform, lane(&n, l), c, Vec2::new(sx[l], sy[l]))
     };
     [frame(0), frame(1), frame(2), frame(3)]
 }
@@ -394,24 +378,31 @@ fn frame_with_geometry(
     if g.c.z.is_nan() || g.c.z <= NEAR_PLANE {
         return None;
     }
-    let transform = transform_of(g.a, g.b, g.c, camera);
+    let frame = checked_frame(transform_of(g.a, g.b, g.c, camera), g.normal_view, g.c, g.scales)?;
+    Some((frame, g))
+}
+
+/// The frame of a billboard whose centre is in front of the near plane, from its transform,
+/// `R_cw·n`, `p_view` and scales; `None` when the transform or the normal is not finite or
+/// `cos θ = −(R_cw·n)·p_view` is exactly 0. Shared by [`splat_frame`] and [`splat_frames_x4`].
+#[inline]
+fn checked_frame(transform: SplatTransform, normal_view: Vec3, c: Vec3, scales: Vec2) -> Option<SplatFrame> {
     let SplatTransform { tu, tv, tw } = transform;
-    if !(tu.is_finite() && tv.is_finite() && tw.is_finite() && g.normal_view.is_finite()) {
+    if !(tu.is_finite() && tv.is_finite() && tw.is_finite() && normal_view.is_finite()) {
         return None;
     }
-    let cos_theta = -g.normal_view.dot(g.c);
+    let cos_theta = -normal_view.dot(c);
     if cos_theta == 0.0 {
         return None;
     }
     let normal_sign = if cos_theta > 0.0 { 1.0 } else { -1.0 };
-    let frame = SplatFrame {
+    Some(SplatFrame {
         transform,
-        normal_view: g.normal_view * normal_sign,
+        normal_view: normal_view * normal_sign,
         normal_sign,
-        view_depth: g.c.z,
-        scales: g.scales,
-    };
-    Some((frame, g))
+        view_depth: c.z,
+        scales,
+    })
 }
 
 /// [`project_splat`], also returning the intermediate geometry for the backward pass.
