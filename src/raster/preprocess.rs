@@ -91,8 +91,9 @@ pub fn preprocess(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSett
 /// [`preprocess`] into `prepared`, reusing its storage (its old values are all replaced).
 ///
 /// Each task takes [`PREPROCESS_CHUNK`] billboards: first their geometry, the splat frames four
-/// at a time ([`splat_frames_x4`], in vector lanes: about 17 % less time for the whole
-/// preprocess on the benchmark scene, `docs/perf.md`), then the SH colours of those that
+/// at a time ([`splat_frames_x4`], in vector lanes: 6-17 % less time for the whole preprocess
+/// on the benchmark scene, depending on the host's phase, `docs/perf.md`), then the SH colours
+/// of those that
 /// survived, [`SH_BATCH`] at a time ([`sh_colour_batch`], whose interleaved dependency chains
 /// take 21.8 ns a colour against 36.5 ns one at a time, `cargo bench --bench appearance --
 /// eval`). Every record equals [`prepare_one`]'s bit for bit (tested).
