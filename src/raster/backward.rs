@@ -618,14 +618,17 @@ pub fn render_backward(
                 }
                 if lb + 4 < len {
                     let la = lb + 4;
-                    let mut any = false;
+                    // The billboard will be reduced when one of its entries was blended (its
+                    // texel list may be empty: single-entry billboards' texel gradients are
+                    // already in the rows).
+                    let mut blended = false;
                     for rec in entry_records(b0 + la) {
+                        blended |= rec.blended;
                         for &(idx, _) in texels_of(rec) {
                             prefetch(d_tex, la * texels + idx as usize);
-                            any = true;
                         }
                     }
-                    if any {
+                    if blended {
                         let sh = set.sh_of(b0 + la);
                         prefetch(sh, 0);
                         prefetch(sh, SH_FLOATS - 1);
