@@ -607,20 +607,37 @@ fn render_and_backward(
 /// The backward pass of `out` under the fixed random per-pixel weighted loss (seed 77) on rgb
 /// and alpha: the gradients and the touched billboards.
 fn backward_of(scene: &Billboards, cam: &Camera, out: &RenderOutput) -> (RenderGradients, Vec<u32>) {
-    let loss = WeightedLoss::new(cam.pixel_count(), 77);
-    let (rgb, alpha) = (WeightedLoss::f32s(&loss.rgb), WeightedLoss::f32s(&loss.alpha));
     let mut g = RenderGradients::zeros(scene.len(), scene.texture_size);
-    let touched = render_backward(
-        &scene.as_set(),
-        out,
-        &ImageGradients {
-            rgb: &rgb,
-            alpha: Some(&alpha),
-            depth: None,
-        },
-        &mut g,
-    );
+    let touched = add_weighted_backward(scene, cam, out, 77, &mut g);
     (g, touched)
+}
+
+/// Adds into `g` the backward pass of `out` under the random per-pixel weighted loss of `seed`
+/// on rgb and alpha; returns the touched billboards.
+fn add_weighted_backward(
+    scene: &Billboards,
+    cam: &Camera,
+    out: &RenderOutput,
+    seed: u64,
+    g: &mut RenderGradients,
+) -> Vec<u32> {
+    let loss = WeightedLoss::new(cam.pixel_count(), seed);
+    let (rgb, alpha) = (WeightedLoss::f32s(&loss.rgb), WeightedLoss::f32s(&loss.alpha));
+    let ig = ImageGradients {
+        rgb: &rgb,
+        alpha: Some(&alpha),
+        depth: None,
+    };
+    render_backward(&scene.as_set(), out, &ig, g)
+}
+
+/// `f` run in a rayon pool of `threads` threads.
+fn with_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(f)
 }
 
 #[test]
@@ -628,13 +645,7 @@ fn bit_identical_across_runs_and_thread_counts() {
     let scene = small_scene(400, 96, 80, 16, 12.0, (0.0, 1.0), 21);
     let cam = random_scene_camera(96, 80);
     let s = settings(Vec3::splat(0.5));
-    let run = |threads: usize| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| render_and_backward(&scene, &cam, &s))
-    };
+    let run = |threads: usize| with_threads(threads, || render_and_backward(&scene, &cam, &s));
     let (o1, g1, t1) = run(1);
     for threads in [1, 2, 8] {
         let (o, g, t) = run(threads);
@@ -651,8 +662,9 @@ fn bit_identical_across_runs_and_thread_counts() {
 /// rows receive the second view's contributions one at a time on top of the first view's
 /// (the tile pass writes them directly); the others go through the per-billboard reduction.
 /// The texture gradients differ from the separate sums by at most 5.4e-8 of the largest
-/// `|g₁| + |g₂|` (measured, seed 31); the bound is 1e-6. A tile pass that overwrote the rows
-/// instead of adding fails it by 0.8.
+/// `|g₁| + |g₂|` (measured, seed 31); the bound is 1e-6. The SH gradients, summed per view by
+/// the reduction, equal the separate sums exactly. A tile pass that overwrote the rows instead
+/// of adding fails it by 0.8.
 #[test]
 fn two_views_accumulate_deterministically() {
     let scene = small_scene(400, 96, 80, 8, 4.0, (0.3, 0.9), 31);
@@ -669,34 +681,23 @@ fn two_views_accumulate_deterministically() {
         single > 100 && multi > 5,
         "{single} single-entry, {multi} multi-entry billboards"
     );
-    let accumulate = |threads: usize| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| {
-                let loss = WeightedLoss::new(cam1.pixel_count(), 5);
-                let (rgb, alpha) = (WeightedLoss::f32s(&loss.rgb), WeightedLoss::f32s(&loss.alpha));
-                let mut g = RenderGradients::zeros(scene.len(), scene.texture_size);
-                for cam in [&cam1, &cam2] {
-                    let out = render(&scene.as_set(), cam, &s);
-                    let ig = ImageGradients {
-                        rgb: &rgb,
-                        alpha: Some(&alpha),
-                        depth: None,
-                    };
-                    render_backward(&scene.as_set(), &out, &ig, &mut g);
-                }
-                g
-            })
+    // Both views into one buffer (`cams`), or each into its own.
+    let backward = |cams: &[&Camera]| {
+        let mut g = RenderGradients::zeros(scene.len(), scene.texture_size);
+        for &cam in cams {
+            add_weighted_backward(&scene, cam, &render(&scene.as_set(), cam, &s), 5, &mut g);
+        }
+        g
     };
-    let g1 = accumulate(1);
+    let g1 = with_threads(1, || backward(&[&cam1, &cam2]));
     for threads in [2, 8] {
-        assert_eq!(accumulate(threads), g1, "{threads} threads");
+        assert_eq!(
+            with_threads(threads, || backward(&[&cam1, &cam2])),
+            g1,
+            "{threads} threads"
+        );
     }
-    let separate: Vec<RenderGradients> = [&cam1, &cam2]
-        .map(|cam| backward_of_weighted(&scene, cam, &s, 5))
-        .into();
+    let separate = [backward(&[&cam1]), backward(&[&cam2])];
     let mut worst = 0.0f32;
     let mut scale = 0.0f32;
     for ((a, x), y) in g1.textures.iter().zip(&separate[0].textures).zip(&separate[1].textures) {
@@ -709,28 +710,11 @@ fn two_views_accumulate_deterministically() {
         scale > 0.0 && worst <= 1e-6 * scale,
         "texture gradients: {worst:e} off at scale {scale:e}"
     );
+    // The SH gradients go through the per-billboard reduction, which adds each view's sum to
+    // the row: `(0 + x) + y`, exactly `x + y`.
     for ((a, x), y) in g1.sh.iter().zip(&separate[0].sh).zip(&separate[1].sh) {
-        assert!(
-            (a - (x + y)).abs() <= 1e-6 * (1.0 + x.abs() + y.abs()),
-            "sh: {a} vs {x} + {y}"
-        );
+        assert_eq!(*a, x + y, "sh");
     }
-}
-
-/// The backward pass of a fresh render from `cam` under the random per-pixel weighted loss of
-/// `seed` on rgb and alpha, into fresh gradients.
-fn backward_of_weighted(scene: &Billboards, cam: &Camera, s: &RenderSettings, seed: u64) -> RenderGradients {
-    let loss = WeightedLoss::new(cam.pixel_count(), seed);
-    let (rgb, alpha) = (WeightedLoss::f32s(&loss.rgb), WeightedLoss::f32s(&loss.alpha));
-    let out = render(&scene.as_set(), cam, s);
-    let mut g = RenderGradients::zeros(scene.len(), scene.texture_size);
-    let ig = ImageGradients {
-        rgb: &rgb,
-        alpha: Some(&alpha),
-        depth: None,
-    };
-    render_backward(&scene.as_set(), &out, &ig, &mut g);
-    g
 }
 
 /// Every value a render reports (images, impact, visibility, counters), as bits.
