@@ -558,7 +558,7 @@ mod tests {
                     "case {case}, n = {n}, lane {l}, seed {seed:#x}"
                 );
             }
-            let one = raw_colours_scalar(n, [coeffs[2]], &[basis[2]]);
+            let one = raw_colours(n, [coeffs[2]], &[basis[2]]);
             assert_eq!(bits(&one[0]), bits(&reference[2]), "a batch of one, case {case}");
         }
     }
