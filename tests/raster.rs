@@ -912,3 +912,15 @@ fn backward_refuses_overlapping_tile_ranges() {
     };
     render_backward(&scene.as_set(), &out, &grads_in, &mut g);
 }
+
+/// Texture-gradient rows that do not match the billboard set (here sized for 4×4 textures
+/// while the set has 8×8) are refused before the tile pass writes any row in place.
+#[test]
+#[should_panic(expected = "gradient buffers must match the billboard set")]
+fn backward_refuses_texture_gradients_of_another_size() {
+    let scene = small_scene(200, 64, 48, 8, 10.0, (0.2, 0.9), 3);
+    let cam = random_scene_camera(64, 48);
+    let out = render(&scene.as_set(), &cam, &settings(Vec3::ZERO));
+    let mut g = RenderGradients::zeros(scene.len(), 4);
+    add_weighted_backward(&scene, &cam, &out, 1, &mut g);
+}
