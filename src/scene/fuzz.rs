@@ -2,7 +2,7 @@
 //!
 //! Each function must never panic on any input except to report a broken invariant (a bug).
 //! They are called by the cargo-fuzz targets in `fuzz/` and by the mutation property test
-//! `tests/scene_fuzz.rs`. Invariants checked on inputs that parse:
+//! `tests/suite/scene_fuzz.rs`. Invariants checked on inputs that parse:
 //! - COLMAP binary: writing the parsed records reproduces the input bytes exactly (the layout
 //!   has no slack, so parse is injective);
 //! - COLMAP text: write-then-parse gives the same records (compared through `Debug`, so that

@@ -1,10 +1,8 @@
 //! Loading small synthetic datasets: detection, splits, downscaling, compositing, extent.
 
-mod scene_support;
-
+use crate::scene_support::*;
 use bbsplat::scene::colmap::read_model;
 use bbsplat::scene::{Background, LoadOptions, SceneFormat, UndistortMode, colmap_binary, colmap_text, load};
-use scene_support::*;
 
 fn quiet() -> LoadOptions {
     LoadOptions {

@@ -2,7 +2,7 @@
 //! one-sided convention at texel borders, non-finite coordinates, and broken backwards that the
 //! checker must reject (including the paper's Algorithm 1 as printed).
 //!
-//! Tolerance measurement: `cargo test --test stage_bilinear -- --ignored --nocapture` runs the
+//! Tolerance measurement: `cargo test --test suite stage_bilinear:: -- --ignored --nocapture` runs the
 //! property's case generator over many seeds and prints the worst observed statistics.
 
 use bbsplat::gradcheck::{GradReport, GradTolerance, StepRule, check_vjp, random_weights};

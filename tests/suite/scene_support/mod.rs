@@ -1,5 +1,4 @@
 //! Helpers shared by the scene tests: temporary folders and small synthetic datasets.
-#![allow(dead_code)]
 
 use bbsplat::scene::colmap::{
     CameraModel, ColmapCamera, ColmapImage, ColmapModel, ColmapPoint3D, Point2D, TrackElement,

@@ -115,7 +115,7 @@ fn every_mode_trains() {
 
 /// The sparse-vs-dense Adam measurement of `docs/training.md`. Not run by default (tens of
 /// seconds); run with
-/// `cargo test --test train_demo -- --ignored --nocapture measure_adam_modes`.
+/// `cargo test --test suite train_demo:: -- --ignored --nocapture measure_adam_modes`.
 /// Size from `BBSPLAT_MEASURE="resolution points iterations"` (default `48 1000 1500`).
 #[test]
 #[ignore]

@@ -435,7 +435,7 @@ macro_rules! fd_banded_test {
 }
 
 /// Tolerance of the banded geometry checks. Measured over 64 seeds × 3 groups
-/// (`FD_MEASURE=1 FD_SEEDS=64 cargo test --test raster fd_ -- --nocapture`): worst relative L2
+/// (`FD_MEASURE=1 FD_SEEDS=64 cargo test --test suite raster::fd_ -- --nocapture`): worst relative L2
 /// error 9.8e-4, worst elementwise ratio 2.8 against (atol 1e-3, rtol 5e-3); bounds set at
 /// about twice the worst observed. A 1 % scale error (relative L2 1e-2) fails.
 fn geometry_tolerance() -> GradTolerance {

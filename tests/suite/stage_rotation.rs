@@ -1,6 +1,6 @@
 //! Quaternion → rotation: FD gradient property, invariants, broken backwards, hard cases.
 //!
-//! Tolerances were measured with `cargo test --release --test stage_rotation -- --ignored
+//! Tolerances were measured with `cargo test --release --test suite stage_rotation:: -- --ignored
 //! --nocapture measure` (worst case over 40 seeds × 256 cases per property); the numbers are in
 //! `docs/numerics-geometry.md` and next to each constant.
 

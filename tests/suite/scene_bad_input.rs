@@ -1,12 +1,10 @@
 //! Bad input is refused with a message naming the file, the record and the problem.
 
-mod scene_support;
-
+use crate::scene_support::*;
 use bbsplat::scene::colmap_binary as bin;
 use bbsplat::scene::colmap_text as txt;
 use bbsplat::scene::nerf_json::parse_transforms;
 use bbsplat::scene::{LoadOptions, SceneError, load};
-use scene_support::*;
 use std::path::Path;
 
 fn quiet() -> LoadOptions {

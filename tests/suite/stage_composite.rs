@@ -3,7 +3,7 @@
 //! incremental (hot-loop) API, and broken backwards the checker must reject (including the
 //! paper's Algorithm 2 as printed).
 //!
-//! Tolerance measurement: `cargo test --test stage_composite -- --ignored --nocapture`.
+//! Tolerance measurement: `cargo test --test suite stage_composite:: -- --ignored --nocapture`.
 
 use bbsplat::gradcheck::{GradReport, GradTolerance, StepRule, check_vjp, random_weights};
 use bbsplat::rng::Rng;

@@ -1,7 +1,7 @@
 //! Ray-plane intersection: FD gradient property, round trip, guards, broken backwards and the
 //! named hard cases (grazing rays, rays along a billboard axis, elongated billboards, NaN).
 //!
-//! Tolerances were measured with `cargo test --test stage_ray_plane -- --ignored --nocapture
+//! Tolerances were measured with `cargo test --test suite stage_ray_plane:: -- --ignored --nocapture
 //! measure` (worst case over 40 seeds × 256 cases); the numbers are in
 //! `docs/numerics-geometry.md` and next to each constant.
 

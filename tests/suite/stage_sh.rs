@@ -3,7 +3,7 @@
 //! orthonormality, view independence of degree 0, degenerate and far directions, and broken
 //! backwards the checker must reject.
 //!
-//! Tolerance measurement: `cargo test --test stage_sh -- --ignored --nocapture`.
+//! Tolerance measurement: `cargo test --test suite stage_sh:: -- --ignored --nocapture`.
 
 // Index loops mirror the (l, m) and (k, channel) formulas they implement.
 #![allow(clippy::needless_range_loop)]

@@ -1,7 +1,7 @@
 //! Splat transform `T`, camera-facing normal and screen bounds: FD gradient property, projection
 //! invariants, broken backwards and the named hard cases.
 //!
-//! Tolerances were measured with `cargo test --test stage_splat_transform -- --ignored --nocapture
+//! Tolerances were measured with `cargo test --test suite stage_splat_transform:: -- --ignored --nocapture
 //! measure` (worst case over 40 seeds × 256 cases); the numbers are in
 //! `docs/numerics-geometry.md` and next to each constant.
 

@@ -1,0 +1,31 @@
+//! The integration tests, one crate: each module is one area (stages, raster, scene input,
+//! initialisation, training, files, command line). One binary links once, instead of one per file.
+
+#![allow(clippy::needless_range_loop)]
+
+mod cli;
+mod init_fibonacci;
+mod init_fps;
+mod init_scene;
+mod loss_ssim;
+mod model_file;
+mod model_knn;
+mod raster;
+mod scene_bad_input;
+mod scene_colmap_roundtrip;
+mod scene_distortion;
+mod scene_fuzz;
+mod scene_load;
+mod scene_real_data;
+#[allow(dead_code)]
+mod scene_support;
+mod stage_bilinear;
+mod stage_composite;
+mod stage_ray_plane;
+mod stage_rotation;
+mod stage_sh;
+mod stage_splat_transform;
+mod train_checkpoint;
+mod train_demo;
+mod train_regularise;
+mod train_relocate;
