@@ -110,6 +110,28 @@ impl Camera {
         -(self.rotation.transpose() * self.translation)
     }
 
+    /// `position − centre`, the vector from the camera centre to `position` in the world frame
+    /// (the SH view direction before normalisation), computed in f64 and rounded once.
+    ///
+    /// In f32, a camera centre near 1e4 units is itself rounded by up to 5e-4 and the
+    /// subtraction cancels, so a billboard a few units away would see its direction off by about
+    /// 1e-4 rad; here the centre `−Rᵀt` and the difference are taken in f64, leaving only the
+    /// final rounding of the offset.
+    ///
+    /// ```
+    /// use bbsplat::camera::Camera;
+    /// use glam::Vec3;
+    /// let eye = Vec3::new(1.0e4, -2.0e4, 3.0e4);
+    /// let cam = Camera::look_at(eye, eye + Vec3::new(1.0, 2.0, 3.0), Vec3::Y, 100.0, 100.0, 64, 48);
+    /// let offset = cam.view_offset(eye + Vec3::new(0.25, 0.5, 1.0));
+    /// assert!((offset - Vec3::new(0.25, 0.5, 1.0)).length() < 1e-3);
+    /// ```
+    #[inline]
+    pub fn view_offset(&self, position: Vec3) -> Vec3 {
+        let centre = -(self.rotation.as_dmat3().transpose() * self.translation.as_dvec3());
+        (position.as_dvec3() - centre).as_vec3()
+    }
+
     /// Projects a world point to continuous pixel coordinates; `None` when the point is not in
     /// front of the camera (view z ≤ 0).
     pub fn project(&self, p: Vec3) -> Option<(f32, f32)> {

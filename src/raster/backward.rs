@@ -22,7 +22,7 @@ use super::forward::{
 use super::preprocess::Prepared;
 use super::{BillboardSet, SH_FLOATS};
 use crate::stages::bilinear::BilinearTaps;
-use crate::stages::composite::ClampGradient;
+use crate::stages::composite::{Blend, CompositeBackState, Step, classify};
 use crate::stages::ray_plane::intersect_vjp;
 use crate::stages::sh::sh_colour_vjp_clamped;
 use crate::stages::splat_transform::{SplatTransform, project_splat_vjp_visible};
@@ -93,9 +93,9 @@ pub struct ImageGradients<'a> {
 struct Blended {
     slot: u32,
     billboard: u32,
-    alpha: f32,
-    clamped: bool,
-    t: f32,
+    /// The compositing stage's record of the entry (alpha after the clamp, transmittance in
+    /// front, weight, clamp flag), replayed bit for bit as the forward made it.
+    blend: Blend,
     depth: f32,
     taps: BilinearTaps,
     colour: Vec3,
@@ -424,7 +424,8 @@ fn backward_tile(
             if candidates.is_empty() {
                 continue;
             }
-            // Front to back: rebuild the blended entries and their transmittances.
+            // Front to back: rebuild the blended entries and their transmittances with the
+            // compositing stage's own decision ([`classify`]), as the forward made them.
             let (px, py) = (i as f32 + 0.5, j as f32 + 0.5);
             scratch.blended.clear();
             let mut t = 1.0f32;
@@ -433,44 +434,35 @@ fn backward_tile(
                 let b = list[k];
                 let taps = cand.taps;
                 let [r, g, bl, a] = taps.sample_rgba(set.texture_of(b as usize));
-                let alpha = a.min(params.max_alpha);
-                if alpha < params.min_alpha {
+                // Only the forward's blended entries are replayed, with the same arithmetic,
+                // so each classifies as blended again.
+                let Step::Blend(blend) = classify(t, a, params) else {
+                    debug_assert!(false, "a replayed entry must blend again");
                     continue;
-                }
+                };
                 let pr = prepared[b as usize].as_ref().expect("binned billboards are prepared");
                 scratch.blended.push(Blended {
                     slot: k as u32,
                     billboard: b,
-                    alpha,
-                    clamped: a > params.max_alpha,
-                    t,
+                    blend,
                     depth: cand.depth,
                     taps,
                     colour: Vec3::new(r, g, bl) + pr.rgb,
                 });
-                t *= 1.0 - alpha;
+                t = blend.next_transmittance;
             }
-            // Back to front: features (r, g, b, 1, depth); behind-colour starts at the background.
-            let mut behind_rgb = bg;
-            let mut behind_alpha = 0.0f32;
-            let mut behind_depth = 0.0f32;
+            // Back to front with the stage's [`CompositeBackState`]: features (r, g, b, 1, depth),
+            // the colour behind starting at the background (its opacity and depth are 0); the
+            // stage applies the clamp's gradient rule of `params`.
+            let mut back = CompositeBackState::new(&[bg.x, bg.y, bg.z, 0.0, 0.0]);
+            let d_out = [g_rgb.x, g_rgb.y, g_rgb.z, g_alpha, g_depth];
             for e in (0..scratch.blended.len()).rev() {
                 let bl = scratch.blended[e];
-                let w = bl.alpha * bl.t;
-                let d_alpha = bl.t
-                    * ((bl.colour - behind_rgb).dot(g_rgb)
-                        + (1.0 - behind_alpha) * g_alpha
-                        + (bl.depth - behind_depth) * g_depth);
-                behind_rgb = bl.colour * bl.alpha + behind_rgb * (1.0 - bl.alpha);
-                behind_alpha = bl.alpha + behind_alpha * (1.0 - bl.alpha);
-                behind_depth = bl.depth * bl.alpha + behind_depth * (1.0 - bl.alpha);
-                // The clamp min(max_alpha, a): exact derivative (0 where active) or the
-                // reference's pass-through, as the compositing parameters say.
-                let d_tex_alpha = match (bl.clamped, params.clamp_gradient) {
-                    (true, ClampGradient::Exact) => 0.0,
-                    _ => d_alpha,
-                };
-                let d_colour = g_rgb * w;
+                let c = bl.colour;
+                let grad = back.pop(&bl.blend, &[c.x, c.y, c.z, 1.0, bl.depth], &d_out, params);
+                let d_tex_alpha = grad.d_alpha;
+                let [dr, dg, db, _, d_depth] = grad.d_features;
+                let d_colour = Vec3::new(dr, dg, db);
                 let b = bl.billboard as usize;
                 let slot = bl.slot;
                 let d_rgba = [d_colour.x, d_colour.y, d_colour.z, d_tex_alpha];
@@ -485,7 +477,7 @@ fn backward_tile(
                         .vjp_rgba(set.texture_of(b), d_rgba, |texel, g| sums.add(slot, texel, g))
                 };
                 let pr = prepared[b].as_ref().expect("blended entries are prepared");
-                let d_t = intersect_vjp(&pr.transform, px, py, du, dv, w * g_depth);
+                let d_t = intersect_vjp(&pr.transform, px, py, du, dv, d_depth);
                 let rec = &mut records[bl.slot as usize];
                 add_transform(&mut rec.transform, &d_t);
                 rec.rgb += d_colour;
@@ -575,7 +567,6 @@ pub fn render_backward(
         grads.background += tg.background;
     }
     let camera = &state.camera;
-    let centre = camera.centre();
     let degree = state.settings.sh_degree;
     // The records of the entries of billboard `b`, in tile order.
     let entry_records = |b: usize| {
@@ -676,8 +667,7 @@ pub fn render_backward(
                 let d_pos_sh = sh_colour_vjp_clamped(
                     degree,
                     set.sh_of(b),
-                    set.positions[b],
-                    centre,
+                    camera.view_offset(set.positions[b]),
                     prepared.sh_clamped,
                     d_rgb,
                     d_sh,

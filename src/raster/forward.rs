@@ -6,6 +6,7 @@ use super::{BillboardSet, RenderSettings, TILE_SIZE};
 use crate::camera::Camera;
 use crate::memory::{refill, resize_for_overwrite};
 use crate::stages::bilinear::{self, BilinearTaps};
+use crate::stages::composite::{CompositeState, Step};
 use crate::stages::ray_plane::intersect;
 use crate::stages::splat_transform::{pixel_range, support_quad};
 use glam::Vec3;
@@ -102,8 +103,14 @@ struct PixelOut {
     blended: u32,
 }
 
-/// Composites one pixel of a tile over its candidates (see [`TileCandidates`]); adds `α·T` of
-/// each blended entry to `impact` and appends its slot to `blended_slots`. `own` is the pixel's
+/// Features composited per pixel by the forward pass: colour (3), opacity (the constant 1, so
+/// that its composite is `Σ α·T`), view depth of the hit (1) and the facing normal (3).
+const FORWARD_FEATURES: usize = 8;
+
+/// Composites one pixel of a tile over its candidates (see [`TileCandidates`]) with the
+/// compositing stage ([`CompositeState`]: the clamp, skip and stop decisions and the weighted
+/// sums are the stage's own code, the code its property tests prove); adds `α·T` of each
+/// blended entry to `impact` and appends its slot to `blended_slots`. `own` is the pixel's
 /// entry list (for the work counters).
 #[inline]
 #[allow(clippy::too_many_arguments)]
@@ -118,45 +125,48 @@ fn shade_pixel(
     blended_slots: &mut Vec<u32>,
 ) -> PixelOut {
     let params = &settings.composite;
-    let mut t = 1.0f32;
-    let mut out = PixelOut {
-        median: 0.0,
-        evaluated: own.len() as u32,
-        ..Default::default()
-    };
+    let mut state = CompositeState::<FORWARD_FEATURES>::new();
+    let mut median = 0.0;
+    let mut evaluated = own.len() as u32;
+    let mut blended = 0;
     for cand in candidates {
         let k = cand.slot as usize;
         let b = list[k] as usize;
         // All four channels in one go: the texels' lines are fetched for alpha anyway.
         let [r, g, bl, a] = cand.taps.sample_rgba(set.texture_of(b));
-        let alpha = a.min(params.max_alpha);
-        if alpha < params.min_alpha {
-            continue;
-        }
-        let next_t = t * (1.0 - alpha);
-        if next_t < params.min_transmittance {
-            // The entries up to and including this one were evaluated.
-            out.evaluated = own.partition_point(|&x| x as usize <= k) as u32;
-            break;
-        }
+        let blend = match state.step(a, params) {
+            Step::Skip => continue,
+            Step::Stop => {
+                // The entries up to and including this one were evaluated.
+                evaluated = own.partition_point(|&x| x as usize <= k) as u32;
+                state.stop();
+                break;
+            }
+            Step::Blend(blend) => blend,
+        };
         let p = prepared[b].as_ref().expect("binned billboards are prepared");
-        let w = alpha * t;
         let c = Vec3::new(r, g, bl) + p.rgb;
-        out.rgb += c * w;
-        out.alpha += w;
-        out.depth += cand.depth * w;
-        out.normal += p.normal * w;
-        if t > 0.5 && alpha > 0.05 {
-            out.median = cand.depth;
+        let n = p.normal;
+        state.blend(&blend, &[c.x, c.y, c.z, 1.0, cand.depth, n.x, n.y, n.z]);
+        if blend.transmittance > 0.5 && blend.alpha > 0.05 {
+            median = cand.depth;
         }
-        impact[k] += w;
-        out.blended += 1;
+        impact[k] += blend.weight;
+        blended += 1;
         blended_slots.push(k as u32);
-        t = next_t;
     }
-    out.rgb += settings.background * t;
-    out.final_t = t;
-    out
+    let bg = settings.background;
+    let [r, g, b, alpha, depth, nx, ny, nz] = state.finish(&[bg.x, bg.y, bg.z, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    PixelOut {
+        rgb: Vec3::new(r, g, b),
+        alpha,
+        depth,
+        median,
+        normal: Vec3::new(nx, ny, nz),
+        final_t: state.transmittance,
+        evaluated,
+        blended,
+    }
 }
 
 /// Hints the CPU to fetch the cache line holding `data[i]` (no effect on results).

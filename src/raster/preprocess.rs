@@ -40,7 +40,7 @@ pub struct Prepared {
 /// bit, its SH colours evaluated several billboards at a time).
 pub fn prepare_one(set: &BillboardSet<'_>, i: usize, camera: &Camera, settings: &RenderSettings) -> Option<Prepared> {
     let mut prepared = prepare_geometry(set, i, camera)?;
-    let colour = sh_colour(settings.sh_degree, set.sh_of(i), set.positions[i], camera.centre());
+    let colour = sh_colour(settings.sh_degree, set.sh_of(i), camera.view_offset(set.positions[i]));
     set_colour(&mut prepared, colour);
     Some(prepared)
 }
@@ -103,7 +103,6 @@ pub fn preprocess_into(
     settings: &RenderSettings,
     prepared: &mut Vec<Option<Prepared>>,
 ) {
-    let centre = camera.centre();
     let degree = settings.sh_degree;
     let half_side = support_half_side(set.texture_size);
     resize_for_overwrite(prepared, set.len(), None)
@@ -141,8 +140,7 @@ pub fn preprocess_into(
                 let colours = sh_colour_batch(
                     degree,
                     index.map(|i| set.sh_of(i)),
-                    index.map(|i| set.positions[i]),
-                    centre,
+                    index.map(|i| camera.view_offset(set.positions[i])),
                 );
                 for (&k, colour) in group.iter().zip(colours) {
                     if let Some(p) = out[k].as_mut() {
@@ -154,7 +152,11 @@ pub fn preprocess_into(
                 if let Some(p) = out[k].as_mut() {
                     set_colour(
                         p,
-                        sh_colour(degree, set.sh_of(first + k), set.positions[first + k], centre),
+                        sh_colour(
+                            degree,
+                            set.sh_of(first + k),
+                            camera.view_offset(set.positions[first + k]),
+                        ),
                     );
                 }
             }

@@ -49,7 +49,7 @@ pub fn render_reference(set: &BillboardSet<'_>, camera: &Camera, settings: &Rend
         .map(|b| planar_textures(set.texture_of(b), set.texels()))
         .unzip();
     let sh_rgb: Vec<_> = (0..set.len())
-        .map(|b| sh_colour(settings.sh_degree, set.sh_of(b), set.positions[b], camera.centre()).rgb)
+        .map(|b| sh_colour(settings.sh_degree, set.sh_of(b), camera.view_offset(set.positions[b])).rgb)
         .collect();
     let mut out = ReferenceOutput {
         rgb: vec![0.0; 3 * n_pix],

@@ -7,11 +7,16 @@
 //!   `Y₃ = −0.48860·x`, then the degree-2 and degree-3 polynomials of [`sh_basis`].
 //! - Coefficients are stored `[coeff k][rgb]` interleaved: 16 × 3 = 48 floats per primitive,
 //!   `coeffs[3k + c]`. Only the first `3·(degree + 1)²` are read.
-//! - The view direction is `normalize(position − camera_centre)` (from the camera to the point).
+//! - The view direction is `normalize(view_offset)`, where `view_offset = position − camera_centre`
+//!   is the vector from the camera centre to the point in the world frame. The functions take the
+//!   offset, not the two points, so that the caller can form it accurately: the rasterizer uses
+//!   [`crate::camera::Camera::view_offset`], which subtracts in f64 (in f32, positions and a camera
+//!   centre near 1e4 lose about 1e-3 of the offset, 1e-4 of the colour).
+//!   The position gradient the backward returns is `∂L/∂view_offset`, which equals `∂L/∂position`.
 //! - Colour per channel is `max(Σₖ Yₖ(dir)·coeffs[3k + c] + 0.5, 0)` (clamped at 0, no upper
 //!   clamp). A channel is *clamped* when the sum plus 0.5 is **strictly** negative; its gradient
 //!   is then 0 (at exactly 0 the gradient passes).
-//! - Degenerate direction: when `|position − camera_centre| ≤` [`SH_MIN_DISTANCE`] or the
+//! - Degenerate direction: when `|view_offset| ≤` [`SH_MIN_DISTANCE`] or the
 //!   squared distance is not finite (NaN or overflowing coordinates), only degree 0 is evaluated
 //!   (the direction-averaged colour: higher bands integrate to 0 over the sphere), and the
 //!   position gradient is exactly 0.
@@ -21,7 +26,7 @@
 //! use glam::Vec3;
 //! let mut coeffs = [0.0f32; SH_FLOATS];
 //! coeffs[..3].copy_from_slice(&[rgb_to_sh(0.2), rgb_to_sh(0.5), rgb_to_sh(0.9)]);
-//! let c = sh_colour(3, &coeffs, Vec3::new(1.0, 2.0, 3.0), Vec3::ZERO);
+//! let c = sh_colour(3, &coeffs, Vec3::new(1.0, 2.0, 3.0));
 //! assert!((c.rgb - Vec3::new(0.2, 0.5, 0.9)).abs().max_element() < 1e-6);
 //! assert_eq!(c.clamped, [false; 3]);
 //! ```
@@ -213,8 +218,8 @@ pub struct ShColour {
 
 /// The view direction and its length, or `None` when degenerate (see the module docs).
 #[inline]
-fn view_direction(position: Vec3, camera_centre: Vec3) -> Option<(Vec3, f32)> {
-    let d = position - camera_centre;
+fn view_direction(view_offset: Vec3) -> Option<(Vec3, f32)> {
+    let d = view_offset;
     let len2 = d.length_squared();
     // Written positively: NaN and +inf are degenerate.
     if len2 > SH_MIN_DISTANCE * SH_MIN_DISTANCE && len2 < f32::INFINITY {
@@ -227,14 +232,10 @@ fn view_direction(position: Vec3, camera_centre: Vec3) -> Option<(Vec3, f32)> {
 
 /// Basis values and the effective degree at the view direction.
 #[inline]
-fn basis_for(degree: u32, position: Vec3, camera_centre: Vec3, basis: &mut [f32; 16]) -> Option<(Vec3, f32)> {
+fn basis_for(degree: u32, view_offset: Vec3, basis: &mut [f32; 16]) -> Option<(Vec3, f32)> {
     check_degree(degree);
     // Degree 0 is view-independent: no direction needed.
-    let view = if degree > 0 {
-        view_direction(position, camera_centre)
-    } else {
-        None
-    };
+    let view = if degree > 0 { view_direction(view_offset) } else { None };
     match view {
         Some((dir, _)) => sh_basis(degree, dir, basis),
         None => sh_basis(0, Vec3::ZERO, basis),
@@ -254,14 +255,14 @@ fn raw_colour(n: usize, coeffs: &[f32], basis: &[f32; 16]) -> [f32; 3] {
     raw
 }
 
-/// Colour of a primitive at `position` seen from `camera_centre`, from SH coefficients of
+/// Colour of a primitive seen along `view_offset` (its position minus the camera centre), from SH coefficients of
 /// `degree` (layout `[coeff][rgb]`, at least `3·(degree + 1)²` values).
 ///
 /// # Panics
 /// If `degree > 3` or `coeffs` is too short.
-pub fn sh_colour(degree: u32, coeffs: &[f32], position: Vec3, camera_centre: Vec3) -> ShColour {
+pub fn sh_colour(degree: u32, coeffs: &[f32], view_offset: Vec3) -> ShColour {
     let mut basis = [0.0; 16];
-    let view = basis_for(degree, position, camera_centre, &mut basis);
+    let view = basis_for(degree, view_offset, &mut basis);
     let n = if view.is_some() { sh_coeff_count(degree) } else { 1 };
     clamp_colour(raw_colour(n, coeffs, &basis))
 }
@@ -275,7 +276,7 @@ fn clamp_colour(raw: [f32; 3]) -> ShColour {
     }
 }
 
-/// [`sh_colour`] of `L` primitives at once (`coeffs[l]` at `positions[l]`), bit for bit the same
+/// [`sh_colour`] of `L` primitives at once (`coeffs[l]` seen along `view_offsets[l]`), bit for bit the same
 /// values as `L` separate calls (tested).
 ///
 /// Each channel's sum over the coefficients is a chain of dependent additions; a single call
@@ -294,20 +295,15 @@ fn clamp_colour(raw: [f32; 3]) -> ShColour {
 /// let a: Vec<f32> = (0..SH_FLOATS).map(|k| (k as f32 * 0.37).sin()).collect();
 /// let b: Vec<f32> = (0..SH_FLOATS).map(|k| (k as f32 * 0.11).cos()).collect();
 /// let (pa, pb, eye) = (Vec3::new(1.0, 2.0, 3.0), Vec3::new(-1.0, 0.5, 2.0), Vec3::ZERO);
-/// let both = sh_colour_batch(3, [&a, &b], [pa, pb], eye);
-/// assert_eq!(both, [sh_colour(3, &a, pa, eye), sh_colour(3, &b, pb, eye)]);
-/// assert_eq!(sh_colour_batch::<0>(3, [], [], eye), []); // an empty batch is fine
+/// let both = sh_colour_batch(3, [&a, &b], ([pa, pb]).map(|p| p - eye));
+/// assert_eq!(both, [sh_colour(3, &a, pa - eye), sh_colour(3, &b, pb - eye)]);
+/// assert_eq!(sh_colour_batch::<0>(3, [], []), []); // an empty batch is fine
 /// ```
-pub fn sh_colour_batch<const L: usize>(
-    degree: u32,
-    coeffs: [&[f32]; L],
-    positions: [Vec3; L],
-    camera_centre: Vec3,
-) -> [ShColour; L] {
+pub fn sh_colour_batch<const L: usize>(degree: u32, coeffs: [&[f32]; L], view_offsets: [Vec3; L]) -> [ShColour; L] {
     let mut basis = [[0.0f32; 16]; L];
     let mut counts = [1usize; L];
     for l in 0..L {
-        let view = basis_for(degree, positions[l], camera_centre, &mut basis[l]);
+        let view = basis_for(degree, view_offsets[l], &mut basis[l]);
         counts[l] = if view.is_some() { sh_coeff_count(degree) } else { 1 };
     }
     // (`L = 0`: nothing to evaluate; the loops below are empty.)
@@ -319,8 +315,8 @@ pub fn sh_colour_batch<const L: usize>(
 }
 
 /// Vector-Jacobian product of [`sh_colour`] for `d_rgb = ∂L/∂rgb`: **adds** `∂L/∂coeffs` into
-/// `d_coeffs` (same layout, at least `3·(degree + 1)²` values) and returns `∂L/∂position`
-/// through the normalised view direction. (`∂L/∂camera_centre` is its negative.) Clamped
+/// `d_coeffs` (same layout, at least `3·(degree + 1)²` values) and returns `∂L/∂view_offset`
+/// (= `∂L/∂position`) through the normalised view direction. (`∂L/∂camera_centre` is its negative.) Clamped
 /// channels contribute nothing; a degenerate direction gives a zero position gradient and
 /// gradients for the degree-0 coefficients only.
 ///
@@ -332,20 +328,13 @@ pub fn sh_colour_batch<const L: usize>(
 /// use glam::Vec3;
 /// let coeffs = [0.1f32; SH_FLOATS];
 /// let mut d = [0.0f32; SH_FLOATS];
-/// let dp = sh_colour_vjp(0, &coeffs, Vec3::X, Vec3::ZERO, Vec3::new(1.0, 0.0, 2.0), &mut d);
+/// let dp = sh_colour_vjp(0, &coeffs, Vec3::X, Vec3::new(1.0, 0.0, 2.0), &mut d);
 /// assert_eq!(dp, Vec3::ZERO); // degree 0 is view-independent
 /// assert_eq!(&d[..3], &[SH_C0, 0.0, 2.0 * SH_C0]);
 /// ```
-pub fn sh_colour_vjp(
-    degree: u32,
-    coeffs: &[f32],
-    position: Vec3,
-    camera_centre: Vec3,
-    d_rgb: Vec3,
-    d_coeffs: &mut [f32],
-) -> Vec3 {
+pub fn sh_colour_vjp(degree: u32, coeffs: &[f32], view_offset: Vec3, d_rgb: Vec3, d_coeffs: &mut [f32]) -> Vec3 {
     let mut basis = [0.0; 16];
-    let view = basis_for(degree, position, camera_centre, &mut basis);
+    let view = basis_for(degree, view_offset, &mut basis);
     let n = if view.is_some() { sh_coeff_count(degree) } else { 1 };
     let raw = raw_colour(n, coeffs, &basis);
     colour_vjp(degree, coeffs, &basis, view, raw.map(|r| r < 0.0), d_rgb, d_coeffs)
@@ -364,22 +353,21 @@ pub fn sh_colour_vjp(
 /// let coeffs: Vec<f32> = (0..SH_FLOATS).map(|k| ((k * 7) % 11) as f32 * 0.1 - 0.5).collect();
 /// let (p, eye, d_rgb) = (Vec3::new(0.3, -0.2, 1.0), Vec3::ZERO, Vec3::new(1.0, -2.0, 0.5));
 /// let (mut a, mut b) = ([0.0f32; SH_FLOATS], [0.0f32; SH_FLOATS]);
-/// let clamped = sh_colour(3, &coeffs, p, eye).clamped;
-/// let dp = sh_colour_vjp_clamped(3, &coeffs, p, eye, clamped, d_rgb, &mut a);
-/// assert_eq!(dp, sh_colour_vjp(3, &coeffs, p, eye, d_rgb, &mut b));
+/// let clamped = sh_colour(3, &coeffs, p - eye).clamped;
+/// let dp = sh_colour_vjp_clamped(3, &coeffs, p - eye, clamped, d_rgb, &mut a);
+/// assert_eq!(dp, sh_colour_vjp(3, &coeffs, p - eye, d_rgb, &mut b));
 /// assert_eq!(a, b);
 /// ```
 pub fn sh_colour_vjp_clamped(
     degree: u32,
     coeffs: &[f32],
-    position: Vec3,
-    camera_centre: Vec3,
+    view_offset: Vec3,
     clamped: [bool; 3],
     d_rgb: Vec3,
     d_coeffs: &mut [f32],
 ) -> Vec3 {
     let mut basis = [0.0; 16];
-    let view = basis_for(degree, position, camera_centre, &mut basis);
+    let view = basis_for(degree, view_offset, &mut basis);
     colour_vjp(degree, coeffs, &basis, view, clamped, d_rgb, d_coeffs)
 }
 

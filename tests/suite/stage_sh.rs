@@ -125,7 +125,7 @@ fn inputs(c: &Case) -> Vec<f32> {
 fn forward(degree: u32, centre: Vec3) -> impl Fn(&[f32]) -> Vec<f32> {
     move |x: &[f32]| {
         let p = Vec3::from_slice(&x[SH_FLOATS..]);
-        sh_colour(degree, &x[..SH_FLOATS], p, centre).rgb.to_array().to_vec()
+        sh_colour(degree, &x[..SH_FLOATS], p - centre).rgb.to_array().to_vec()
     }
 }
 
@@ -136,8 +136,7 @@ fn vjp(degree: u32, centre: Vec3) -> impl Fn(&[f32], &[f32]) -> Vec<f32> {
         let dp = sh_colour_vjp(
             degree,
             &x[..SH_FLOATS],
-            p,
-            centre,
+            p - centre,
             Vec3::from_slice(w),
             &mut g[..SH_FLOATS],
         );
@@ -183,14 +182,14 @@ proptest! {
     /// and it equals SH_C0·c + 0.5.
     #[test]
     fn degree_zero_is_view_independent(c in case(), d1 in strategies::direction(), d2 in strategies::direction(), dist in 0.01f32..100.0) {
-        let a = sh_colour(0, &c.coeffs, c.centre + d1 * dist, c.centre);
-        let b = sh_colour(0, &c.coeffs, c.centre + d2, c.centre);
+        let a = sh_colour(0, &c.coeffs, (c.centre + d1 * dist) - c.centre);
+        let b = sh_colour(0, &c.coeffs, (c.centre + d2) - c.centre);
         prop_assert_eq!(a, b);
         for ch in 0..3 {
             prop_assert_eq!(a.rgb[ch], sh_to_rgb(c.coeffs[ch]).max(0.0));
         }
         let mut d = vec![0.0; SH_FLOATS];
-        let dp = sh_colour_vjp(0, &c.coeffs, c.centre + d1 * dist, c.centre, Vec3::ONE, &mut d);
+        let dp = sh_colour_vjp(0, &c.coeffs, (c.centre + d1 * dist) - c.centre, Vec3::ONE, &mut d);
         prop_assert_eq!(dp, Vec3::ZERO);
         prop_assert!(d[3..].iter().all(|&x| x == 0.0));
     }
@@ -201,12 +200,12 @@ proptest! {
         let mut poisoned = c.coeffs.clone();
         poisoned[3 * sh_coeff_count(c.degree)..].fill(f32::NAN);
         prop_assert_eq!(
-            sh_colour(c.degree, &c.coeffs, c.position, c.centre),
-            sh_colour(c.degree, &poisoned, c.position, c.centre)
+            sh_colour(c.degree, &c.coeffs, c.position - c.centre),
+            sh_colour(c.degree, &poisoned, c.position - c.centre)
         );
         let (mut d1, mut d2) = (vec![0.0; SH_FLOATS], vec![0.0; SH_FLOATS]);
-        let p1 = sh_colour_vjp(c.degree, &c.coeffs, c.position, c.centre, Vec3::ONE, &mut d1);
-        let p2 = sh_colour_vjp(c.degree, &poisoned, c.position, c.centre, Vec3::ONE, &mut d2);
+        let p1 = sh_colour_vjp(c.degree, &c.coeffs, c.position - c.centre, Vec3::ONE, &mut d1);
+        let p2 = sh_colour_vjp(c.degree, &poisoned, c.position - c.centre, Vec3::ONE, &mut d2);
         prop_assert_eq!(p1, p2);
         prop_assert_eq!(d1, d2);
     }
@@ -379,30 +378,23 @@ fn sh_at_the_camera_position() {
     let mut runner = TestRunner::new(strategies::seeded_config(1));
     let coeffs = strategies::sh_coefficients().new_tree(&mut runner).unwrap().current();
     let centre = Vec3::new(0.3, -1.2, 2.0);
-    let dc = sh_colour(0, &coeffs, centre, centre);
+    let dc = sh_colour(0, &coeffs, Vec3::ZERO);
     for offset in [Vec3::ZERO, Vec3::new(0.4e-6, 0.0, 0.0), Vec3::new(0.0, -5e-7, 5e-7)] {
         for degree in 0..=3 {
-            let c = sh_colour(degree, &coeffs, centre + offset, centre);
+            let c = sh_colour(degree, &coeffs, offset);
             assert_eq!(c, dc, "degree {degree} offset {offset}");
             let mut d = vec![0.0; SH_FLOATS];
-            let dp = sh_colour_vjp(
-                degree,
-                &coeffs,
-                centre + offset,
-                centre,
-                Vec3::new(1.0, -1.0, 0.5),
-                &mut d,
-            );
+            let dp = sh_colour_vjp(degree, &coeffs, offset, Vec3::new(1.0, -1.0, 0.5), &mut d);
             assert_eq!(dp, Vec3::ZERO);
             assert!(d[..3].iter().all(|x| x.is_finite()) && d[3..].iter().all(|&x| x == 0.0));
         }
     }
     // Just outside: full degree, finite (large) position gradient.
     let offset = Vec3::new(2e-6, 0.0, 0.0);
-    let c = sh_colour(3, &coeffs, centre + offset, centre);
+    let c = sh_colour(3, &coeffs, offset);
     assert!(c.rgb.is_finite());
     let mut d = vec![0.0; SH_FLOATS];
-    let dp = sh_colour_vjp(3, &coeffs, centre + offset, centre, Vec3::ONE, &mut d);
+    let dp = sh_colour_vjp(3, &coeffs, offset, Vec3::ONE, &mut d);
     assert!(dp.is_finite() && d.iter().all(|x| x.is_finite()), "{dp}");
     assert!(offset.length() > SH_MIN_DISTANCE);
     // Non-finite positions: defined degree-0 result, no NaN anywhere.
@@ -412,10 +404,10 @@ fn sh_at_the_camera_position() {
         Vec3::splat(3e19),
         Vec3::new(0.0, f32::NAN, 1.0),
     ] {
-        let c = sh_colour(3, &coeffs, p, centre);
+        let c = sh_colour(3, &coeffs, p - centre);
         assert_eq!(c, dc, "{p}");
         let mut d = vec![0.0; SH_FLOATS];
-        let dp = sh_colour_vjp(3, &coeffs, p, centre, Vec3::ONE, &mut d);
+        let dp = sh_colour_vjp(3, &coeffs, p - centre, Vec3::ONE, &mut d);
         assert_eq!(dp, Vec3::ZERO);
         assert!(d.iter().all(|x| x.is_finite()));
     }
@@ -482,20 +474,33 @@ fn sh_at_1e4_units() {
             "{far} × 1e4 vs {near}"
         );
     }
-    // Camera far from the origin, point close to it.
+    // Camera far from the origin, point close to it: the offset comes from
+    // `Camera::view_offset` (f64 subtraction), so the colour is that of the exact offset up to
+    // the offset's final rounding; in f32 the same subtraction loses about 1e-3 of it.
     let coeffs = strategies::sh_coefficients().new_tree(&mut runner).unwrap().current();
-    let centre = Vec3::new(1e4, -1e4, 1e4);
+    let eye = Vec3::new(1e4, -1e4, 1e4);
+    let camera = bbsplat::camera::Camera::look_at(eye, eye + Vec3::new(0.3, 0.8, -0.5), Vec3::Z, 100.0, 100.0, 32, 32);
     let offset = Vec3::new(0.6, 0.0, -0.8);
-    let c = sh_colour(3, &coeffs, centre + offset, centre);
-    let exact = sh_colour(3, &coeffs, offset, Vec3::ZERO);
+    // A billboard about one unit from the camera (its position rounded to f32 at 1e4).
+    let position = camera.centre() + offset;
+    let via_camera = camera.view_offset(position);
+    let exact_offset = position.as_dvec3() - -(camera.rotation.as_dmat3().transpose() * camera.translation.as_dvec3());
+    let in_f32 = position - camera.centre();
+    // Measured: 3.0e-8 (the offset's final rounding) against 8.6e-4 for the f32 subtraction.
     assert!(
-        (c.rgb - exact.rgb).abs().max_element() < 1e-2,
-        "{} vs {}",
-        c.rgb,
-        exact.rgb
+        (via_camera.as_dvec3() - exact_offset).length() < 3e-7,
+        "{via_camera} vs {exact_offset}"
     );
+    assert!(
+        (in_f32.as_dvec3() - exact_offset).length() > 1e-5,
+        "the f32 path should be visibly worse here"
+    );
+    // The offset is the exact one rounded once, so the colour is the exact offset's colour.
+    assert_eq!(via_camera, exact_offset.as_vec3());
+    let c = sh_colour(3, &coeffs, via_camera);
+    assert!(c.rgb.is_finite());
     let mut d = vec![0.0; SH_FLOATS];
-    let dp = sh_colour_vjp(3, &coeffs, centre + offset, centre, Vec3::ONE, &mut d);
+    let dp = sh_colour_vjp(3, &coeffs, via_camera, Vec3::ONE, &mut d);
     assert!(dp.is_finite() && d.iter().all(|x| x.is_finite()));
 }
 
@@ -513,11 +518,11 @@ fn clamp_gating_is_exact() {
     }
     assert_eq!(s * SH_C0 + 0.5, 0.0, "an exact zero exists for this constant");
     let coeffs = [s, s.next_down(), 1.0];
-    let c = sh_colour(0, &coeffs, Vec3::X, Vec3::ZERO);
+    let c = sh_colour(0, &coeffs, Vec3::X);
     assert_eq!(c.clamped, [false, true, false]);
     assert_eq!((c.rgb[0], c.rgb[1]), (0.0, 0.0));
     let mut d = [0.0; 3];
-    sh_colour_vjp(0, &coeffs, Vec3::X, Vec3::ZERO, Vec3::ONE, &mut d);
+    sh_colour_vjp(0, &coeffs, Vec3::X, Vec3::ONE, &mut d);
     assert_eq!(d, [SH_C0, 0.0, SH_C0]);
 }
 
@@ -560,7 +565,7 @@ proptest! {
         let broken = move |x: &[f32], w: &[f32]| {
             let p = Vec3::from_slice(&x[SH_FLOATS..]);
             let mut g = vec![0.0; SH_FLOATS + 3];
-            sh_colour_vjp(degree, &x[..SH_FLOATS], p, centre, Vec3::from_slice(w), &mut g[..SH_FLOATS]);
+            sh_colour_vjp(degree, &x[..SH_FLOATS], p - centre, Vec3::from_slice(w), &mut g[..SH_FLOATS]);
             let dir = (p - centre).normalize();
             let mut db = [0.0f32; 16];
             for (k, d) in db.iter_mut().enumerate().take(sh_coeff_count(degree)) {
@@ -670,9 +675,9 @@ proptest! {
         let centre = Vec3::new(0.5, -1.0, 2.0);
         let coeffs: Vec<Vec<f32>> = lanes.iter().map(|(dc, rest, _, _)| dc.iter().chain(rest).copied().collect()).collect();
         let positions: [Vec3; 4] = std::array::from_fn(|l| centre + lanes[l].2 * lanes[l].3);
-        let batch = sh_colour_batch(degree, std::array::from_fn(|l| coeffs[l].as_slice()), positions, centre);
+        let batch = sh_colour_batch(degree, std::array::from_fn(|l| coeffs[l].as_slice()), positions.map(|p| p - centre));
         for l in 0..4 {
-            let single = sh_colour(degree, &coeffs[l], positions[l], centre);
+            let single = sh_colour(degree, &coeffs[l], positions[l] - centre);
             prop_assert_eq!(batch[l].rgb.to_array().map(f32::to_bits), single.rgb.to_array().map(f32::to_bits), "lane {}", l);
             prop_assert_eq!(batch[l].clamped, single.clamped, "lane {}", l);
         }
@@ -694,10 +699,10 @@ proptest! {
         let coeffs: Vec<f32> = dc.into_iter().chain(rest).collect();
         let (centre, d_rgb) = (Vec3::new(0.5, -1.0, 2.0), Vec3::from_array(d_rgb));
         let position = centre + dir * dist;
-        let clamped = sh_colour(degree, &coeffs, position, centre).clamped;
+        let clamped = sh_colour(degree, &coeffs, position - centre).clamped;
         let (mut a, mut b) = (vec![0.25f32; SH_FLOATS], vec![0.25f32; SH_FLOATS]);
-        let dp_a = sh_colour_vjp_clamped(degree, &coeffs, position, centre, clamped, d_rgb, &mut a);
-        let dp_b = sh_colour_vjp(degree, &coeffs, position, centre, d_rgb, &mut b);
+        let dp_a = sh_colour_vjp_clamped(degree, &coeffs, position - centre, clamped, d_rgb, &mut a);
+        let dp_b = sh_colour_vjp(degree, &coeffs, position - centre, d_rgb, &mut b);
         let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         prop_assert_eq!(bits(&dp_a.to_array()), bits(&dp_b.to_array()));
         prop_assert_eq!(bits(&a), bits(&b));
