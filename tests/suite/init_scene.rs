@@ -8,7 +8,7 @@ use bbsplat::init::scene_init::{InitError, camera_box, init_model, init_points};
 use bbsplat::rng::Rng;
 use bbsplat::scene::{Background, Image, LoadOptions, PointCloud, Scene, SceneFormat, View, load};
 use glam::Vec3;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Cameras on a ring of `radius` around `target`, `width × height`, focal `f` pixels.
 fn ring(n: usize, target: Vec3, radius: f32, width: u32, height: u32, f: f32) -> Vec<Camera> {
@@ -243,13 +243,7 @@ fn budget_is_monotonic_and_bounded() {
 }
 
 fn data(name: &str) -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(name);
-    if p.is_dir() {
-        Some(p)
-    } else {
-        eprintln!("skipping {name}: {} is absent", p.display());
-        None
-    }
+    crate::shared_data::shared_data("init_scene", name)
 }
 
 #[test]

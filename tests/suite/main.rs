@@ -19,6 +19,7 @@ mod scene_load;
 mod scene_real_data;
 #[allow(dead_code)]
 mod scene_support;
+mod shared_data;
 mod stage_bilinear;
 mod stage_composite;
 mod stage_ray_plane;

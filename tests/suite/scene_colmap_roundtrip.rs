@@ -227,11 +227,9 @@ fn extreme_values_round_trip() {
 /// The real beer model survives binary → text → binary byte for byte.
 #[test]
 fn real_model_binary_text_binary() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/beer_colmap/sparse/0");
-    if !dir.is_dir() {
-        println!("skipped: {} not found", dir.display());
+    let Some(dir) = crate::shared_data::shared_data("real_model_binary_text_binary", "beer_colmap/sparse/0") else {
         return;
-    }
+    };
     let m = read_model(&dir).unwrap();
     let t = temp_dir("beer");
     txt::write_model(&m, &t).unwrap();

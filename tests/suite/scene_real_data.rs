@@ -1,19 +1,13 @@
-//! The three real scenes of `../shared/data` (skipped with a message when absent).
+//! The three real scenes of `../shared/data` (see `shared_data` for what happens when they are absent).
 
 use bbsplat::scene::colmap::{self, Intrinsics};
 use bbsplat::scene::{Background, LoadOptions, SceneFormat, load};
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 fn data(scene: &str) -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(scene);
-    if p.is_dir() {
-        Some(p)
-    } else {
-        println!("skipped: test data {} not found", p.display());
-        None
-    }
+    crate::shared_data::shared_data("scene_real_data", scene)
 }
 
 #[test]
