@@ -88,6 +88,14 @@ pub struct RenderStats {
     pub evaluated_pairs: u64,
     /// (pixel, billboard) pairs that were blended.
     pub blended_pairs: u64,
+    /// Billboards with a non-finite position, log-scale or quaternion component: culled (they
+    /// have no place on screen), and counted here so that a caller can tell them from billboards
+    /// that are merely out of view. Non-finite SH coefficients or colour texels are not counted:
+    /// they make the pixels the billboard covers NaN.
+    pub non_finite_billboards: u64,
+    /// (pixel, billboard) pairs whose sampled alpha was NaN: skipped, as the compositing stage
+    /// skips NaN alphas, and counted here.
+    pub nan_alpha_pairs: u64,
 }
 
 /// Per-pixel values a tile produces.
@@ -101,6 +109,7 @@ struct PixelOut {
     final_t: f32,
     evaluated: u32,
     blended: u32,
+    nan_alpha: u32,
 }
 
 /// Features composited per pixel by the forward pass: colour (3), opacity (the constant 1, so
@@ -129,13 +138,17 @@ fn shade_pixel(
     let mut median = 0.0;
     let mut evaluated = own.len() as u32;
     let mut blended = 0;
+    let mut nan_alpha = 0;
     for cand in candidates {
         let k = cand.slot as usize;
         let b = list[k] as usize;
         // All four channels in one go: the texels' lines are fetched for alpha anyway.
         let [r, g, bl, a] = cand.taps.sample_rgba(set.texture_of(b));
         let blend = match state.step(a, params) {
-            Step::Skip => continue,
+            Step::Skip => {
+                nan_alpha += u32::from(a.is_nan());
+                continue;
+            }
             Step::Stop => {
                 // The entries up to and including this one were evaluated.
                 evaluated = own.partition_point(|&x| x as usize <= k) as u32;
@@ -166,7 +179,16 @@ fn shade_pixel(
         final_t: state.transmittance,
         evaluated,
         blended,
+        nan_alpha,
     }
+}
+
+/// Billboards of `set` with a non-finite position, log-scale or quaternion component.
+fn count_non_finite(set: &BillboardSet<'_>) -> u64 {
+    (set.positions, set.log_scales, set.quaternions)
+        .into_par_iter()
+        .filter(|(p, s, q)| !(p.is_finite() && s.is_finite() && q.iter().all(|x| x.is_finite())))
+        .count() as u64
 }
 
 /// Hints the CPU to fetch the cache line holding `data[i]` (no effect on results).
@@ -660,7 +682,7 @@ pub fn render_with(
     resize_for_overwrite(&mut blended_offsets, n_pix + 1, 0)[0] = 0;
     let slot_chunks = split_by_lengths(&mut blended_slots, tiles.iter().map(|(_, s)| s.len()));
     let offset_chunks = split_by_lengths(&mut blended_offsets[1..], tiles.iter().map(|(p, _)| p.len()));
-    let evaluated_pairs: u64 = slot_chunks
+    let (evaluated_pairs, nan_alpha_pairs): (u64, u64) = slot_chunks
         .into_par_iter()
         .zip(offset_chunks)
         .zip(tiles)
@@ -672,9 +694,11 @@ pub fn render_with(
                 end += px.blended;
                 *offset = end;
             }
-            pixels.iter().map(|px| u64::from(px.evaluated)).sum::<u64>()
+            pixels.iter().fold((0u64, 0u64), |(e, n), px| {
+                (e + u64::from(px.evaluated), n + u64::from(px.nan_alpha))
+            })
         })
-        .sum();
+        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
     // Images, one band of tile rows per task; every pixel is written (the tiles cover the
     // image), so recycled storage is not reset first.
     let band = TILE_SIZE as usize * w as usize;
@@ -748,6 +772,8 @@ pub fn render_with(
             tile_entries: bins.entries.len() as u64,
             evaluated_pairs,
             blended_pairs: u64::from(blended_count),
+            non_finite_billboards: count_non_finite(set),
+            nan_alpha_pairs,
         },
         state: ForwardState {
             camera: *camera,

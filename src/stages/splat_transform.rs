@@ -183,6 +183,7 @@ fn transform_of(a: Vec3, b: Vec3, c: Vec3, camera: &Camera) -> SplatTransform {
 ///
 /// Returns `None` (culled) when
 /// - the centre's view depth is `≤` [`NEAR_PLANE`] (or NaN),
+/// - a quaternion or log-scale component is not finite,
 /// - any entry of `T` or the normal is not finite (NaN or overflowing inputs, e.g. a log-scale
 ///   above 88.7),
 /// - `cos θ = −(R_cw·n)·p_view` is exactly 0 (camera exactly in the billboard's plane: `T` is
@@ -233,7 +234,8 @@ pub struct SplatFrame {
 }
 
 /// The [`SplatFrame`] of a billboard, or `None` when it is culled: centre at or behind the
-/// near plane, exactly edge-on (`cos θ = 0`), or non-finite.
+/// near plane, exactly edge-on (`cos θ = 0`), a non-finite quaternion or log-scale (a NaN
+/// quaternion is not given the identity rotation of degenerate ones), or a non-finite frame.
 ///
 /// ```
 /// use bbsplat::camera::Camera;
@@ -353,7 +355,7 @@ pub fn splat_frames_x4(
     let lane = |v: &[Vec4; 3], l: usize| Vec3::new(v[0][l], v[1][l], v[2][l]);
     let frame = |l: usize| {
         let c = c[l];
-        if c.z.is_nan() || c.z <= NEAR_PLANE {
+        if !(q[l].iter().all(|x| x.is_finite()) && ls[l].is_finite()) || c.z.is_nan() || c.z <= NEAR_PLANE {
             return None;
         }
         let transform = SplatTransform {
@@ -374,6 +376,12 @@ fn frame_with_geometry(
     quaternion: [f32; 4],
     camera: &Camera,
 ) -> Option<(SplatFrame, Geometry)> {
+    // A non-finite quaternion would otherwise fall back to the identity rotation (the rule for
+    // degenerate but finite ones) and a log-scale of −∞ to a zero-size square: both would pass
+    // for ordinary billboards.
+    if !(quaternion.iter().all(|q| q.is_finite()) && log_scales.is_finite()) {
+        return None;
+    }
     let g = geometry(position, log_scales, quaternion, camera);
     if g.c.z.is_nan() || g.c.z <= NEAR_PLANE {
         return None;

@@ -978,3 +978,76 @@ fn backward_refuses_texture_gradients_of_another_size() {
     let mut g = RenderGradients::zeros(scene.len(), 4);
     add_weighted_backward(&scene, &cam, &out, 1, &mut g);
 }
+
+/// Non-finite parameters never render as plausible values: a billboard with a NaN or infinite
+/// position, log-scale or quaternion component is culled and counted in
+/// `RenderStats::non_finite_billboards` (a NaN quaternion used to get the identity rotation of
+/// degenerate quaternions and render as an ordinary billboard); NaN SH coefficients or colour
+/// texels make the covered pixels NaN; NaN alpha texels are skipped, as the compositing stage
+/// skips NaN alphas (the rasterizer's old inline clamp turned them into 0.99), and counted in
+/// `RenderStats::nan_alpha_pairs`.
+#[test]
+fn non_finite_parameters_never_render_as_plausible_values() {
+    let scene = small_scene(12, 32, 32, 8, 10.0, (0.3, 0.8), 5);
+    let cam = random_scene_camera(32, 32);
+    let s = settings(Vec3::splat(0.2));
+    let clean = render(&scene.as_set(), &cam, &s);
+    assert_eq!((clean.stats.non_finite_billboards, clean.stats.nan_alpha_pairs), (0, 0));
+    assert!(clean.rgb.iter().all(|x| x.is_finite()));
+    // The billboard with the largest impact: certainly on screen.
+    let b = (0..scene.len())
+        .max_by(|&i, &j| clean.impact[i].total_cmp(&clean.impact[j]))
+        .unwrap();
+    assert!(clean.impact[b] > 1.0);
+    for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+        let edits: [(&str, Box<dyn Fn(&mut Billboards)>); 3] = [
+            ("position", Box::new(move |m: &mut Billboards| m.positions[b].y = bad)),
+            ("log-scale", Box::new(move |m: &mut Billboards| m.log_scales[b].x = bad)),
+            (
+                "quaternion",
+                Box::new(move |m: &mut Billboards| m.quaternions[b][2] = bad),
+            ),
+        ];
+        for (what, edit) in &edits {
+            let mut m = scene.clone();
+            edit(&mut m);
+            let out = render(&m.as_set(), &cam, &s);
+            assert_eq!(out.stats.non_finite_billboards, 1, "{what} = {bad}");
+            assert!(!out.visible[b] && out.impact[b] == 0.0, "{what} = {bad}");
+            assert!(out.rgb.iter().all(|x| x.is_finite()), "{what} = {bad}");
+        }
+    }
+    let t = scene.texture_size * scene.texture_size;
+    let mut m = scene.clone();
+    m.sh[b * 48] = f32::NAN;
+    assert!(render(&m.as_set(), &cam, &s).rgb.iter().any(|x| x.is_nan()), "NaN SH");
+    let mut m = scene.clone();
+    m.textures[b * t..(b + 1) * t].iter_mut().for_each(|x| x[0] = f32::NAN);
+    assert!(
+        render(&m.as_set(), &cam, &s).rgb.iter().any(|x| x.is_nan()),
+        "NaN colour texels"
+    );
+    let mut m = scene.clone();
+    m.textures[b * t..(b + 1) * t].iter_mut().for_each(|x| x[3] = f32::NAN);
+    let out = render(&m.as_set(), &cam, &s);
+    assert!(
+        out.stats.nan_alpha_pairs > 0 && out.impact[b] == 0.0,
+        "NaN alpha texels"
+    );
+    assert!(out.rgb.iter().all(|x| x.is_finite()));
+    // The backward of a render with skipped NaN alphas gives the billboard no gradient.
+    let mut g = RenderGradients::zeros(m.len(), m.texture_size);
+    let d_rgb = vec![1.0; out.rgb.len()];
+    let touched = render_backward(
+        &m.as_set(),
+        &out,
+        &ImageGradients {
+            rgb: &d_rgb,
+            alpha: None,
+            depth: None,
+        },
+        &mut g,
+    );
+    assert!(!touched.contains(&(b as u32)));
+    assert!(g.textures.iter().flatten().all(|x| x.is_finite()));
+}

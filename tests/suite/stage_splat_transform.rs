@@ -549,20 +549,20 @@ fn nan_and_infinite_inputs_never_panic() {
         (Vec3::new(inf, 0.0, 3.0), Vec2::ZERO, FACE_ON),
         (p, Vec2::new(nan, 0.0), FACE_ON),
         (p, Vec2::new(0.0, inf), FACE_ON),
+        (p, Vec2::new(f32::NEG_INFINITY, 0.0), FACE_ON),
+        // A NaN or infinite quaternion is culled: the identity fallback of degenerate (finite)
+        // quaternions would render it as an ordinary billboard.
+        (p, Vec2::ZERO, [nan, 1.0, 0.0, 0.0]),
+        (p, Vec2::ZERO, [1.0, 0.0, inf, 0.0]),
     ];
     for (pos, ls, q) in culled {
         assert!(project_splat(pos, ls, q, &cam).is_none(), "{pos} {ls} {q:?}");
+        assert!(splat_frame(pos, ls, q, &cam).is_none(), "{pos} {ls} {q:?}");
         assert_eq!(
             project_splat_vjp(pos, ls, q, &cam, &d_t, Vec3::ONE),
             SplatGrads::default()
         );
     }
-    // A NaN quaternion is the identity rotation (documented in `rotation`): kept, finite.
-    let ps = project_splat(p, Vec2::ZERO, [nan, 1.0, 0.0, 0.0], &cam).unwrap();
-    assert_eq!(ps.normal_view, -Vec3::Z);
-    let g = project_splat_vjp(p, Vec2::ZERO, [nan, 1.0, 0.0, 0.0], &cam, &d_t, Vec3::ONE);
-    assert_eq!(g.d_quaternion, [0.0; 4]);
-    assert!(g.d_position.is_finite());
     // A NaN camera culls everything.
     let bad = Camera {
         rotation: Mat3::from_cols_array(&[nan; 9]),
