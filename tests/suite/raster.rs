@@ -1000,7 +1000,8 @@ fn non_finite_parameters_never_render_as_plausible_values() {
         .unwrap();
     assert!(clean.impact[b] > 1.0);
     for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
-        let edits: [(&str, Box<dyn Fn(&mut Billboards)>); 3] = [
+        type Edit = Box<dyn Fn(&mut Billboards)>;
+        let edits: [(&str, Edit); 3] = [
             ("position", Box::new(move |m: &mut Billboards| m.positions[b].y = bad)),
             ("log-scale", Box::new(move |m: &mut Billboards| m.log_scales[b].x = bad)),
             (
