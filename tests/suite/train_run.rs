@@ -532,19 +532,22 @@ fn no_training_views_is_a_typed_error() {
     assert!(matches!(err, RunError::NoTrainViews), "{err:?}");
 }
 
-/// The cost of the non-finite checks against a step, at the size of the `train_step` bench's
-/// larger case (192 px, 10 000 billboards, TS 16). Not run by default; run with
-/// `cargo test --release --test suite train_run::measure -- --ignored --nocapture`.
+/// The cost of the non-finite checks against a step, by default at the size of the `train_step`
+/// bench's larger case (192 px, 10 000 billboards, TS 16; `BBSPLAT_MEASURE="96 3000"` for the
+/// smaller). Not run by default; run with
+/// `cargo test --test suite train_run::measure -- --ignored --nocapture`.
 #[test]
 #[ignore]
 fn measure_non_finite_check_cost() {
     use std::time::Instant;
+    let spec = std::env::var("BBSPLAT_MEASURE").unwrap_or_else(|_| "192 10000".into());
+    let v: Vec<usize> = spec.split_whitespace().map(|x| x.parse().unwrap()).collect();
     let scene = generate(&DemoConfig {
-        resolution: 192,
-        points: 20_000,
+        resolution: v[0] as u32,
+        points: 2 * v[1],
         ..DemoConfig::default()
     });
-    let keep = bbsplat::init::fps::farthest_point_sampling(&scene.points, 10_000).unwrap();
+    let keep = bbsplat::init::fps::farthest_point_sampling(&scene.points, v[1]).unwrap();
     let points: Vec<Vec3> = keep.iter().map(|&i| scene.points[i]).collect();
     let colours: Vec<[f32; 3]> = keep.iter().map(|&i| scene.colours[i]).collect();
     let model = Model::from_points(&points, &colours, 16, 0);
@@ -581,7 +584,7 @@ fn measure_non_finite_check_cost() {
     }
     let param_ms = t0.elapsed().as_secs_f64() * 1e3 / reps as f64;
     println!(
-        "{} threads: step {step_ms:.1} ms (checks included); gradient check {grad_ms:.2} ms, parameter check \
+        "{spec}: {} threads: step {step_ms:.1} ms (checks included); gradient check {grad_ms:.2} ms, parameter check \
          {param_ms:.2} ms: {:.1} % of a step",
         rayon::current_num_threads(),
         100.0 * (grad_ms + param_ms) / step_ms
