@@ -18,7 +18,11 @@
 //! 30 000/32 000 only SH rest and (at the final rate) positions keep moving.
 //! [`TextureMode::Gaussian`] replaces the learned textures with one opacity per billboard times
 //! the fixed initial Gaussian (the "textures off" ablation). [`checkpoint`] saves and restores the
-//! whole state bit for bit. Everything is deterministic for any thread count.
+//! whole state bit for bit. Every step checks its loss, gradients and parameters for NaN and
+//! infinities ([`finite`], [`TrainError::NonFinite`]). [`TrainConfig::clamp_gradient`] chooses the
+//! backward pass through the compositing clamp. [`run()`] is the whole run around the steps
+//! (evaluations, checkpoints, stop requests, final save and summary). Everything is
+//! deterministic for any thread count.
 
 pub mod adam;
 pub mod checkpoint;
@@ -39,7 +43,6 @@ use crate::raster::backward::ImageGradients;
 use crate::raster::{RenderBuffers, RenderGradients, RenderSettings, SH_FLOATS, render_backward, render_with};
 use crate::rng::Rng;
 pub use crate::stages::composite::ClampGradient;
-use crate::stages::composite::CompositeParams;
 use adam::{AdamGroup, AdamParams};
 pub use checkpoint::CheckpointError;
 pub use error::TrainError;
@@ -522,15 +525,13 @@ impl Trainer {
 
     /// Render settings at the current step.
     pub fn settings(&self) -> RenderSettings {
-        RenderSettings {
+        let mut settings = RenderSettings {
             background: self.config.background,
             sh_degree: active_sh_degree(self.step, self.config.iterations, self.config.sh_degree),
-            composite: CompositeParams {
-                clamp_gradient: self.config.clamp_gradient,
-                ..CompositeParams::default()
-            },
             ..RenderSettings::default()
-        }
+        };
+        settings.composite.clamp_gradient = self.config.clamp_gradient;
+        settings
     }
 
     fn validate(&self, views: &[TrainView]) -> Result<(), TrainError> {

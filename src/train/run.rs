@@ -56,7 +56,7 @@
 //! finite parameters) is saved as the checkpoint before [`RunError::Step`] is returned. When a
 //! parameter turns non-finite in the optimiser step, nothing is written: the checkpoint on disk
 //! stays the last one saved (from a step whose parameters were checked). In both cases the
-//! error names the step, the view, the value ([`NonFinite`](super::NonFinite)) and the checkpoint.
+//! error names the step, the view, the value ([`NonFinite`]) and the checkpoint.
 //!
 //! Evaluation PSNR and SSIM are those of [`crate::eval`] (8-bit images). Deterministic: the same
 //! trainer, views and settings give the same files for any thread count, and a run stopped and
