@@ -56,6 +56,34 @@ pub struct TrainSummary {
     pub command: Vec<String>,
 }
 
+/// Training settings recorded in `summary.json` next to the [`TrainSummary`] fields (a separate
+/// struct so that code building a [`TrainSummary`], such as the sweep tool's stand-ins, is not
+/// affected; [`TrainSummary`] readers ignore these keys).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RecordedSettings {
+    /// Gradient through the compositing clamp: `exact` or `straight-through`
+    /// ([`crate::train::TrainConfig::clamp_gradient`]); `exact` in summaries written before it
+    /// was recorded (the only one used then).
+    #[serde(default = "exact")]
+    pub clamp_gradient: String,
+}
+
+fn exact() -> String {
+    "exact".into()
+}
+
+/// The content of `summary.json`: a [`TrainSummary`] and the [`RecordedSettings`] as one flat
+/// JSON object.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SummaryFile {
+    /// The run's results.
+    #[serde(flatten)]
+    pub summary: TrainSummary,
+    /// Its settings.
+    #[serde(flatten)]
+    pub settings: RecordedSettings,
+}
+
 /// One evaluation during training.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CurvePoint {
@@ -138,6 +166,26 @@ mod tests {
         };
         let text = serde_json::to_string(&s).unwrap();
         assert_eq!(serde_json::from_str::<TrainSummary>(&text).unwrap(), s);
+        // The summary file: the same object with the settings; read as either.
+        let file = SummaryFile {
+            summary: s.clone(),
+            settings: RecordedSettings {
+                clamp_gradient: "straight-through".into(),
+            },
+        };
+        let text = serde_json::to_string(&file).unwrap();
+        assert!(text.contains(r#""clamp_gradient":"straight-through""#), "{text}");
+        assert_eq!(serde_json::from_str::<SummaryFile>(&text).unwrap(), file);
+        assert_eq!(serde_json::from_str::<TrainSummary>(&text).unwrap(), s);
+        // An older summary without the settings reads as exact.
+        let old = serde_json::to_string(&s).unwrap();
+        assert_eq!(
+            serde_json::from_str::<SummaryFile>(&old)
+                .unwrap()
+                .settings
+                .clamp_gradient,
+            "exact"
+        );
     }
 
     #[test]

@@ -2,7 +2,6 @@
 
 use anyhow::{Context, Result};
 use bbsplat::scene::{Background, LoadOptions, Scene, View};
-use bbsplat::train::TrainView;
 use clap::{Args, ValueEnum};
 use std::path::{Path, PathBuf};
 
@@ -71,17 +70,6 @@ pub fn split_views(scene: &Scene, split: Split) -> &[View] {
         Split::Train => &scene.train,
         Split::Test => &scene.test,
     }
-}
-
-/// Float copies of views for training and evaluation.
-pub fn train_views(views: &[View]) -> Vec<TrainView> {
-    views
-        .iter()
-        .map(|v| TrainView {
-            camera: v.camera,
-            rgb: v.image.to_f32_rgb(),
-        })
-        .collect()
 }
 
 /// Starts the global rayon pool with `threads` workers (all cores when `None`); returns the

@@ -6,12 +6,16 @@ use bbsplat::demo::{DemoConfig, generate};
 use bbsplat::init::fps::farthest_point_sampling;
 use bbsplat::model::Model;
 use bbsplat::raster::{RenderSettings, render};
-use bbsplat::train::{TrainConfig, TrainView, Trainer, scene_extent};
+use bbsplat::train::{
+    self, RunConfig, RunOutcome, StopSignal, TrainConfig, TrainEvent, TrainView, Trainer, scene_extent,
+};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 use std::time::Instant;
 
+/// Runs `bbsplat demo`: generates the demo scene, trains it with [`bbsplat::train::run`] (no
+/// files written, no intermediate evaluation) and reports the test PSNR before and after.
 #[allow(clippy::too_many_arguments)]
 pub fn run(
     iterations: usize,
@@ -46,15 +50,8 @@ pub fn run(
     let points: Vec<Vec3> = keep.iter().map(|&i| scene.points[i]).collect();
     let colours: Vec<[f32; 3]> = keep.iter().map(|&i| scene.colours[i]).collect();
     let model = Model::from_points(&points, &colours, texture_size, seed);
-    let to_views = |v: &[bbsplat::demo::DemoView]| -> Vec<TrainView> {
-        v.iter()
-            .map(|v| TrainView {
-                camera: v.camera,
-                rgb: v.rgb.clone(),
-            })
-            .collect()
-    };
-    let (train, test) = (to_views(&scene.train), to_views(&scene.test));
+    let train: Vec<TrainView> = scene.train.iter().map(TrainView::from_demo).collect();
+    let test: Vec<TrainView> = scene.test.iter().map(TrainView::from_demo).collect();
     let cameras: Vec<_> = train.iter().map(|v| v.camera).collect();
     let config = TrainConfig {
         iterations,
@@ -79,25 +76,28 @@ pub fn run(
         ProgressStyle::with_template("{bar:30} {pos}/{len} [{elapsed_precise} < {eta_precise}, {per_sec}] {msg}")
             .expect("valid template"),
     );
-    let t0 = Instant::now();
-    let mut running = 0.0;
-    for i in 0..iterations {
-        let log = trainer.step(&train)?;
-        running = if i == 0 {
-            log.psnr
-        } else {
-            0.95 * running + 0.05 * log.psnr
-        };
-        if i % 25 == 0 || i + 1 == iterations {
-            bar.set_position(i as u64 + 1);
-            bar.set_message(format!("loss {:.4}, train PSNR {:.2} dB", log.loss, running));
+    let settings = RunConfig {
+        eval_every: 0,
+        scene: "demo".into(),
+        command: std::env::args().collect(),
+        ..RunConfig::default()
+    };
+    let outcome = train::run(&mut trainer, &train, &test, &settings, &StopSignal::new(), |event| {
+        if let TrainEvent::Step { log, running_psnr, .. } = event
+            && ((log.step - 1) % 25 == 0 || log.step == iterations)
+        {
+            bar.set_position(log.step as u64);
+            bar.set_message(format!("loss {:.4}, train PSNR {running_psnr:.2} dB", log.loss));
         }
-    }
+    })
+    .context("training on the demo scene")?;
     bar.finish();
-    let train_secs = t0.elapsed().as_secs_f64();
-    let after = trainer.evaluate(&test);
+    let RunOutcome::Finished(summary) = outcome else {
+        anyhow::bail!("the demo run stopped early: {outcome:?}");
+    };
     println!(
-        "test PSNR: {before:.2} dB at initialisation -> {after:.2} dB after {iterations} steps ({train_secs:.1} s)"
+        "test PSNR: {before:.2} dB at initialisation -> {:.2} dB after {iterations} steps ({:.1} s)",
+        summary.test_psnr, summary.train_seconds
     );
     if let Some(dir) = output {
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;

@@ -1,23 +1,19 @@
 //! `bbsplat train <scene> -o <out>`: the main job.
 
-use super::common::{SceneArgs, start_threads, train_views, write_text_atomic};
+use super::common::{SceneArgs, start_threads};
 use anyhow::{Context, Result};
-use bbsplat::eval::{EvalView, evaluate_views};
 use bbsplat::init::budget::{BudgetInputs, budget_for};
 use bbsplat::init::hull::HullConfig;
 use bbsplat::init::scene_init::{PointlessInit, init_model_with};
-use bbsplat::model::{Model, logit};
-use bbsplat::model_file::{ModelMeta, load_model, save_model};
-use bbsplat::raster::{BillboardSet, RenderSettings};
-use bbsplat::report::{CurvePoint, SUMMARY_VERSION, TrainSummary, peak_rss_bytes};
-use bbsplat::train::resolution::{ResolutionSchedule, downscale_view};
-use bbsplat::train::{AdamMode, LearningRateScales, TextureMode, TrainConfig, TrainView, Trainer};
+use bbsplat::train::resolution::ResolutionSchedule;
+use bbsplat::train::{
+    AdamMode, ClampGradient, LearningRateScales, RunConfig, RunOutcome, StopReason, StopSignal, TextureMode,
+    TrainConfig, TrainEvent, TrainView, Trainer,
+};
 use clap::{Args, ValueEnum};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// Flags of `bbsplat train`.
@@ -118,6 +114,11 @@ pub struct TrainArgs {
     /// Learning-rate factor of the alpha and colour textures (default: `--lr-scale`).
     #[arg(long, value_parser = non_negative)]
     pub lr_texture: Option<f32>,
+    /// Gradient through the compositing clamp `α = min(0.99, a)`: `exact` (the derivative of the
+    /// forward: none above the clamp) or `straight-through` (as if unclamped, as the reference
+    /// rasterizer does). See docs/training.md.
+    #[arg(long, value_enum, default_value_t = ClampGradientArg::Exact)]
+    pub clamp_gradient: ClampGradientArg,
 }
 
 /// A finite number ≥ 0 (the learning-rate factors).
@@ -159,6 +160,24 @@ pub enum TextureModeArg {
     Gaussian,
 }
 
+/// `--clamp-gradient`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ClampGradientArg {
+    /// Zero gradient where the clamp is active.
+    Exact,
+    /// The gradient passes through the clamp.
+    StraightThrough,
+}
+
+impl From<ClampGradientArg> for ClampGradient {
+    fn from(c: ClampGradientArg) -> Self {
+        match c {
+            ClampGradientArg::Exact => ClampGradient::Exact,
+            ClampGradientArg::StraightThrough => ClampGradient::PassThrough,
+        }
+    }
+}
+
 /// `--adam`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum AdamModeArg {
@@ -168,32 +187,9 @@ pub enum AdamModeArg {
     Sparse,
 }
 
-fn evenly_spaced<T>(items: &[T], at_most: usize) -> Vec<&T> {
-    if items.len() <= at_most || at_most == 0 {
-        return items.iter().collect();
-    }
-    (0..at_most).map(|k| &items[k * items.len() / at_most]).collect()
-}
-
-fn evaluate(
-    set: &BillboardSet<'_>,
-    views: &[(String, TrainView)],
-    settings: &RenderSettings,
-) -> Result<(f64, f64, f64)> {
-    let report = evaluate_views(
-        set,
-        views.iter().map(|(name, v)| EvalView {
-            name,
-            camera: &v.camera,
-            rgb: &v.rgb,
-        }),
-        settings,
-        |_, _| {},
-    )?;
-    Ok((report.mean_psnr, report.mean_ssim, report.mean_render_ms))
-}
-
-/// Runs `bbsplat train`.
+/// Runs `bbsplat train`: loads the scene, builds or resumes the trainer, and turns the events of
+/// [`bbsplat::train::run`] into the progress bar and printed lines; Ctrl-C raises its stop
+/// signal.
 pub fn run(args: TrainArgs) -> Result<()> {
     anyhow::ensure!(args.texture_size >= 2, "--texture-size must be at least 2");
     anyhow::ensure!(args.sh_degree <= 3, "--sh-degree must be 0, 1, 2 or 3");
@@ -203,35 +199,20 @@ pub fn run(args: TrainArgs) -> Result<()> {
         (0.0..=1.0).contains(&args.coarse_until),
         "--coarse-until must be a fraction between 0 and 1"
     );
-    let resolution = ResolutionSchedule {
-        factor: args.coarse_factor,
-        until: args.coarse_until,
-    };
     let threads = start_threads(args.threads)?;
     let start = Instant::now();
     let scene = args.scene_args.load(&args.scene, args.quiet)?;
-    let train = train_views(&scene.train);
+    let train = TrainView::from_views(&scene.train);
     anyhow::ensure!(
         !train.is_empty(),
         "{}: the scene has no training view",
         args.scene.display()
     );
-    let coarse: Vec<TrainView> = if args.coarse_factor > 1 {
-        train.iter().map(|v| downscale_view(v, args.coarse_factor)).collect()
-    } else {
-        Vec::new()
-    };
-    let test: Vec<(String, TrainView)> = scene
-        .test
-        .iter()
-        .map(|v| v.name.clone())
-        .zip(train_views(&scene.test))
-        .collect();
-    let background = Vec3::from_array(scene.background.rgb());
+    let test = TrainView::from_views(&scene.test);
     let config = TrainConfig {
         iterations: args.iterations,
         sh_degree: args.sh_degree,
-        background,
+        background: Vec3::from_array(scene.background.rgb()),
         seed: args.seed,
         extent: scene.extent,
         impact_threshold: args.texture_threshold,
@@ -245,9 +226,9 @@ pub fn run(args: TrainArgs) -> Result<()> {
         },
         relocate: !args.no_relocate,
         lr_scales: args.lr_scales(),
+        clamp_gradient: args.clamp_gradient.into(),
         ..TrainConfig::default()
     };
-    let checkpoint = args.output.join("checkpoint.bin");
     let mut trainer = match &args.resume {
         Some(path) => {
             let t = Trainer::load_checkpoint(path).with_context(|| format!("resuming from {}", path.display()))?;
@@ -311,32 +292,13 @@ pub fn run(args: TrainArgs) -> Result<()> {
             Trainer::new(model, config)
         }
     };
-    let cam0 = train[0].camera;
-    // From here on Ctrl-C saves a checkpoint instead of killing the process.
-    let interrupted = Arc::new(AtomicBool::new(false));
+    drop(scene);
+    // From here on Ctrl-C stops the run with a checkpoint instead of killing the process.
+    let stop = StopSignal::new();
     {
-        let flag = interrupted.clone();
-        ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
+        let stop = stop.clone();
+        ctrlc::set_handler(move || stop.request()).context("installing the Ctrl-C handler")?;
     }
-    println!(
-        "{}: {} train / {} test views at {}x{}, {} billboards (TS {}), loaded in {:.1} s, {threads} threads",
-        args.scene.display(),
-        train.len(),
-        test.len(),
-        cam0.width,
-        cam0.height,
-        trainer.model.len(),
-        trainer.model.texture_size,
-        start.elapsed().as_secs_f64()
-    );
-    std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
-
-    let eval_settings = RenderSettings {
-        background,
-        sh_degree: args.sh_degree,
-        ..RenderSettings::default()
-    };
-    let eval_subset: Vec<(String, TrainView)> = evenly_spaced(&test, args.eval_views).into_iter().cloned().collect();
     let bar = if args.quiet {
         ProgressBar::hidden()
     } else {
@@ -347,152 +309,103 @@ pub fn run(args: TrainArgs) -> Result<()> {
         );
         bar
     };
-    let mut curve = Vec::new();
-    let mut train_seconds = 0.0;
-    let mut running_psnr = f64::NAN;
-    let mut relocated = 0usize;
-    while trainer.step_index() < args.iterations {
-        let stop_requested = args.stop_after.is_some_and(|n| trainer.step_index() >= n);
-        if stop_requested || interrupted.load(Ordering::SeqCst) {
+    let run_config = RunConfig {
+        eval_every: args.eval_every,
+        eval_views: args.eval_views,
+        save_every: args.save_every,
+        output: Some(args.output.clone()),
+        stop_after: args.stop_after,
+        resolution: ResolutionSchedule {
+            factor: args.coarse_factor,
+            until: args.coarse_until,
+        },
+        scene: args.scene.display().to_string(),
+        command: std::env::args().collect(),
+    };
+    let on_event = |event: &TrainEvent| match event {
+        TrainEvent::Started {
+            train_views,
+            test_views,
+            width,
+            height,
+            billboards,
+            texture_size,
+            ..
+        } => println!(
+            "{}: {train_views} train / {test_views} test views at {width}x{height}, {billboards} billboards (TS {texture_size}), loaded in {:.1} s, {threads} threads",
+            args.scene.display(),
+            start.elapsed().as_secs_f64()
+        ),
+        TrainEvent::Warning(warning) if !args.quiet => bar.suspend(|| eprintln!("warning: {warning}")),
+        TrainEvent::Step {
+            log,
+            running_psnr,
+            relocated_total,
+            ..
+        } => {
+            bar.set_position(log.step as u64);
+            bar.set_message(format!(
+                "loss {:.4} | train PSNR {running_psnr:.2} dB | relocated {relocated_total}",
+                log.loss
+            ));
+        }
+        TrainEvent::Evaluation {
+            step,
+            psnr,
+            ssim,
+            seconds,
+            views,
+        } if !args.quiet => bar.suspend(|| {
+            println!("step {step:>6}: test PSNR {psnr:.2} dB, SSIM {ssim:.4} ({views} views), {seconds:.0} s")
+        }),
+        _ => {}
+    };
+    let outcome = bbsplat::train::run(&mut trainer, &train, &test, &run_config, &stop, on_event);
+    let summary = match outcome {
+        Ok(RunOutcome::Finished(summary)) => {
+            bar.finish_and_clear();
+            summary
+        }
+        Ok(RunOutcome::Stopped {
+            step,
+            reason,
+            checkpoint,
+        }) => {
             bar.abandon();
-            trainer
-                .save_checkpoint(&checkpoint)
-                .with_context(|| format!("saving {}", checkpoint.display()))?;
+            let checkpoint = checkpoint.unwrap_or_else(|| args.output.join(bbsplat::train::run::CHECKPOINT_FILE));
             eprintln!(
-                "{} at step {}: saved {}; continue with the same command and --resume {}",
-                if stop_requested { "stopped" } else { "interrupted" },
-                trainer.step_index(),
+                "{} at step {step}: saved {}; continue with the same command and --resume {}",
+                if reason == StopReason::Requested {
+                    "interrupted"
+                } else {
+                    "stopped"
+                },
                 checkpoint.display(),
                 checkpoint.display()
             );
-            if stop_requested {
-                return Ok(());
+            if reason == StopReason::Requested {
+                std::process::exit(130);
             }
-            std::process::exit(130);
+            return Ok(());
         }
-        let t0 = Instant::now();
-        let views = if resolution.is_coarse(trainer.step_index(), args.iterations) {
-            &coarse
-        } else {
-            &train
-        };
-        let log = trainer.step(views)?;
-        train_seconds += t0.elapsed().as_secs_f64();
-        running_psnr = if running_psnr.is_nan() {
-            log.psnr
-        } else {
-            0.95 * running_psnr + 0.05 * log.psnr
-        };
-        let step = trainer.step_index();
-        bar.set_position(step as u64);
-        relocated += log.relocated;
-        bar.set_message(format!(
-            "loss {:.4} | train PSNR {running_psnr:.2} dB | relocated {relocated}",
-            log.loss
-        ));
-        if args.save_every > 0 && step % args.save_every == 0 {
-            trainer
-                .save_checkpoint(&checkpoint)
-                .with_context(|| format!("saving {}", checkpoint.display()))?;
+        Ok(other) => anyhow::bail!("training ended unexpectedly: {other:?}"),
+        Err(e) => {
+            bar.abandon();
+            return Err(e).with_context(|| format!("training on {}", args.scene.display()));
         }
-        if args.eval_every > 0 && step % args.eval_every == 0 && step < args.iterations && !eval_subset.is_empty() {
-            let (psnr, ssim, _) = evaluate(&trainer.activated.as_set(), &eval_subset, &eval_settings)?;
-            curve.push(CurvePoint {
-                step,
-                seconds: train_seconds,
-                psnr,
-                ssim,
-            });
-            if !args.quiet {
-                bar.suspend(|| {
-                    println!(
-                        "step {step:>6}: test PSNR {psnr:.2} dB, SSIM {ssim:.4} ({} views), {train_seconds:.0} s",
-                        eval_subset.len()
-                    )
-                });
-            }
-        }
-    }
-    bar.finish_and_clear();
-    // The model is saved as the reference saves it (8-bit textures) and evaluated as re-loaded,
-    // as the reference's render.py does.
-    let model_dir = args.output.join("model");
-    let meta = ModelMeta::for_model(&trainer.model, args.sh_degree, background.to_array());
-    let model_bytes = save_model(&model_dir, &effective_model(&trainer), &meta)
-        .with_context(|| format!("saving the model to {}", model_dir.display()))?;
-    trainer
-        .save_checkpoint(&checkpoint)
-        .with_context(|| format!("saving {}", checkpoint.display()))?;
-    let (saved, _) = load_model(&model_dir).with_context(|| format!("re-loading {}", model_dir.display()))?;
-    let saved = saved.activate();
-    let (test_psnr, test_ssim, render_ms) = if test.is_empty() {
-        (f64::NAN, f64::NAN, f64::NAN)
-    } else {
-        evaluate(&saved.as_set(), &test, &eval_settings)?
     };
-    curve.push(CurvePoint {
-        step: args.iterations,
-        seconds: train_seconds,
-        psnr: test_psnr,
-        ssim: test_ssim,
-    });
-    let summary = TrainSummary {
-        version: SUMMARY_VERSION,
-        scene: args.scene.display().to_string(),
-        iterations: args.iterations,
-        billboards: trainer.model.len(),
-        alive: trainer.alive_count(),
-        texture_size: args.texture_size,
-        sh_degree: args.sh_degree,
-        resolution: [cam0.width, cam0.height],
-        train_seconds,
-        render_ms_per_frame: render_ms,
-        test_psnr,
-        test_ssim,
-        test_views: test.len(),
-        model_bytes,
-        peak_rss_bytes: peak_rss_bytes(),
-        seed: args.seed,
-        threads,
-        curve,
-        command: std::env::args().collect(),
-    };
-    write_summary(&args.output, &summary)?;
     println!(
         "trained {} steps in {:.1} s ({:.2} it/s): test PSNR {:.2} dB, SSIM {:.4} over {} views; {} billboards ({} alive); model {:.2} MB; peak memory {:.0} MB",
-        args.iterations,
-        train_seconds,
-        args.iterations as f64 / train_seconds,
-        test_psnr,
-        test_ssim,
-        test.len(),
+        summary.iterations,
+        summary.train_seconds,
+        summary.iterations as f64 / summary.train_seconds,
+        summary.test_psnr,
+        summary.test_ssim,
+        summary.test_views,
         summary.billboards,
         summary.alive,
-        model_bytes as f64 / 1e6,
+        summary.model_bytes as f64 / 1e6,
         summary.peak_rss_bytes as f64 / 1e6
     );
     Ok(())
-}
-
-/// The model to save: the trainer's raw parameters, with the alpha logits taken from the textures
-/// the renderer actually used (in Gaussian mode those are opacity × the fixed shape, not the
-/// stored logits).
-fn effective_model(trainer: &Trainer) -> Model {
-    let mut model = trainer.model.clone();
-    if trainer.config().texture_mode == TextureMode::Gaussian {
-        let t = model.texture_size * model.texture_size;
-        for (i, texel) in trainer.activated.textures.iter().enumerate() {
-            model.alpha_logits[i] = if model.alpha_mask[i % t] {
-                logit(texel[3].clamp(1e-6, 1.0 - 1e-6))
-            } else {
-                0.0
-            };
-        }
-    }
-    model
-}
-
-fn write_summary(dir: &Path, summary: &TrainSummary) -> Result<()> {
-    let text = serde_json::to_string_pretty(summary).context("encoding the summary")?;
-    write_text_atomic(&dir.join("summary.json"), &text)
 }

@@ -1,13 +1,13 @@
 //! Training checkpoints: everything needed to continue a run bit for bit.
 //!
-//! # Format (version 2)
+//! # Format (version 3)
 //!
 //! Little-endian, no padding. `T = TS²`, `n` = number of billboards.
 //!
 //! | field | type | notes |
 //! |---|---|---|
 //! | magic | 8 bytes | `BBSPLCKP` |
-//! | version | u32 | 2 (version 1, without the learning-rate multipliers, is still read) |
+//! | version | u32 | 3 (versions 1 and 2 are still read, see [`OLDEST_VERSION`]) |
 //! | file length | u64 | total bytes including the checksum |
 //! | iterations | u64 | [`TrainConfig::iterations`] |
 //! | sh_degree | u32 | ≤ 3 |
@@ -20,6 +20,7 @@
 //! | relocate | u8 | 0 / 1 |
 //! | relocate_every | u64 | |
 //! | learning-rate multipliers | 4 × f32 | [`super::LearningRateScales`] in field order; absent in version 1 (read as all 1) |
+//! | clamp gradient | u8 | [`super::ClampGradient`]: 0 exact, 1 pass-through (straight-through); absent in versions 1-2 (read as exact, what they trained with) |
 //! | step | u64 | steps done |
 //! | RNG state | 4 × u64 | [`crate::rng::Rng::state`] |
 //! | order length `k`, order | u64, `k` × u64 | view indices still on the shuffled stack (popped from the end) |
@@ -45,7 +46,7 @@
 //! allocates more than the file's size.
 
 use super::adam::AdamGroup;
-use super::{AdamMode, LearningRateScales, TextureMode, TrainConfig, Trainer, adam_groups, group};
+use super::{AdamMode, ClampGradient, LearningRateScales, TextureMode, TrainConfig, Trainer, adam_groups, group};
 use crate::model::Model;
 use crate::raster::SH_FLOATS;
 use crate::rng::Rng;
@@ -57,10 +58,11 @@ use thiserror::Error;
 /// File magic.
 pub const MAGIC: [u8; 8] = *b"BBSPLCKP";
 /// Format version written (and the newest read).
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 3;
 
-/// Oldest format version still read: version 1 lacks the learning-rate multipliers, read as
-/// [`super::LearningRateScales::REFERENCE`].
+/// Oldest format version still read. Version 1 lacks the learning-rate multipliers, read as
+/// [`super::LearningRateScales::REFERENCE`]; versions 1 and 2 lack the clamp gradient, read as
+/// [`ClampGradient::Exact`] (the only one the trainer used before it became a setting).
 pub const OLDEST_VERSION: u32 = 1;
 
 /// What went wrong reading or writing a checkpoint; every variant names the file.
@@ -333,6 +335,10 @@ fn encode_into<S: Sink>(tr: &Trainer, len: u64, sink: &mut S) {
     w.u8(c.relocate as u8);
     w.u64(c.relocate_every as u64);
     w.f32s(&c.lr_scales.to_array());
+    w.u8(match c.clamp_gradient {
+        ClampGradient::Exact => 0,
+        ClampGradient::PassThrough => 1,
+    });
     w.u64(tr.step as u64);
     for s in tr.rng.state() {
         w.u64(s);
@@ -464,6 +470,15 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
     } else {
         LearningRateScales::REFERENCE
     };
+    let clamp_gradient = if version >= 3 {
+        match r.u8("clamp gradient")? {
+            0 => ClampGradient::Exact,
+            1 => ClampGradient::PassThrough,
+            x => return Err(r.inconsistent(format!("unknown clamp gradient {x}"))),
+        }
+    } else {
+        ClampGradient::Exact
+    };
     let config = TrainConfig {
         iterations,
         sh_degree,
@@ -478,6 +493,7 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
         relocate,
         relocate_every,
         lr_scales,
+        clamp_gradient,
     };
     let step = r.u64("step")? as usize;
     let rng = Rng::from_state([r.u64("RNG")?, r.u64("RNG")?, r.u64("RNG")?, r.u64("RNG")?]);

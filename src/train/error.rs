@@ -1,10 +1,13 @@
 //! Errors of a training step.
 
+use super::finite::NonFinite;
 use thiserror::Error;
 
-/// Why [`super::Trainer::step`] refused to run. The trainer's state is unchanged when a step
-/// returns an error.
+/// Why [`super::Trainer::step`] refused to run or stopped. The trainer's state is unchanged when
+/// a step returns an error, except for [`TrainError::NonFinite`] with
+/// [`NonFinite::Parameter`], found after the optimiser step was applied.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[non_exhaustive]
 pub enum TrainError {
     /// The list of training views is empty.
     #[error("no training views: a training step needs at least one view")]
@@ -32,4 +35,30 @@ pub enum TrainError {
         /// Number of views given.
         views: usize,
     },
+    /// A NaN or infinite value in a step.
+    ///
+    /// [`NonFinite::Loss`] and [`NonFinite::Gradient`] are found before the optimiser step,
+    /// which is then not applied: the trainer is exactly as before the step (view stack, RNG and
+    /// every parameter and moment), so it can be saved as the last good state. For
+    /// [`NonFinite::Parameter`] the step was applied (the trainer is at step `step`, with the bad
+    /// value): recover from an earlier checkpoint.
+    #[error(
+        "step {step} (view {view}): {value} is not finite (NaN or infinite){}",
+        applied_note(value)
+    )]
+    NonFinite {
+        /// 1-based number of the step (as [`super::StepLog::step`] would have named it).
+        step: usize,
+        /// Index of the step's view in the slice passed to `step`.
+        view: usize,
+        /// Which value.
+        value: NonFinite,
+    },
+}
+
+fn applied_note(value: &NonFinite) -> &'static str {
+    match value {
+        NonFinite::Parameter(_) => "; the step was applied",
+        _ => "; the step was not applied",
+    }
 }

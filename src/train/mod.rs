@@ -18,14 +18,20 @@
 //! 30 000/32 000 only SH rest and (at the final rate) positions keep moving.
 //! [`TextureMode::Gaussian`] replaces the learned textures with one opacity per billboard times
 //! the fixed initial Gaussian (the "textures off" ablation). [`checkpoint`] saves and restores the
-//! whole state bit for bit. Everything is deterministic for any thread count.
+//! whole state bit for bit. Every step checks its loss, gradients and parameters for NaN and
+//! infinities ([`finite`], [`TrainError::NonFinite`]). [`TrainConfig::clamp_gradient`] chooses the
+//! backward pass through the compositing clamp. [`run()`] is the whole run around the steps
+//! (evaluations, checkpoints, stop requests, final save and summary). Everything is
+//! deterministic for any thread count.
 
 pub mod adam;
 pub mod checkpoint;
 pub mod error;
+pub mod finite;
 pub mod regularise;
 pub mod relocate;
 pub mod resolution;
+pub mod run;
 pub mod texture_step;
 
 use crate::billboards::Billboards;
@@ -36,12 +42,15 @@ use crate::model::{Model, initial_alpha, logit, sigmoid};
 use crate::raster::backward::ImageGradients;
 use crate::raster::{RenderBuffers, RenderGradients, RenderSettings, SH_FLOATS, render_backward, render_with};
 use crate::rng::Rng;
+pub use crate::stages::composite::ClampGradient;
 use adam::{AdamGroup, AdamParams};
 pub use checkpoint::CheckpointError;
 pub use error::TrainError;
+pub use finite::{NonFinite, ParamGroup};
 use glam::Vec3;
 use regularise::{gaussian_opacity_grad, mean_alpha, opacity_regulariser, texture_regulariser};
 use relocate::{DEAD_OPACITY, apply_relocation, plan_relocation, split_alpha_logit};
+pub use run::{RunConfig, RunError, RunOutcome, RunWarning, StopReason, StopSignal, TrainEvent, run};
 
 /// A posed image: camera and interleaved RGB values in `[0, 1]`.
 #[derive(Clone, Debug)]
@@ -50,6 +59,29 @@ pub struct TrainView {
     pub camera: Camera,
     /// `width · height · 3` values.
     pub rgb: Vec<f32>,
+}
+
+impl TrainView {
+    /// The float copy of a loaded scene view (its background-composited image).
+    pub fn from_view(view: &crate::scene::View) -> Self {
+        Self {
+            camera: view.camera,
+            rgb: view.image.to_f32_rgb(),
+        }
+    }
+
+    /// [`TrainView::from_view`] of each view, e.g. `TrainView::from_views(&scene.train)`.
+    pub fn from_views(views: &[crate::scene::View]) -> Vec<Self> {
+        views.iter().map(Self::from_view).collect()
+    }
+
+    /// A view of the embedded demo scene ([`crate::demo`]).
+    pub fn from_demo(view: &crate::demo::DemoView) -> Self {
+        Self {
+            camera: view.camera,
+            rgb: view.rgb.clone(),
+        }
+    }
 }
 
 /// How the optimiser treats billboards that received no gradient from the step's view.
@@ -111,6 +143,12 @@ pub struct TrainConfig {
     pub relocate_every: usize,
     /// Multipliers of the reference learning rates (all 1 by default).
     pub lr_scales: LearningRateScales,
+    /// How the gradient of a step's backward pass goes through the compositing clamp
+    /// `α = min(0.99, a)`: [`ClampGradient::Exact`] (default: zero above the clamp, the
+    /// derivative of the forward) or [`ClampGradient::PassThrough`] (straight-through, as the
+    /// reference rasterizer does, so that an alpha texel above the clamp still learns). Only the
+    /// backward pass depends on it; renders are the same.
+    pub clamp_gradient: ClampGradient,
 }
 
 /// Multipliers of the reference learning rates of [`learning_rates`], per parameter group; the
@@ -159,7 +197,7 @@ impl Default for LearningRateScales {
 impl Default for TrainConfig {
     /// The reference settings: 32 000 iterations, SH degree 3, black background, seed 0, extent 1,
     /// σ = 500, weights `1e-4` / `0.01`, dense Adam, full textures, relocation every 100 steps,
-    /// the reference learning rates.
+    /// the reference learning rates, the exact clamp gradient.
     fn default() -> Self {
         Self {
             iterations: 32_000,
@@ -175,6 +213,7 @@ impl Default for TrainConfig {
             relocate: true,
             relocate_every: 100,
             lr_scales: LearningRateScales::REFERENCE,
+            clamp_gradient: ClampGradient::Exact,
         }
     }
 }
@@ -441,6 +480,32 @@ impl Trainer {
         &self.opacity_logits
     }
 
+    /// The first parameter group (in the order of [`ParamGroup`]) holding a NaN or infinite
+    /// value, or `None`. One pass over the parameters; [`Trainer::step`] runs it after every
+    /// optimiser step.
+    pub fn non_finite_parameter(&self) -> Option<ParamGroup> {
+        finite::non_finite_parameter(&self.model, &self.opacity_logits)
+    }
+
+    /// The model to save or render: the raw parameters, with the alpha logits of
+    /// [`TextureMode::Gaussian`] taken from the textures the renderer used (opacity × the fixed
+    /// shape, clamped to `[1e-6, 1 − 1e-6]`; masked texels 0). In full-texture mode a copy of
+    /// [`Trainer::model`].
+    pub fn export_model(&self) -> Model {
+        let mut model = self.model.clone();
+        if self.config.texture_mode == TextureMode::Gaussian {
+            let t = model.texture_size * model.texture_size;
+            for (i, texel) in self.activated.textures.iter().enumerate() {
+                model.alpha_logits[i] = if model.alpha_mask[i % t] {
+                    logit(texel[3].clamp(1e-6, 1.0 - 1e-6))
+                } else {
+                    0.0
+                };
+            }
+        }
+        model
+    }
+
     /// Billboards whose mean alpha exceeds the relocation threshold 0.005.
     pub fn alive_count(&self) -> usize {
         let t = self.model.texture_size * self.model.texture_size;
@@ -460,11 +525,13 @@ impl Trainer {
 
     /// Render settings at the current step.
     pub fn settings(&self) -> RenderSettings {
-        RenderSettings {
+        let mut settings = RenderSettings {
             background: self.config.background,
             sh_degree: active_sh_degree(self.step, self.config.iterations, self.config.sh_degree),
             ..RenderSettings::default()
-        }
+        };
+        settings.composite.clamp_gradient = self.config.clamp_gradient;
+        settings
     }
 
     fn validate(&self, views: &[TrainView]) -> Result<(), TrainError> {
@@ -499,11 +566,19 @@ impl Trainer {
     /// The loss is photometric + texture regulariser + opacity regulariser; the gradients of the
     /// regularisers are added to the rasterizer's texture gradients before the optimiser step.
     ///
+    /// Every step checks its values (see [`finite`]): the total loss and every gradient before
+    /// the optimiser step, every parameter after it.
+    ///
     /// # Errors
     /// [`TrainError`] when `views` is empty, an image does not match its camera, or the view
-    /// list shrank below an index still on the shuffled stack. The trainer is unchanged then.
+    /// list shrank below an index still on the shuffled stack; the trainer is unchanged then.
+    /// [`TrainError::NonFinite`] when the loss or a gradient is NaN or infinite (the step is not
+    /// applied and the trainer is unchanged, bit for bit) or a parameter is after the optimiser
+    /// step (the step was applied).
     pub fn step(&mut self, views: &[TrainView]) -> Result<StepLog, TrainError> {
         self.validate(views)?;
+        // What drawing the view changes, to undo a refused step.
+        let (rng_before, refills) = (self.rng.state(), self.order.is_empty());
         let vi = self.next_view(views.len());
         let view = &views[vi];
         let cam = &view.camera;
@@ -542,6 +617,27 @@ impl Trainer {
             0.0
         };
         self.render_buffers = out.into_buffers();
+        let total = loss.loss + texture_reg + opacity_reg;
+        let bad = if total.is_finite() {
+            finite::non_finite_gradient(&self.grads).map(NonFinite::Gradient)
+        } else {
+            Some(NonFinite::Loss)
+        };
+        if let Some(value) = bad {
+            // Refuse the step: the view goes back on the stack, the gradients back to zero.
+            if refills {
+                self.order.clear();
+                self.rng = Rng::from_state(rng_before);
+            } else {
+                self.order.push(vi);
+            }
+            self.grads = RenderGradients::zeros(self.model.len(), self.model.texture_size);
+            return Err(TrainError::NonFinite {
+                step: self.step + 1,
+                view: vi,
+                value,
+            });
+        }
         let lr = learning_rates(self.step, self.config.iterations, self.config.extent).scaled(&self.config.lr_scales);
         let updated = match self.config.adam {
             AdamMode::Dense => {
@@ -570,9 +666,16 @@ impl Trainer {
                 0
             };
         self.step += 1;
+        if let Some(group) = finite::non_finite_parameter(&self.model, &self.opacity_logits) {
+            return Err(TrainError::NonFinite {
+                step: self.step,
+                view: vi,
+                value: NonFinite::Parameter(group),
+            });
+        }
         Ok(StepLog {
             step: self.step,
-            loss: loss.loss + texture_reg + opacity_reg,
+            loss: total,
             photometric: loss.loss,
             texture_reg,
             opacity_reg,

@@ -415,3 +415,24 @@ fn learning_rate_flags_reach_the_trainer() {
     }
     std::fs::remove_dir_all(&root).ok();
 }
+
+/// `--clamp-gradient straight-through` reaches the trainer, its checkpoint and `summary.json`;
+/// an unknown value is refused by name.
+#[test]
+fn the_clamp_gradient_flag_reaches_the_checkpoint_and_the_summary() {
+    let root = temp("clamp");
+    let data = export_demo(&root, 24, 100);
+    let (d, out) = (data.to_str().unwrap(), root.join("run").to_str().unwrap().to_string());
+    run_ok(&tiny_train_args(d, &out, &["--clamp-gradient", "straight-through"]));
+    let trainer = bbsplat::train::Trainer::load_checkpoint(root.join("run/checkpoint.bin")).unwrap();
+    assert_eq!(
+        trainer.config().clamp_gradient,
+        bbsplat::train::ClampGradient::PassThrough
+    );
+    let text = std::fs::read_to_string(root.join("run/summary.json")).unwrap();
+    let file: bbsplat::report::SummaryFile = serde_json::from_str(&text).unwrap();
+    assert_eq!(file.settings.clamp_gradient, "straight-through");
+    let (ok, err) = run(&tiny_train_args(d, &out, &["--clamp-gradient", "sideways"]));
+    assert!(!ok && err.contains("sideways"), "{err}");
+    std::fs::remove_dir_all(&root).ok();
+}

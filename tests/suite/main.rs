@@ -30,3 +30,4 @@ mod train_checkpoint;
 mod train_demo;
 mod train_regularise;
 mod train_relocate;
+mod train_run;

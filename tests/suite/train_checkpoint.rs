@@ -6,8 +6,8 @@ use bbsplat::demo::{DemoConfig, generate};
 use bbsplat::model::Model;
 use bbsplat::train::checkpoint::{MAGIC, OLDEST_VERSION, VERSION};
 use bbsplat::train::{
-    AdamMode, CheckpointError, LearningRateScales, TextureMode, TrainConfig, TrainError, TrainView, Trainer,
-    scene_extent,
+    AdamMode, CheckpointError, ClampGradient, LearningRateScales, TextureMode, TrainConfig, TrainError, TrainView,
+    Trainer, scene_extent,
 };
 use glam::Vec3;
 use std::path::PathBuf;
@@ -52,6 +52,7 @@ fn setup(adam: AdamMode, texture_mode: TextureMode) -> (Trainer, Vec<TrainView>)
             shape: 1.25,
             texture: 2.0,
         },
+        clamp_gradient: ClampGradient::PassThrough,
         ..TrainConfig::default()
     };
     (Trainer::new(model, config), views)
@@ -127,10 +128,13 @@ fn fnv1a(data: &[u8]) -> u64 {
     h
 }
 
-/// Byte offset of the learning-rate multipliers in a version-2 checkpoint (after magic, version,
-/// length, iterations, SH degree, background, seed, extent, three regulariser settings, three
-/// mode bytes and `relocate_every`).
+/// Byte offset of the learning-rate multipliers in a checkpoint of version ≥ 2 (after magic,
+/// version, length, iterations, SH degree, background, seed, extent, three regulariser settings,
+/// three mode bytes and `relocate_every`).
 const LR_SCALES_AT: usize = 8 + 4 + 8 + 8 + 4 + 12 + 8 + 4 + 12 + 3 + 8;
+
+/// Byte offset of the clamp-gradient byte (version ≥ 3), right after the multipliers.
+const CLAMP_AT: usize = LR_SCALES_AT + 16;
 
 /// `bytes` with the header's length and the checksum recomputed.
 fn resealed(mut bytes: Vec<u8>) -> Vec<u8> {
@@ -145,8 +149,8 @@ fn resealed(mut bytes: Vec<u8>) -> Vec<u8> {
 fn version_1_checkpoints_load_with_the_reference_learning_rates() {
     let (mut tr, views) = setup(AdamMode::Dense, TextureMode::Full);
     tr.step(&views).unwrap();
-    let v2 = tr.checkpoint_bytes();
-    let stored: Vec<f32> = v2[LR_SCALES_AT..LR_SCALES_AT + 16]
+    let v3 = tr.checkpoint_bytes();
+    let stored: Vec<f32> = v3[LR_SCALES_AT..LR_SCALES_AT + 16]
         .chunks_exact(4)
         .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
         .collect();
@@ -155,9 +159,13 @@ fn version_1_checkpoints_load_with_the_reference_learning_rates() {
         [1.5, 0.75, 1.25, 2.0],
         "the multipliers sit where this test expects"
     );
-    // The same state as version 1 wrote it: no multipliers.
-    let mut v1 = v2.clone();
-    v1.drain(LR_SCALES_AT..LR_SCALES_AT + 16);
+    assert_eq!(
+        v3[CLAMP_AT], 1,
+        "the clamp gradient (pass-through) sits where this test expects"
+    );
+    // The same state as version 1 wrote it: no multipliers, no clamp gradient.
+    let mut v1 = v3.clone();
+    v1.drain(LR_SCALES_AT..CLAMP_AT + 1);
     v1[8..12].copy_from_slice(&OLDEST_VERSION.to_le_bytes());
     let v1 = resealed(v1);
     let path = PathBuf::from("old.ckpt");
@@ -167,20 +175,23 @@ fn version_1_checkpoints_load_with_the_reference_learning_rates() {
         *old.config(),
         TrainConfig {
             lr_scales: LearningRateScales::REFERENCE,
+            clamp_gradient: ClampGradient::Exact,
             ..*tr.config()
         }
     );
     assert_eq!(old.step_index(), tr.step_index());
-    // Everything else is the same state: written again with the original multipliers, it is
-    // the version-2 file byte for byte.
+    // Everything else is the same state: written again with the original multipliers and clamp
+    // gradient, it is the version-3 file byte for byte.
     let mut again = old.checkpoint_bytes();
     for (k, x) in [1.5f32, 0.75, 1.25, 2.0].iter().enumerate() {
         again[LR_SCALES_AT + 4 * k..LR_SCALES_AT + 4 * k + 4].copy_from_slice(&x.to_le_bytes());
     }
-    assert_eq!(resealed(again), v2);
+    assert_eq!(again[CLAMP_AT], 0, "read as exact");
+    again[CLAMP_AT] = 1;
+    assert_eq!(resealed(again), v3);
     // A negative or NaN multiplier is refused.
     for bad_value in [-1.0f32, f32::NAN] {
-        let mut bad = v2.clone();
+        let mut bad = v3.clone();
         bad[LR_SCALES_AT + 4..LR_SCALES_AT + 8].copy_from_slice(&bad_value.to_le_bytes());
         let err = Trainer::from_checkpoint_bytes(&resealed(bad), &path)
             .err()
@@ -190,6 +201,44 @@ fn version_1_checkpoints_load_with_the_reference_learning_rates() {
             "{err}"
         );
     }
+}
+
+/// Version 2 (multipliers, no clamp gradient) loads with the exact clamp gradient; version 3
+/// keeps either setting; an unknown clamp-gradient byte is refused by name.
+#[test]
+fn the_clamp_gradient_is_checkpointed_and_version_2_reads_as_exact() {
+    let (mut tr, views) = setup(AdamMode::Dense, TextureMode::Full);
+    tr.step(&views).unwrap();
+    let v3 = tr.checkpoint_bytes();
+    let path = PathBuf::from("c.ckpt");
+    let back = Trainer::from_checkpoint_bytes(&v3, &path).unwrap();
+    assert_eq!(back.config().clamp_gradient, ClampGradient::PassThrough);
+    assert_eq!(*back.config(), *tr.config());
+
+    let mut v2 = v3.clone();
+    v2.remove(CLAMP_AT);
+    v2[8..12].copy_from_slice(&2u32.to_le_bytes());
+    let old = Trainer::from_checkpoint_bytes(&resealed(v2), &path).unwrap();
+    assert_eq!(
+        *old.config(),
+        TrainConfig {
+            clamp_gradient: ClampGradient::Exact,
+            ..*tr.config()
+        }
+    );
+    let mut again = old.checkpoint_bytes();
+    again[CLAMP_AT] = 1;
+    assert_eq!(resealed(again), v3, "nothing else changed");
+
+    let mut bad = v3.clone();
+    bad[CLAMP_AT] = 7;
+    let err = Trainer::from_checkpoint_bytes(&resealed(bad), &path)
+        .err()
+        .expect("must fail");
+    assert!(
+        matches!(&err, CheckpointError::Inconsistent { what, .. } if what.contains("clamp gradient")),
+        "{err}"
+    );
 }
 
 #[test]
@@ -261,7 +310,7 @@ fn corrupted_files_give_typed_errors() {
 
     // A huge billboard count with a valid checksum does not allocate or panic.
     let mut bad = bytes.clone();
-    let order_len_at = LR_SCALES_AT + 16 + 8 + 32;
+    let order_len_at = CLAMP_AT + 1 + 8 + 32;
     let k = u64::from_le_bytes(bad[order_len_at..order_len_at + 8].try_into().unwrap()) as usize;
     let n_at = order_len_at + 8 + 8 * k;
     bad[n_at..n_at + 8].copy_from_slice(&u64::MAX.to_le_bytes());

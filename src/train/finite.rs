@@ -1,0 +1,222 @@
+//! Detection of NaN and infinite values in a training step: the loss, the gradients (before the
+//! optimiser uses them) and the parameters (after it wrote them).
+//!
+//! A value is non-finite when its exponent bits are all ones (NaN or ±∞). The scans take the
+//! maximum of the masked exponent bits, an integer reduction that the compiler vectorises, so a
+//! pass over the gradient or parameter arrays costs about as much as reading them once (measured
+//! in `docs/training.md`, "Non-finite values"). The large texture arrays are split across the
+//! rayon pool; the answer (which group, checked in a fixed order) does not depend on the thread
+//! count.
+
+use crate::model::Model;
+use crate::raster::RenderGradients;
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+/// A group of trained values, as named by [`NonFinite`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum ParamGroup {
+    /// Billboard centres.
+    Positions,
+    /// Rotation quaternions.
+    Quaternions,
+    /// Log-scales.
+    LogScales,
+    /// SH coefficients (all degrees).
+    Sh,
+    /// Alpha textures: the alpha logits (parameters) or the activated alpha texels (gradients).
+    AlphaTextures,
+    /// Colour textures: the colour logits (parameters) or the activated colour texels
+    /// (gradients).
+    ColourTextures,
+    /// The per-billboard opacity logits of [`super::TextureMode::Gaussian`].
+    Opacity,
+}
+
+impl std::fmt::Display for ParamGroup {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            ParamGroup::Positions => "positions",
+            ParamGroup::Quaternions => "quaternions",
+            ParamGroup::LogScales => "log-scales",
+            ParamGroup::Sh => "SH coefficients",
+            ParamGroup::AlphaTextures => "alpha textures",
+            ParamGroup::ColourTextures => "colour textures",
+            ParamGroup::Opacity => "opacity logits",
+        })
+    }
+}
+
+/// Which value of a step was NaN or infinite.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum NonFinite {
+    /// The step's total loss (photometric + regularisers), e.g. from a NaN pixel in the view.
+    /// Found before the optimiser step: nothing was applied.
+    Loss,
+    /// The gradient of a group. Found before the optimiser step: nothing was applied.
+    Gradient(ParamGroup),
+    /// A parameter of a group, found after the optimiser step (which was applied), or by
+    /// [`super::Trainer::non_finite_parameter`].
+    Parameter(ParamGroup),
+}
+
+impl std::fmt::Display for NonFinite {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            NonFinite::Loss => f.write_str("the loss"),
+            NonFinite::Gradient(g) => write!(f, "the gradient of the {g}"),
+            NonFinite::Parameter(g) => write!(f, "a parameter of the {g}"),
+        }
+    }
+}
+
+/// Exponent bits of an `f32`.
+const EXPONENT: u32 = 0x7f80_0000;
+
+/// Elements per parallel task of the large scans.
+const CHUNK: usize = 1 << 16;
+
+/// True when every value of `xs` is finite (serial).
+fn finite_serial(xs: &[f32]) -> bool {
+    xs.iter().fold(0u32, |m, x| m.max(x.to_bits() & EXPONENT)) != EXPONENT
+}
+
+/// True when every value of `xs` is finite (split across the rayon pool when large).
+pub fn all_finite(xs: &[f32]) -> bool {
+    if xs.len() <= CHUNK {
+        finite_serial(xs)
+    } else {
+        xs.par_chunks(CHUNK).all(finite_serial)
+    }
+}
+
+fn finite_vec3(xs: &[Vec3]) -> bool {
+    xs.iter().fold(0u32, |m, p| {
+        m.max(p.x.to_bits() & EXPONENT)
+            .max(p.y.to_bits() & EXPONENT)
+            .max(p.z.to_bits() & EXPONENT)
+    }) != EXPONENT
+}
+
+fn finite_vec2(xs: &[Vec2]) -> bool {
+    xs.iter().fold(0u32, |m, p| {
+        m.max(p.x.to_bits() & EXPONENT).max(p.y.to_bits() & EXPONENT)
+    }) != EXPONENT
+}
+
+/// The first group (in the order of [`ParamGroup`]) whose gradient holds a non-finite value.
+/// The texture gradients are checked as one array first; only when that fails are the alpha and
+/// colour lanes told apart.
+pub fn non_finite_gradient(g: &RenderGradients) -> Option<ParamGroup> {
+    if !finite_vec3(&g.positions) {
+        return Some(ParamGroup::Positions);
+    }
+    if !finite_serial(g.quaternions.as_flattened()) {
+        return Some(ParamGroup::Quaternions);
+    }
+    if !finite_vec2(&g.log_scales) {
+        return Some(ParamGroup::LogScales);
+    }
+    if !all_finite(&g.sh) {
+        return Some(ParamGroup::Sh);
+    }
+    if !all_finite(g.textures.as_flattened()) {
+        let alpha_ok = g.textures.iter().all(|t| t[3].is_finite());
+        return Some(if alpha_ok {
+            ParamGroup::ColourTextures
+        } else {
+            ParamGroup::AlphaTextures
+        });
+    }
+    None
+}
+
+/// The first group (in the order of [`ParamGroup`]) of `model` and `opacity_logits` holding a
+/// non-finite value.
+pub fn non_finite_parameter(model: &Model, opacity_logits: &[f32]) -> Option<ParamGroup> {
+    if !finite_vec3(&model.positions) {
+        return Some(ParamGroup::Positions);
+    }
+    if !finite_serial(model.quaternions.as_flattened()) {
+        return Some(ParamGroup::Quaternions);
+    }
+    if !finite_vec2(&model.log_scales) {
+        return Some(ParamGroup::LogScales);
+    }
+    if !all_finite(&model.sh) {
+        return Some(ParamGroup::Sh);
+    }
+    if !all_finite(&model.alpha_logits) {
+        return Some(ParamGroup::AlphaTextures);
+    }
+    if !all_finite(&model.colour_logits) {
+        return Some(ParamGroup::ColourTextures);
+    }
+    if !all_finite(opacity_logits) {
+        return Some(ParamGroup::Opacity);
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_non_finite_value_is_found_at_any_position() {
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -f32::NAN] {
+            for len in [1, 7, CHUNK - 1, CHUNK + 5, 3 * CHUNK] {
+                for at in [0, len / 2, len - 1] {
+                    let mut xs = vec![1.5f32; len];
+                    xs[at] = bad;
+                    assert!(!all_finite(&xs), "{bad} at {at} of {len}");
+                }
+            }
+        }
+        let extremes = [f32::MAX, f32::MIN, f32::MIN_POSITIVE, 1e-45, -0.0, 0.0];
+        assert!(all_finite(&extremes));
+        assert!(all_finite(&[]));
+    }
+
+    #[test]
+    fn gradient_groups_are_named() {
+        let mut g = RenderGradients::zeros(3, 2);
+        assert_eq!(non_finite_gradient(&g), None);
+        g.textures[5][1] = f32::NAN;
+        assert_eq!(non_finite_gradient(&g), Some(ParamGroup::ColourTextures));
+        g.textures[7][3] = f32::INFINITY;
+        assert_eq!(non_finite_gradient(&g), Some(ParamGroup::AlphaTextures));
+        g.sh[100] = f32::NAN;
+        assert_eq!(non_finite_gradient(&g), Some(ParamGroup::Sh));
+        g.log_scales[2].y = f32::NAN;
+        assert_eq!(non_finite_gradient(&g), Some(ParamGroup::LogScales));
+        g.quaternions[1][0] = f32::NEG_INFINITY;
+        assert_eq!(non_finite_gradient(&g), Some(ParamGroup::Quaternions));
+        g.positions[0].z = f32::NAN;
+        assert_eq!(non_finite_gradient(&g), Some(ParamGroup::Positions));
+    }
+
+    #[test]
+    fn parameter_groups_are_named() {
+        let points = [Vec3::ZERO, Vec3::X, Vec3::Y];
+        let mut m = Model::from_points(&points, &[[0.5; 3]; 3], 4, 0);
+        let mut o = vec![0.0; 3];
+        assert_eq!(non_finite_parameter(&m, &o), None);
+        o[2] = f32::NAN;
+        assert_eq!(non_finite_parameter(&m, &o), Some(ParamGroup::Opacity));
+        m.colour_logits[9] = f32::INFINITY;
+        assert_eq!(non_finite_parameter(&m, &o), Some(ParamGroup::ColourTextures));
+        m.alpha_logits[3] = f32::NAN;
+        assert_eq!(non_finite_parameter(&m, &o), Some(ParamGroup::AlphaTextures));
+        m.sh[50] = f32::NAN;
+        assert_eq!(non_finite_parameter(&m, &o), Some(ParamGroup::Sh));
+        m.log_scales[1].x = f32::NAN;
+        assert_eq!(non_finite_parameter(&m, &o), Some(ParamGroup::LogScales));
+        m.quaternions[2][3] = f32::NAN;
+        assert_eq!(non_finite_parameter(&m, &o), Some(ParamGroup::Quaternions));
+        m.positions[1].x = f32::INFINITY;
+        assert_eq!(non_finite_parameter(&m, &o), Some(ParamGroup::Positions));
+    }
+}

@@ -1,0 +1,616 @@
+//! The whole training run: steps, coarse-to-fine schedule, periodic evaluation and checkpoints,
+//! stop requests, the final save of the 8-bit model, its re-load and final evaluation, and the
+//! run's summary (`summary.json`: a [`TrainSummary`] and the [`RecordedSettings`], see
+//! [`SummaryFile`]). `bbsplat train` and `bbsplat demo` are thin wrappers around [`run`]; a program
+//! embedding the crate gets the same loop.
+//!
+//! ```no_run
+//! use bbsplat::demo::{DemoConfig, generate};
+//! use bbsplat::model::Model;
+//! use bbsplat::train::{RunConfig, RunOutcome, StopSignal, TrainConfig, TrainEvent, TrainView, Trainer, run};
+//!
+//! let scene = generate(&DemoConfig::default());
+//! let train: Vec<TrainView> = scene.train.iter().map(TrainView::from_demo).collect();
+//! let test: Vec<TrainView> = scene.test.iter().map(TrainView::from_demo).collect();
+//! let model = Model::from_points(&scene.points, &scene.colours, 8, 0);
+//! let config = TrainConfig { iterations: 300, ..TrainConfig::default() };
+//! let mut trainer = Trainer::new(model, config);
+//! let settings = RunConfig { output: Some("out".into()), ..RunConfig::default() };
+//! let outcome = run(&mut trainer, &train, &test, &settings, &StopSignal::new(), |event| {
+//!     if let TrainEvent::Evaluation { step, psnr, .. } = event {
+//!         println!("step {step}: {psnr:.2} dB");
+//!     }
+//! })?;
+//! if let RunOutcome::Finished(summary) = outcome {
+//!     println!("test PSNR {:.2} dB", summary.test_psnr);
+//! }
+//! # Ok::<(), bbsplat::train::RunError>(())
+//! ```
+//!
+//! # What a run does
+//!
+//! The trainer's own [`TrainConfig`](super::TrainConfig) (iterations, schedules, seed) drives the
+//! steps; [`RunConfig`] holds what is around them. From the trainer's current step (0, or the
+//! step of a loaded checkpoint) to `iterations`:
+//!
+//! 1. before each step: if [`RunConfig::stop_after`] steps are done or the [`StopSignal`] was
+//!    raised, save the checkpoint (with an output folder) and return [`RunOutcome::Stopped`];
+//! 2. one [`Trainer::step`] on the coarse or full-size views ([`RunConfig::resolution`]),
+//!    timed (only step time counts as training time), then [`TrainEvent::Step`];
+//! 3. every [`RunConfig::save_every`] steps the checkpoint, every [`RunConfig::eval_every`]
+//!    steps (not at the last) an evaluation on at most [`RunConfig::eval_views`] evenly spaced
+//!    test views ([`TrainEvent::Evaluation`]).
+//!
+//! At the end, with an output folder, the model is saved as the reference saves it (8-bit
+//! textures, [`crate::model_file`]) in `<output>/model`, the checkpoint written, and the model
+//! **re-loaded** and evaluated on every test view, as the reference's `render.py` does; the
+//! summary goes to `<output>/summary.json` ([`TrainSummary`]). Without an output folder nothing
+//! is written and the final evaluation renders the trainer's float model.
+//!
+//! # Non-finite values
+//!
+//! [`Trainer::step`] checks the loss and gradients before its optimiser step and the
+//! parameters after it; [`run`] also checks the parameters once before the first step, so every
+//! step starts from finite parameters. When a step's loss or gradient is not finite the step is
+//! not applied, and with an output folder the trainer (exactly the state before that step, with
+//! finite parameters) is saved as the checkpoint before [`RunError::Step`] is returned. When a
+//! parameter turns non-finite in the optimiser step, nothing is written: the checkpoint on disk
+//! stays the last one saved (from a step whose parameters were checked). In both cases the
+//! error names the step, the view, the value ([`NonFinite`]) and the checkpoint.
+//!
+//! Evaluation PSNR and SSIM are those of [`crate::eval`] (8-bit images). Deterministic: the same
+//! trainer, views and settings give the same files for any thread count, and a run stopped and
+//! continued from its checkpoint writes the same files as one that was not.
+
+use super::resolution::{ResolutionSchedule, downscale_view};
+use super::{CheckpointError, NonFinite, ParamGroup, StepLog, TrainError, TrainView, Trainer};
+use crate::eval::{EvalView, evaluate_views};
+use crate::loss::LossError;
+use crate::model_file::{ModelFileError, ModelMeta, load_model, save_model};
+use crate::raster::{BillboardSet, RenderSettings};
+use crate::report::{CurvePoint, RecordedSettings, SUMMARY_VERSION, SummaryFile, TrainSummary, peak_rss_bytes};
+use crate::stages::composite::ClampGradient;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+use thiserror::Error;
+
+/// File name of the checkpoint in the output folder.
+pub const CHECKPOINT_FILE: &str = "checkpoint.bin";
+/// Folder name of the saved model in the output folder.
+pub const MODEL_DIR: &str = "model";
+/// File name of the summary in the output folder.
+pub const SUMMARY_FILE: &str = "summary.json";
+
+/// What surrounds the steps of a run (the steps themselves follow the trainer's
+/// [`TrainConfig`](super::TrainConfig)).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunConfig {
+    /// Evaluate on the test views every n steps (0: only at the end). Default 1000.
+    pub eval_every: usize,
+    /// At most this many test views (evenly spaced: view `k·len/n` for `k < n`) in the
+    /// intermediate evaluations; 0 means all. The final evaluation uses all. Default 25.
+    pub eval_views: usize,
+    /// Write the checkpoint every n steps (0: only when stopping and at the end). Needs
+    /// [`RunConfig::output`]; ignored without. Default 0.
+    pub save_every: usize,
+    /// Output folder (created): `checkpoint.bin`, `model/`, `summary.json`. `None`: nothing is
+    /// written. Default `None`.
+    pub output: Option<PathBuf>,
+    /// Stop (with a checkpoint) once this many steps of the run are done, as a stop request
+    /// does: lets a long run be done in slices. Default `None`.
+    pub stop_after: Option<usize>,
+    /// Coarse-to-fine schedule (default [`ResolutionSchedule::OFF`]).
+    pub resolution: ResolutionSchedule,
+    /// The scene's name, recorded in the summary.
+    pub scene: String,
+    /// The command line, recorded in the summary (program name first; empty when embedded).
+    pub command: Vec<String>,
+}
+
+impl Default for RunConfig {
+    fn default() -> Self {
+        Self {
+            eval_every: 1000,
+            eval_views: 25,
+            save_every: 0,
+            output: None,
+            stop_after: None,
+            resolution: ResolutionSchedule::OFF,
+            scene: String::new(),
+            command: Vec::new(),
+        }
+    }
+}
+
+/// A stop request shared with another thread or a signal handler (e.g. Ctrl-C): [`run`] polls it
+/// before every step and stops with a checkpoint. Clones share the flag.
+#[derive(Clone, Debug, Default)]
+pub struct StopSignal(Arc<AtomicBool>);
+
+impl StopSignal {
+    /// A signal not raised.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Asks the run to stop before its next step.
+    pub fn request(&self) {
+        self.0.store(true, Ordering::SeqCst);
+    }
+
+    /// True once [`StopSignal::request`] was called.
+    pub fn is_requested(&self) -> bool {
+        self.0.load(Ordering::SeqCst)
+    }
+}
+
+/// Why a run stopped before its last step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum StopReason {
+    /// [`RunConfig::stop_after`] steps were done.
+    StopAfter,
+    /// The [`StopSignal`] was raised.
+    Requested,
+}
+
+/// Something worth telling the user that does not stop the run.
+#[derive(Clone, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum RunWarning {
+    /// No test views: no evaluation (the summary's PSNR and SSIM are NaN).
+    NoTestViews,
+}
+
+impl std::fmt::Display for RunWarning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RunWarning::NoTestViews => f.write_str("the scene has no test views: nothing will be evaluated"),
+        }
+    }
+}
+
+/// What a run reports to its caller's `on_event`, in order: `Started`, then per step `Step`
+/// (and `Checkpoint` / `Evaluation` when due), and at the end `ModelSaved`, `Checkpoint` and
+/// `Finished`, or `Checkpoint` and `Stopped`.
+#[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum TrainEvent {
+    /// The run starts (after the checks, before the first step).
+    Started {
+        /// Steps already done (a resumed trainer's step).
+        step: usize,
+        /// Steps of the whole run.
+        iterations: usize,
+        /// Training views.
+        train_views: usize,
+        /// Test views.
+        test_views: usize,
+        /// Size of the first training view, pixels.
+        width: u32,
+        /// Height of the first training view, pixels.
+        height: u32,
+        /// Billboards.
+        billboards: usize,
+        /// Texture side.
+        texture_size: usize,
+    },
+    /// A warning.
+    Warning(RunWarning),
+    /// A step was done.
+    Step {
+        /// The step's log (`log.step` counts the steps done).
+        log: StepLog,
+        /// Steps of the whole run.
+        iterations: usize,
+        /// Exponential moving average of the steps' PSNR (weight 0.05 on the newest; the first
+        /// step of this call starts it).
+        running_psnr: f64,
+        /// Billboards relocated so far in this call.
+        relocated_total: usize,
+        /// Seconds spent in steps so far in this call.
+        train_seconds: f64,
+    },
+    /// An intermediate evaluation on the test subset.
+    Evaluation {
+        /// Steps done.
+        step: usize,
+        /// Mean PSNR, dB (8-bit images).
+        psnr: f64,
+        /// Mean SSIM (8-bit images).
+        ssim: f64,
+        /// Seconds spent in steps so far in this call.
+        seconds: f64,
+        /// Views evaluated.
+        views: usize,
+    },
+    /// The checkpoint was written.
+    Checkpoint {
+        /// Steps done.
+        step: usize,
+        /// The file.
+        path: PathBuf,
+    },
+    /// The model was saved (8-bit textures).
+    ModelSaved {
+        /// The model folder.
+        path: PathBuf,
+        /// Size of its files, bytes.
+        bytes: u64,
+    },
+    /// The run stopped before its last step.
+    Stopped {
+        /// Steps done.
+        step: usize,
+        /// Why.
+        reason: StopReason,
+        /// The checkpoint written (with an output folder).
+        checkpoint: Option<PathBuf>,
+    },
+    /// The run is complete.
+    Finished(Box<TrainSummary>),
+}
+
+/// How a run ended without error.
+#[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum RunOutcome {
+    /// Every step done, the model evaluated (and, with an output folder, saved).
+    Finished(Box<TrainSummary>),
+    /// Stopped before the last step.
+    Stopped {
+        /// Steps done.
+        step: usize,
+        /// Why.
+        reason: StopReason,
+        /// The checkpoint written (with an output folder): continue from it with
+        /// [`Trainer::load_checkpoint`] and [`run`].
+        checkpoint: Option<PathBuf>,
+    },
+}
+
+/// Why a run failed. The trainer passed to [`run`] holds the state reached (see each variant).
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum RunError {
+    /// No training views.
+    #[error("no training views: a run needs at least one")]
+    NoTrainViews,
+    /// The trainer given to [`run`] holds a NaN or infinite parameter (nothing was done).
+    #[error("the trainer at step {step} holds a non-finite {group} value (NaN or infinite) before the run")]
+    NonFiniteStart {
+        /// The trainer's step.
+        step: usize,
+        /// The group.
+        group: ParamGroup,
+    },
+    /// A step failed: bad views, or a non-finite value ([`TrainError::NonFinite`]).
+    #[error("{source}{}", checkpoint_note(.checkpoint))]
+    Step {
+        /// The step's error (step, view, value).
+        source: TrainError,
+        /// The last good checkpoint written by this run: for a non-finite loss or gradient the
+        /// state just before the failed step; otherwise the last one saved earlier, untouched.
+        /// `None` when this run wrote none.
+        checkpoint: Option<PathBuf>,
+    },
+    /// Writing the checkpoint failed.
+    #[error(transparent)]
+    Checkpoint(#[from] CheckpointError),
+    /// Saving or re-loading the model failed.
+    #[error(transparent)]
+    Model(#[from] ModelFileError),
+    /// An evaluation failed (a test image that does not match its camera).
+    #[error("evaluating the test views: {0}")]
+    Evaluation(#[from] LossError),
+    /// The summary could not be encoded.
+    #[error("encoding the summary: {0}")]
+    Summary(serde_json::Error),
+    /// The output folder or the summary could not be written.
+    #[error("{path}: {action}: {source}")]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// What was being done.
+        action: &'static str,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+}
+
+fn checkpoint_note(checkpoint: &Option<PathBuf>) -> String {
+    match checkpoint {
+        Some(path) => format!("; the last good state is in {}", path.display()),
+        None => String::new(),
+    }
+}
+
+/// `at_most` evenly spaced items (`k·len/at_most`), or all when `at_most` is 0 or not smaller.
+fn evenly_spaced<T>(items: &[T], at_most: usize) -> Vec<&T> {
+    if items.len() <= at_most || at_most == 0 {
+        return items.iter().collect();
+    }
+    (0..at_most).map(|k| &items[k * items.len() / at_most]).collect()
+}
+
+/// Mean PSNR, SSIM and render milliseconds of `set` over `views`.
+fn evaluate(
+    set: &BillboardSet<'_>,
+    views: &[&TrainView],
+    settings: &RenderSettings,
+) -> Result<(f64, f64, f64), LossError> {
+    let report = evaluate_views(
+        set,
+        views.iter().map(|v| EvalView {
+            name: "",
+            camera: &v.camera,
+            rgb: &v.rgb,
+        }),
+        settings,
+        |_, _| {},
+    )?;
+    Ok((report.mean_psnr, report.mean_ssim, report.mean_render_ms))
+}
+
+/// Writes `text` to `path` through a temporary name in the same folder.
+fn write_text_atomic(path: &Path, text: &str) -> Result<(), RunError> {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    let io = |action| {
+        move |source| RunError::Io {
+            path: path.to_path_buf(),
+            action,
+            source,
+        }
+    };
+    std::fs::write(&tmp, text).map_err(io("writing"))?;
+    std::fs::rename(&tmp, path).map_err(io("renaming the temporary file"))
+}
+
+/// The name of the clamp gradient in the summary.
+fn clamp_gradient_name(c: ClampGradient) -> &'static str {
+    match c {
+        ClampGradient::Exact => "exact",
+        ClampGradient::PassThrough => "straight-through",
+    }
+}
+
+/// Trains `trainer` from its current step to the end of its run (module docs), on `train`,
+/// evaluating on `test`; `on_event` sees every [`TrainEvent`]. The trainer is left at the state
+/// reached: trained, stopped, or (on error) as each [`RunError`] variant says.
+///
+/// # Errors
+/// [`RunError`]: no training views, a non-finite parameter before the run, a failed step (bad
+/// views, non-finite values), or a file that could not be written or re-loaded.
+pub fn run(
+    trainer: &mut Trainer,
+    train: &[TrainView],
+    test: &[TrainView],
+    config: &RunConfig,
+    stop: &StopSignal,
+    mut on_event: impl FnMut(&TrainEvent),
+) -> Result<RunOutcome, RunError> {
+    let first = train.first().ok_or(RunError::NoTrainViews)?;
+    if let Some(group) = trainer.non_finite_parameter() {
+        return Err(RunError::NonFiniteStart {
+            step: trainer.step_index(),
+            group,
+        });
+    }
+    let tc = *trainer.config();
+    let iterations = tc.iterations;
+    let coarse: Vec<TrainView> = if config.resolution.factor > 1 {
+        train
+            .iter()
+            .map(|v| downscale_view(v, config.resolution.factor))
+            .collect()
+    } else {
+        Vec::new()
+    };
+    on_event(&TrainEvent::Started {
+        step: trainer.step_index(),
+        iterations,
+        train_views: train.len(),
+        test_views: test.len(),
+        width: first.camera.width,
+        height: first.camera.height,
+        billboards: trainer.model.len(),
+        texture_size: trainer.model.texture_size,
+    });
+    if test.is_empty() {
+        on_event(&TrainEvent::Warning(RunWarning::NoTestViews));
+    }
+    let output = config.output.as_deref();
+    if let Some(dir) = output {
+        std::fs::create_dir_all(dir).map_err(|source| RunError::Io {
+            path: dir.to_path_buf(),
+            action: "creating the output folder",
+            source,
+        })?;
+    }
+    let checkpoint = output.map(|d| d.join(CHECKPOINT_FILE));
+    let eval_settings = RenderSettings {
+        background: tc.background,
+        sh_degree: tc.sh_degree,
+        ..RenderSettings::default()
+    };
+    let eval_subset = evenly_spaced(test, config.eval_views);
+    let mut curve = Vec::new();
+    let mut train_seconds = 0.0;
+    let mut running_psnr = f64::NAN;
+    let mut relocated_total = 0usize;
+    // The last checkpoint this call wrote (named by a failed step's error).
+    let mut last_checkpoint: Option<PathBuf> = None;
+    let save = |trainer: &Trainer, on_event: &mut dyn FnMut(&TrainEvent)| -> Result<Option<PathBuf>, RunError> {
+        let Some(path) = &checkpoint else {
+            return Ok(None);
+        };
+        trainer.save_checkpoint(path)?;
+        on_event(&TrainEvent::Checkpoint {
+            step: trainer.step_index(),
+            path: path.clone(),
+        });
+        Ok(Some(path.clone()))
+    };
+    while trainer.step_index() < iterations {
+        let reason = if config.stop_after.is_some_and(|n| trainer.step_index() >= n) {
+            Some(StopReason::StopAfter)
+        } else if stop.is_requested() {
+            Some(StopReason::Requested)
+        } else {
+            None
+        };
+        if let Some(reason) = reason {
+            let checkpoint = save(trainer, &mut on_event)?;
+            let step = trainer.step_index();
+            on_event(&TrainEvent::Stopped {
+                step,
+                reason,
+                checkpoint: checkpoint.clone(),
+            });
+            return Ok(RunOutcome::Stopped {
+                step,
+                reason,
+                checkpoint,
+            });
+        }
+        let t0 = Instant::now();
+        let views = if config.resolution.is_coarse(trainer.step_index(), iterations) {
+            &coarse
+        } else {
+            train
+        };
+        let log = match trainer.step(views) {
+            Ok(log) => log,
+            Err(source) => {
+                let refused = matches!(
+                    source,
+                    TrainError::NonFinite {
+                        value: NonFinite::Loss | NonFinite::Gradient(_),
+                        ..
+                    }
+                );
+                // A refused step left the trainer as it was before the step, with parameters
+                // checked after the previous step (or before the run): the last good state.
+                let checkpoint = if refused && checkpoint.is_some() {
+                    save(trainer, &mut on_event)?
+                } else {
+                    last_checkpoint
+                };
+                return Err(RunError::Step { source, checkpoint });
+            }
+        };
+        train_seconds += t0.elapsed().as_secs_f64();
+        running_psnr = if running_psnr.is_nan() {
+            log.psnr
+        } else {
+            0.95 * running_psnr + 0.05 * log.psnr
+        };
+        relocated_total += log.relocated;
+        let step = log.step;
+        on_event(&TrainEvent::Step {
+            log,
+            iterations,
+            running_psnr,
+            relocated_total,
+            train_seconds,
+        });
+        if config.save_every > 0 && step.is_multiple_of(config.save_every) {
+            last_checkpoint = save(trainer, &mut on_event)?;
+        }
+        if config.eval_every > 0
+            && step.is_multiple_of(config.eval_every)
+            && step < iterations
+            && !eval_subset.is_empty()
+        {
+            let (psnr, ssim, _) = evaluate(&trainer.activated.as_set(), &eval_subset, &eval_settings)?;
+            curve.push(CurvePoint {
+                step,
+                seconds: train_seconds,
+                psnr,
+                ssim,
+            });
+            on_event(&TrainEvent::Evaluation {
+                step,
+                psnr,
+                ssim,
+                seconds: train_seconds,
+                views: eval_subset.len(),
+            });
+        }
+    }
+    // The model is saved as the reference saves it (8-bit textures) and evaluated as re-loaded,
+    // as the reference's render.py does.
+    let mut model_bytes = 0;
+    let saved = match output {
+        Some(dir) => {
+            let model_dir = dir.join(MODEL_DIR);
+            let meta = ModelMeta::for_model(&trainer.model, tc.sh_degree, tc.background.to_array());
+            model_bytes = save_model(&model_dir, &trainer.export_model(), &meta)?;
+            on_event(&TrainEvent::ModelSaved {
+                path: model_dir.clone(),
+                bytes: model_bytes,
+            });
+            save(trainer, &mut on_event)?;
+            let (model, _) = load_model(&model_dir)?;
+            Some(model.activate())
+        }
+        None => None,
+    };
+    let all_test: Vec<&TrainView> = test.iter().collect();
+    let (test_psnr, test_ssim, render_ms) = if test.is_empty() {
+        (f64::NAN, f64::NAN, f64::NAN)
+    } else {
+        let set = match &saved {
+            Some(b) => b.as_set(),
+            None => trainer.activated.as_set(),
+        };
+        evaluate(&set, &all_test, &eval_settings)?
+    };
+    curve.push(CurvePoint {
+        step: iterations,
+        seconds: train_seconds,
+        psnr: test_psnr,
+        ssim: test_ssim,
+    });
+    let summary = TrainSummary {
+        version: SUMMARY_VERSION,
+        scene: config.scene.clone(),
+        iterations,
+        billboards: trainer.model.len(),
+        alive: trainer.alive_count(),
+        texture_size: trainer.model.texture_size,
+        sh_degree: tc.sh_degree,
+        resolution: [first.camera.width, first.camera.height],
+        train_seconds,
+        render_ms_per_frame: render_ms,
+        test_psnr,
+        test_ssim,
+        test_views: test.len(),
+        model_bytes,
+        peak_rss_bytes: peak_rss_bytes(),
+        seed: tc.seed,
+        threads: rayon::current_num_threads(),
+        curve,
+        command: config.command.clone(),
+    };
+    let summary = if let Some(dir) = output {
+        let file = SummaryFile {
+            summary,
+            settings: RecordedSettings {
+                clamp_gradient: clamp_gradient_name(tc.clamp_gradient).to_string(),
+            },
+        };
+        let text = serde_json::to_string_pretty(&file).map_err(RunError::Summary)?;
+        write_text_atomic(&dir.join(SUMMARY_FILE), &text)?;
+        file.summary
+    } else {
+        summary
+    };
+    let summary = Box::new(summary);
+    on_event(&TrainEvent::Finished(summary.clone()));
+    Ok(RunOutcome::Finished(summary))
+}

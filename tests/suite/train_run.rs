@@ -1,0 +1,592 @@
+//! The library's training loop (`bbsplat::train::run`): events in order, the same state as
+//! stepping by hand, stop requests with a resumable checkpoint, non-finite values stopping the run
+//! with a typed error and the last good checkpoint on disk, and the clamp-gradient setting.
+
+use bbsplat::demo::{DemoConfig, generate};
+use bbsplat::model::{Model, logit};
+use bbsplat::train::run::{CHECKPOINT_FILE, MODEL_DIR, SUMMARY_FILE};
+use bbsplat::train::{
+    ClampGradient, NonFinite, ParamGroup, RunConfig, RunError, RunOutcome, StopReason, StopSignal, TrainConfig,
+    TrainError, TrainEvent, TrainView, Trainer, run, scene_extent,
+};
+use glam::Vec3;
+use std::path::PathBuf;
+
+struct Setup {
+    trainer: Trainer,
+    train: Vec<TrainView>,
+    test: Vec<TrainView>,
+}
+
+/// A small demo scene (24 px, 6 train / 2 test views, 150 billboards of TS 4) and a trainer for
+/// a run of `iterations` steps.
+fn setup(iterations: usize, tweak: impl Fn(TrainConfig) -> TrainConfig) -> Setup {
+    let scene = generate(&DemoConfig {
+        resolution: 24,
+        train_views: 6,
+        test_views: 2,
+        points: 150,
+        seed: 4,
+    });
+    let train: Vec<TrainView> = scene.train.iter().map(TrainView::from_demo).collect();
+    let test: Vec<TrainView> = scene.test.iter().map(TrainView::from_demo).collect();
+    let model = Model::from_points(&scene.points, &scene.colours, 4, 4);
+    let cameras: Vec<_> = train.iter().map(|v| v.camera).collect();
+    let config = TrainConfig {
+        iterations,
+        seed: 4,
+        background: Vec3::from_array(scene.background),
+        extent: scene_extent(&cameras),
+        ..TrainConfig::default()
+    };
+    Setup {
+        trainer: Trainer::new(model, tweak(config)),
+        train,
+        test,
+    }
+}
+
+fn temp_dir(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("bbsplat-run-{tag}-{}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    dir
+}
+
+/// A compact trace of the events: kind and step.
+fn trace(event: &TrainEvent) -> String {
+    match event {
+        TrainEvent::Started { step, .. } => format!("start@{step}"),
+        TrainEvent::Step { log, .. } => format!("step@{}", log.step),
+        TrainEvent::Evaluation { step, views, .. } => format!("eval@{step}/{views}"),
+        TrainEvent::Checkpoint { step, .. } => format!("ckpt@{step}"),
+        TrainEvent::ModelSaved { .. } => "model".into(),
+        TrainEvent::Stopped { step, .. } => format!("stopped@{step}"),
+        TrainEvent::Finished(_) => "finished".into(),
+        TrainEvent::Warning(w) => format!("warning {w}"),
+        other => format!("{other:?}"),
+    }
+}
+
+#[test]
+fn a_run_reports_its_events_in_order_and_equals_stepping_by_hand() {
+    let Setup {
+        mut trainer,
+        train,
+        test,
+    } = setup(12, |c| c);
+    let Setup {
+        trainer: mut manual, ..
+    } = setup(12, |c| c);
+    let dir = temp_dir("events");
+    let config = RunConfig {
+        eval_every: 5,
+        eval_views: 1,
+        save_every: 4,
+        output: Some(dir.clone()),
+        scene: "demo".into(),
+        ..RunConfig::default()
+    };
+    let mut events = Vec::new();
+    let outcome = run(&mut trainer, &train, &test, &config, &StopSignal::new(), |e| {
+        events.push(trace(e))
+    })
+    .unwrap();
+    let mut expected = vec!["start@0".to_string()];
+    for s in 1..=12 {
+        expected.push(format!("step@{s}"));
+        if s % 4 == 0 {
+            expected.push(format!("ckpt@{s}"));
+        }
+        if s % 5 == 0 {
+            expected.push(format!("eval@{s}/1"));
+        }
+    }
+    expected.extend(["model".into(), "ckpt@12".into(), "finished".into()]);
+    assert_eq!(events, expected);
+
+    for _ in 0..12 {
+        manual.step(&train).unwrap();
+    }
+    assert!(
+        trainer.checkpoint_bytes() == manual.checkpoint_bytes(),
+        "run ≠ manual steps"
+    );
+    let RunOutcome::Finished(summary) = outcome else {
+        panic!("not finished: {outcome:?}");
+    };
+    assert_eq!(summary.curve.iter().map(|p| p.step).collect::<Vec<_>>(), [5, 10, 12]);
+    assert_eq!(
+        (summary.iterations, summary.test_views, summary.scene.as_str()),
+        (12, 2, "demo")
+    );
+    assert!(summary.test_psnr.is_finite() && summary.model_bytes > 0);
+    assert!(std::fs::read(dir.join(CHECKPOINT_FILE)).unwrap() == manual.checkpoint_bytes());
+    assert!(dir.join(MODEL_DIR).join("point_cloud.ply").exists());
+    let text = std::fs::read_to_string(dir.join(SUMMARY_FILE)).unwrap();
+    let file: bbsplat::report::SummaryFile = serde_json::from_str(&text).unwrap();
+    // JSON keeps the numbers to within the last bit.
+    assert_eq!((file.summary.iterations, file.summary.curve.len()), (12, 3));
+    assert!((file.summary.test_psnr - summary.test_psnr).abs() < 1e-12);
+    assert_eq!(file.settings.clamp_gradient, "exact");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn without_an_output_folder_nothing_is_written_and_the_float_model_is_evaluated() {
+    let Setup {
+        mut trainer,
+        train,
+        test,
+    } = setup(6, |c| c);
+    let config = RunConfig {
+        eval_every: 0,
+        save_every: 2,
+        ..RunConfig::default()
+    };
+    let mut events = Vec::new();
+    let outcome = run(&mut trainer, &train, &test, &config, &StopSignal::new(), |e| {
+        events.push(trace(e))
+    })
+    .unwrap();
+    assert!(
+        events.iter().all(|e| !e.starts_with("ckpt") && e != "model"),
+        "{events:?}"
+    );
+    let RunOutcome::Finished(summary) = outcome else {
+        panic!("not finished");
+    };
+    assert_eq!(summary.model_bytes, 0);
+    // Trainer::evaluate is the mean 8-bit PSNR of the float model over the same views.
+    assert_eq!(summary.test_psnr, trainer.evaluate(&test));
+}
+
+/// A stop request (here raised from the callback after step 5) saves a checkpoint that, run to
+/// the end, gives the files of an uninterrupted run; `stop_after` stops at its step.
+#[test]
+fn a_stop_request_saves_a_checkpoint_that_resumes_bit_for_bit() {
+    let straight_dir = temp_dir("straight");
+    let resumed_dir = temp_dir("resumed");
+    let config = |dir: &PathBuf| RunConfig {
+        eval_every: 0,
+        output: Some(dir.clone()),
+        ..RunConfig::default()
+    };
+    let Setup {
+        mut trainer,
+        train,
+        test,
+    } = setup(10, |c| c);
+    run(
+        &mut trainer,
+        &train,
+        &test,
+        &config(&straight_dir),
+        &StopSignal::new(),
+        |_| {},
+    )
+    .unwrap();
+
+    let Setup { mut trainer, .. } = setup(10, |c| c);
+    let stop = StopSignal::new();
+    let outcome = run(&mut trainer, &train, &test, &config(&resumed_dir), &stop, |e| {
+        if let TrainEvent::Step { log, .. } = e
+            && log.step == 5
+        {
+            stop.request();
+        }
+    })
+    .unwrap();
+    let checkpoint = resumed_dir.join(CHECKPOINT_FILE);
+    assert_eq!(
+        outcome,
+        RunOutcome::Stopped {
+            step: 5,
+            reason: StopReason::Requested,
+            checkpoint: Some(checkpoint.clone()),
+        }
+    );
+    assert!(!resumed_dir.join(SUMMARY_FILE).exists());
+    let mut resumed = Trainer::load_checkpoint(&checkpoint).unwrap();
+    assert_eq!(resumed.step_index(), 5);
+    // A signal still raised stops again at once; a fresh one lets the run finish.
+    let again = run(&mut resumed, &train, &test, &config(&resumed_dir), &stop, |_| {}).unwrap();
+    assert!(matches!(again, RunOutcome::Stopped { step: 5, .. }), "{again:?}");
+    let stop_after = RunConfig {
+        stop_after: Some(8),
+        ..config(&resumed_dir)
+    };
+    let at_8 = run(&mut resumed, &train, &test, &stop_after, &StopSignal::new(), |_| {}).unwrap();
+    assert!(
+        matches!(
+            at_8,
+            RunOutcome::Stopped {
+                step: 8,
+                reason: StopReason::StopAfter,
+                ..
+            }
+        ),
+        "{at_8:?}"
+    );
+    let end = run(
+        &mut resumed,
+        &train,
+        &test,
+        &config(&resumed_dir),
+        &StopSignal::new(),
+        |_| {},
+    )
+    .unwrap();
+    assert!(matches!(end, RunOutcome::Finished(_)));
+    for file in [CHECKPOINT_FILE, "model/point_cloud.ply", "model/texture_alpha.npz"] {
+        let (a, b) = (
+            std::fs::read(straight_dir.join(file)).unwrap(),
+            std::fs::read(resumed_dir.join(file)).unwrap(),
+        );
+        assert!(a == b, "{file} differs");
+    }
+    std::fs::remove_dir_all(&straight_dir).ok();
+    std::fs::remove_dir_all(&resumed_dir).ok();
+}
+
+/// A NaN pixel in one view: the step that draws it is refused (typed error naming the step, the
+/// view and the loss), the trainer keeps the state from before that step, and that state is the
+/// checkpoint on disk; it loads, equals a clean run stopped at the same step, and continues.
+#[test]
+fn a_nan_pixel_stops_the_run_with_the_last_good_state_on_disk() {
+    const BAD: usize = 3;
+    let Setup {
+        mut trainer,
+        mut train,
+        test,
+    } = setup(40, |c| c);
+    let clean_views = train.clone();
+    train[BAD].rgb[100] = f32::NAN;
+    let dir = temp_dir("nan-pixel");
+    let config = RunConfig {
+        eval_every: 0,
+        save_every: 1000,
+        output: Some(dir.clone()),
+        ..RunConfig::default()
+    };
+    let mut events = Vec::new();
+    let err = run(&mut trainer, &train, &test, &config, &StopSignal::new(), |e| {
+        events.push(trace(e))
+    })
+    .unwrap_err();
+    let checkpoint = dir.join(CHECKPOINT_FILE);
+    let RunError::Step {
+        source: TrainError::NonFinite { step, view, value },
+        checkpoint: Some(saved),
+    } = &err
+    else {
+        panic!("unexpected error {err:?}");
+    };
+    let (step, view) = (*step, *view);
+    assert_eq!((view, *value), (BAD, NonFinite::Loss), "{err}");
+    assert_eq!(*saved, checkpoint);
+    assert!(
+        step >= 1 && step <= train.len(),
+        "the bad view is drawn within the first epoch: {step}"
+    );
+    assert_eq!(trainer.step_index(), step - 1, "the bad step was not applied");
+    let message = err.to_string();
+    assert!(
+        message.contains(&format!("step {step}")) && message.contains("loss") && message.contains("not applied"),
+        "{message}"
+    );
+    assert_eq!(events.last().unwrap(), &format!("ckpt@{}", step - 1));
+
+    // The checkpoint is the state before the bad step: a clean run of step − 1 steps.
+    let on_disk = Trainer::load_checkpoint(&checkpoint).unwrap();
+    let Setup { trainer: mut clean, .. } = setup(40, |c| c);
+    for _ in 0..step - 1 {
+        clean.step(&clean_views).unwrap();
+    }
+    assert!(on_disk.checkpoint_bytes() == clean.checkpoint_bytes());
+    assert!(trainer.checkpoint_bytes() == clean.checkpoint_bytes());
+    // The refused view went back on the stack: with the pixel mended, the next step is the
+    // clean run's next step.
+    let mut mended = on_disk;
+    let log = mended.step(&clean_views).unwrap();
+    let clean_log = clean.step(&clean_views).unwrap();
+    assert_eq!(log, clean_log);
+    assert!(mended.checkpoint_bytes() == clean.checkpoint_bytes());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A parameter made non-finite by the optimiser step (an infinite position learning rate): the
+/// error names the step and the group, the trainer is past the step, and the checkpoint on disk
+/// is still the last one written before (by an earlier slice of the run).
+#[test]
+fn a_non_finite_parameter_leaves_the_last_checkpoint_untouched() {
+    let dir = temp_dir("nan-param");
+    let config = RunConfig {
+        eval_every: 0,
+        output: Some(dir.clone()),
+        stop_after: Some(3),
+        ..RunConfig::default()
+    };
+    let Setup {
+        mut trainer,
+        train,
+        test,
+    } = setup(20, |c| c);
+    run(&mut trainer, &train, &test, &config, &StopSignal::new(), |_| {}).unwrap();
+    let good = std::fs::read(dir.join(CHECKPOINT_FILE)).unwrap();
+
+    let Setup { mut trainer, .. } = setup(20, |c| TrainConfig {
+        lr_scales: bbsplat::train::LearningRateScales {
+            position: f32::INFINITY,
+            ..c.lr_scales
+        },
+        ..c
+    });
+    let config = RunConfig {
+        save_every: 1,
+        stop_after: None,
+        ..config
+    };
+    let err = run(&mut trainer, &train, &test, &config, &StopSignal::new(), |_| {}).unwrap_err();
+    assert!(
+        matches!(
+            &err,
+            RunError::Step {
+                source: TrainError::NonFinite {
+                    step: 1,
+                    value: NonFinite::Parameter(ParamGroup::Positions),
+                    ..
+                },
+                checkpoint: None,
+            }
+        ),
+        "{err:?}"
+    );
+    assert!(
+        err.to_string().contains("positions") && err.to_string().contains("was applied"),
+        "{err}"
+    );
+    assert_eq!(trainer.step_index(), 1);
+    assert!(
+        std::fs::read(dir.join(CHECKPOINT_FILE)).unwrap() == good,
+        "checkpoint overwritten"
+    );
+    assert_eq!(
+        Trainer::load_checkpoint(dir.join(CHECKPOINT_FILE))
+            .unwrap()
+            .step_index(),
+        3
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A NaN written into a parameter through the public model field: `run` refuses to start and
+/// names the group; `Trainer::step` applies its step and then names the group.
+#[test]
+fn a_nan_parameter_is_named_by_run_and_by_step() {
+    let Setup {
+        mut trainer,
+        train,
+        test,
+    } = setup(20, |c| c);
+    trainer.model.quaternions[7][2] = f32::NAN;
+    let dir = temp_dir("nan-start");
+    let config = RunConfig {
+        output: Some(dir.clone()),
+        ..RunConfig::default()
+    };
+    let err = run(&mut trainer, &train, &test, &config, &StopSignal::new(), |_| {}).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            RunError::NonFiniteStart {
+                step: 0,
+                group: ParamGroup::Quaternions
+            }
+        ),
+        "{err:?}"
+    );
+    assert!(err.to_string().contains("quaternions"), "{err}");
+    assert!(!dir.exists(), "nothing written");
+
+    let Setup { mut trainer, .. } = setup(20, |c| c);
+    trainer.model.sh[5 * 48 + 1] = f32::NAN;
+    let err = trainer.step(&train).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            TrainError::NonFinite {
+                step: 1,
+                value: NonFinite::Parameter(ParamGroup::Sh),
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+    assert_eq!(trainer.non_finite_parameter(), Some(ParamGroup::Sh));
+}
+
+/// The clamp gradient: with every alpha texel at 0.999 (above the 0.99 clamp) and the
+/// regularisers off, the first step's alpha gradient (read from Adam's first moments) differs
+/// between the settings and reaches fewer texels with the exact gradient (only texels with a
+/// sample below the clamp, where a masked corner texel mixes in); the colour gradient, which does
+/// not go through the clamp, is the same bit for bit. With no texel above the clamp the two
+/// settings train bit-identically. The setting survives a checkpoint.
+#[test]
+fn the_clamp_gradient_setting_changes_the_update_only_where_the_clamp_is_active() {
+    use bbsplat::train::group;
+    let train_with = |clamp: ClampGradient, alpha: Option<f32>, steps: usize| {
+        let Setup { mut trainer, train, .. } = setup(64, |c| TrainConfig {
+            clamp_gradient: clamp,
+            texture_reg_weight: 0.0,
+            opacity_reg_weight: 0.0,
+            relocate: false,
+            ..c
+        });
+        if let Some(a) = alpha {
+            let mask = trainer.model.alpha_mask.clone();
+            let mut model = trainer.model.clone();
+            for (k, x) in model.alpha_logits.iter_mut().enumerate() {
+                if mask[k % mask.len()] {
+                    *x = logit(a);
+                }
+            }
+            trainer = Trainer::new(model, *trainer.config());
+        }
+        for _ in 0..steps {
+            trainer.step(&train).unwrap();
+        }
+        trainer
+    };
+    let exact = train_with(ClampGradient::Exact, Some(0.999), 1);
+    let through = train_with(ClampGradient::PassThrough, Some(0.999), 1);
+    let support = |t: &Trainer| -> Vec<bool> { t.adam()[group::ALPHA].m.iter().map(|&m| m != 0.0).collect() };
+    let (s_exact, s_through) = (support(&exact), support(&through));
+    let count = |s: &[bool]| s.iter().filter(|&&x| x).count();
+    eprintln!(
+        "alpha texels with a gradient: exact {}, straight-through {} of {}",
+        count(&s_exact),
+        count(&s_through),
+        s_exact.len()
+    );
+    assert!(
+        s_exact.iter().zip(&s_through).all(|(&e, &t)| !e || t),
+        "every texel the exact gradient reaches, straight-through reaches"
+    );
+    // Measured: 527 against 594 of 2400 (most sampled texels also have a sample below the clamp
+    // at TS 4), and the first moments differ on 296 texels.
+    let differ = (exact.adam()[group::ALPHA].m.iter())
+        .zip(&through.adam()[group::ALPHA].m)
+        .filter(|(a, b)| a != b)
+        .count();
+    eprintln!("alpha first moments differ on {differ} texels");
+    assert!(
+        count(&s_through) > count(&s_exact) * 11 / 10 && differ > count(&s_through) / 4,
+        "exact {} against straight-through {}, {differ} differ",
+        count(&s_exact),
+        count(&s_through)
+    );
+    assert!(exact.adam()[group::COLOUR].m == through.adam()[group::COLOUR].m);
+    let back = Trainer::from_checkpoint_bytes(&through.checkpoint_bytes(), std::path::Path::new("x")).unwrap();
+    assert_eq!(back.config().clamp_gradient, ClampGradient::PassThrough);
+
+    // Initial alphas (peak 0.49): the clamp never acts and the settings agree bit for bit.
+    let exact = train_with(ClampGradient::Exact, None, 4);
+    let through = train_with(ClampGradient::PassThrough, None, 4);
+    assert!(exact.model == through.model);
+}
+
+/// The setting reaches `summary.json` through the run.
+#[test]
+fn the_summary_records_the_clamp_gradient() {
+    let Setup {
+        mut trainer,
+        train,
+        test,
+    } = setup(2, |c| TrainConfig {
+        clamp_gradient: ClampGradient::PassThrough,
+        ..c
+    });
+    let dir = temp_dir("summary-clamp");
+    let config = RunConfig {
+        output: Some(dir.clone()),
+        ..RunConfig::default()
+    };
+    run(&mut trainer, &train, &test, &config, &StopSignal::new(), |_| {}).unwrap();
+    let text = std::fs::read_to_string(dir.join(SUMMARY_FILE)).unwrap();
+    assert!(text.contains(r#""clamp_gradient": "straight-through""#), "{text}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn no_training_views_is_a_typed_error() {
+    let Setup { mut trainer, test, .. } = setup(2, |c| c);
+    let err = run(
+        &mut trainer,
+        &[],
+        &test,
+        &RunConfig::default(),
+        &StopSignal::new(),
+        |_| {},
+    )
+    .unwrap_err();
+    assert!(matches!(err, RunError::NoTrainViews), "{err:?}");
+}
+
+/// The cost of the non-finite checks against a step, by default at the size of the `train_step`
+/// bench's larger case (192 px, 10 000 billboards, TS 16; `BBSPLAT_MEASURE="96 3000"` for the
+/// smaller). Not run by default; run with
+/// `cargo test --test suite train_run::measure -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn measure_non_finite_check_cost() {
+    use std::time::Instant;
+    let spec = std::env::var("BBSPLAT_MEASURE").unwrap_or_else(|_| "192 10000".into());
+    let v: Vec<usize> = spec.split_whitespace().map(|x| x.parse().unwrap()).collect();
+    let scene = generate(&DemoConfig {
+        resolution: v[0] as u32,
+        points: 2 * v[1],
+        ..DemoConfig::default()
+    });
+    let keep = bbsplat::init::fps::farthest_point_sampling(&scene.points, v[1]).unwrap();
+    let points: Vec<Vec3> = keep.iter().map(|&i| scene.points[i]).collect();
+    let colours: Vec<[f32; 3]> = keep.iter().map(|&i| scene.colours[i]).collect();
+    let model = Model::from_points(&points, &colours, 16, 0);
+    let train: Vec<TrainView> = scene.train.iter().map(TrainView::from_demo).collect();
+    let cameras: Vec<_> = train.iter().map(|v| v.camera).collect();
+    let mut trainer = Trainer::new(
+        model,
+        TrainConfig {
+            iterations: 1000,
+            background: Vec3::from_array(scene.background),
+            extent: scene_extent(&cameras),
+            ..TrainConfig::default()
+        },
+    );
+    for _ in 0..3 {
+        trainer.step(&train).unwrap();
+    }
+    let steps = 10;
+    let t0 = Instant::now();
+    for _ in 0..steps {
+        trainer.step(&train).unwrap();
+    }
+    let step_ms = t0.elapsed().as_secs_f64() * 1e3 / steps as f64;
+    let grads = bbsplat::raster::RenderGradients::zeros(trainer.model.len(), 16);
+    let reps = 50;
+    let t0 = Instant::now();
+    for _ in 0..reps {
+        assert_eq!(bbsplat::train::finite::non_finite_gradient(&grads), None);
+    }
+    let grad_ms = t0.elapsed().as_secs_f64() * 1e3 / reps as f64;
+    let t0 = Instant::now();
+    for _ in 0..reps {
+        assert_eq!(trainer.non_finite_parameter(), None);
+    }
+    let param_ms = t0.elapsed().as_secs_f64() * 1e3 / reps as f64;
+    println!(
+        "{spec}: {} threads: step {step_ms:.1} ms (checks included); gradient check {grad_ms:.2} ms, parameter check \
+         {param_ms:.2} ms: {:.1} % of a step",
+        rayon::current_num_threads(),
+        100.0 * (grad_ms + param_ms) / step_ms
+    );
+}
