@@ -60,7 +60,7 @@ fn normalised(v: V3) -> V3 {
 }
 
 /// The view-space rotation whose normal (third column) is `n` (unit), spun by `spin` about it.
-fn rotation_with_normal(n: V3, spin: f64) -> [f64; 4] {
+pub(super) fn rotation_with_normal(n: V3, spin: f64) -> [f64; 4] {
     let z = [0.0, 0.0, 1.0];
     let axis = cross(z, n);
     let s = dot(axis, axis).sqrt();

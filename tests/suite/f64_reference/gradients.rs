@@ -58,7 +58,7 @@ impl Group {
     }
 }
 
-fn get(s: &Scene64, g: Group) -> Vec<f64> {
+pub fn get(s: &Scene64, g: Group) -> Vec<f64> {
     match g {
         Group::Positions => s.pos.iter().flatten().copied().collect(),
         Group::Quaternions => s.quat.iter().flatten().copied().collect(),
@@ -69,7 +69,7 @@ fn get(s: &Scene64, g: Group) -> Vec<f64> {
     }
 }
 
-fn set(s: &mut Scene64, g: Group, x: &[f64]) {
+pub fn set(s: &mut Scene64, g: Group, x: &[f64]) {
     match g {
         Group::Positions => s.pos = x.chunks(3).map(|c| [c[0], c[1], c[2]]).collect(),
         Group::Quaternions => s.quat = x.chunks(4).map(|c| [c[0], c[1], c[2], c[3]]).collect(),
@@ -80,7 +80,7 @@ fn set(s: &mut Scene64, g: Group, x: &[f64]) {
     }
 }
 
-fn analytic(g: &RenderGradients, group: Group) -> Vec<f64> {
+pub fn analytic(g: &RenderGradients, group: Group) -> Vec<f64> {
     let v: Vec<f32> = match group {
         Group::Positions => g.positions.iter().flat_map(|p| p.to_array()).collect(),
         Group::Quaternions => g.quaternions.iter().flatten().copied().collect(),
