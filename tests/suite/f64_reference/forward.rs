@@ -216,7 +216,7 @@ fn hard_case_crossing_the_camera_plane() {
         let z = 0.6 + 0.19 * k as f64;
         let p = [(rng.uniform_f64() - 0.5) * z, (rng.uniform_f64() - 0.5) * z, z];
         let tilt = (50.0 + 3.5 * k as f64).to_radians();
-        let phi = rng.uniform_f64() * 6.28;
+        let phi = rng.uniform_f64() * std::f64::consts::TAU;
         let n = [tilt.sin() * phi.cos(), tilt.sin() * phi.sin(), tilt.cos()];
         let (pos, q) = placer.place(p, rotation_with_normal(n, rng.uniform_f64() * 6.0));
         let s = (2.0 + 0.45 * k as f64).ln() as f32;

@@ -238,7 +238,7 @@ pub fn check_margins(t0: &Trace, ts: [&Trace; 2], th: &Thresholds, n_pix: usize,
             if p0.fate == Fate::Unreached || !p0.hit {
                 continue;
             }
-            let q = |get: fn(&PairTrace) -> f64| (get(p0), ps.map(|p| get(p)));
+            let q = |get: fn(&PairTrace) -> f64| (get(p0), ps.map(get));
             let (a0, a_s) = q(|p| p.a);
             margin(&at("alpha vs cut-off"), a0, a_s, th.min_alpha, f.alpha)?;
             margin(&at("alpha vs clamp"), a0, a_s, th.max_alpha, f.alpha)?;
@@ -279,12 +279,9 @@ pub fn check_margins(t0: &Trace, ts: [&Trace; 2], th: &Thresholds, n_pix: usize,
     Ok(())
 }
 
-/// A scene ready for gradient checks: inputs in f32 and f64, loss, the crate's gradients and
+/// A scene ready for gradient checks: inputs in f64, loss, the crate's gradients and
 /// the f64 trace at the point.
 pub struct Case {
-    pub b: Billboards,
-    pub cam: Camera,
-    pub settings: RenderSettings,
     pub scene: Scene64,
     pub cam64: Cam64,
     pub th: Thresholds,
@@ -347,9 +344,6 @@ pub fn find_case(kind: Kind, first: u64) -> Case {
             );
         }
         return Case {
-            b,
-            cam,
-            settings,
             scene: scene64,
             cam64,
             th,
@@ -399,7 +393,7 @@ pub fn group_errors(case: &Case, group: Group, scale: f64) -> GroupErrors {
     let an: Vec<f64> = analytic(&case.grads, group).iter().map(|g| g * scale).collect();
     assert_eq!(an.len(), x.len());
     let h = group.step();
-    let mut rng = Rng::new(case.seed ^ (group as u64 + 1) * 0x9e37);
+    let mut rng = Rng::new(case.seed ^ ((group as u64 + 1) * 0x9e37));
     let (mut num, mut den) = (0.0, 0.0);
     for _ in 0..4 {
         let d: Vec<f64> = (0..x.len()).map(|_| rng.normal() as f64).collect();

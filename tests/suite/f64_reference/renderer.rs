@@ -209,8 +209,6 @@ pub struct PairTrace {
     /// Sampled (raw, unclamped) alpha at the hit, whether or not the hit is accepted; 0 outside
     /// the support.
     pub a: f64,
-    /// Transmittance in front of the pair (when reached).
-    pub t: f64,
     /// `T·(1 − min(max_alpha, a))` (when reached and not skipped).
     pub test_t: f64,
 }
@@ -223,7 +221,6 @@ const EMPTY_PAIR: PairTrace = PairTrace {
     tx: 0.0,
     ty: 0.0,
     a: 0.0,
-    t: 0.0,
     test_t: 0.0,
 };
 
@@ -448,7 +445,6 @@ pub fn render64(scene: &Scene64, cam: &Cam64, th: &Thresholds, trace: bool) -> (
                 let s = &splats[b];
                 let mut rec = PairTrace {
                     fate: Fate::Nothing,
-                    t,
                     ..EMPTY_PAIR
                 };
                 if stopped {
@@ -483,7 +479,7 @@ pub fn render64(scene: &Scene64, cam: &Cam64, th: &Thresholds, trace: bool) -> (
                     continue;
                 };
                 let al = texel[3].min(th.max_alpha);
-                if !(al >= th.min_alpha) {
+                if al.is_nan() || al < th.min_alpha {
                     write(rec, &mut pairs);
                     continue;
                 }
