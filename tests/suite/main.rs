@@ -4,6 +4,7 @@
 #![allow(clippy::needless_range_loop)]
 
 mod cli;
+mod f64_reference;
 mod init_fibonacci;
 mod init_fps;
 mod init_scene;
