@@ -123,8 +123,12 @@ impl Camera {
     /// use glam::Vec3;
     /// let eye = Vec3::new(1.0e4, -2.0e4, 3.0e4);
     /// let cam = Camera::look_at(eye, eye + Vec3::new(1.0, 2.0, 3.0), Vec3::Y, 100.0, 100.0, 64, 48);
-    /// let offset = cam.view_offset(eye + Vec3::new(0.25, 0.5, 1.0));
-    /// assert!((offset - Vec3::new(0.25, 0.5, 1.0)).length() < 1e-3);
+    /// let p = cam.centre() + Vec3::new(0.25, 0.5, 1.0);
+    /// // The camera centre −Rᵀt in f64, and the offset to `p` rounded once.
+    /// let centre = -(cam.rotation.as_dmat3().transpose() * cam.translation.as_dvec3());
+    /// assert_eq!(cam.view_offset(p), (p.as_dvec3() - centre).as_vec3());
+    /// // The f32 subtraction is off by about 1e-3 here.
+    /// assert!(((p - cam.centre()).as_dvec3() - (p.as_dvec3() - centre)).length() > 1e-4);
     /// ```
     #[inline]
     pub fn view_offset(&self, position: Vec3) -> Vec3 {
