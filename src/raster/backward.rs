@@ -23,7 +23,7 @@ use super::preprocess::Prepared;
 use super::{BillboardSet, SH_FLOATS};
 use crate::stages::bilinear::BilinearTaps;
 use crate::stages::composite::{Blend, CompositeBackState, Step, classify};
-use crate::stages::ray_plane::intersect_vjp;
+use crate::stages::ray_plane::{intersect_vjp_with, pixel_ray};
 use crate::stages::sh::sh_colour_vjp_clamped;
 use crate::stages::splat_transform::{SplatTransform, project_splat_vjp_visible};
 use glam::{Vec2, Vec3};
@@ -402,9 +402,16 @@ fn backward_tile(
     let mut first = 0;
     while first < n_q {
         // Hits and taps of the blended entries of a run of pixels, their texels prefetched.
-        let end = scratch
-            .candidates
-            .build(set, prepared, list, rect, first, blended_of, prefetch_sole_row);
+        let end = scratch.candidates.build(
+            &state.camera,
+            set,
+            prepared,
+            list,
+            rect,
+            first,
+            blended_of,
+            prefetch_sole_row,
+        );
         // The pixel of `q`, advanced row-major (no division per pixel).
         let (mut i, mut j) = (i0 + (first % tw) as u32, j0 + (first / tw) as u32);
         for q in first..end {
@@ -427,6 +434,7 @@ fn backward_tile(
             // Front to back: rebuild the blended entries and their transmittances with the
             // compositing stage's own decision ([`classify`]), as the forward made them.
             let (px, py) = (i as f32 + 0.5, j as f32 + 0.5);
+            let ray = pixel_ray(&state.camera, px, py);
             scratch.blended.clear();
             let mut t = 1.0f32;
             for cand in candidates {
@@ -477,7 +485,8 @@ fn backward_tile(
                         .vjp_rgba(set.texture_of(b), d_rgba, |texel, g| sums.add(slot, texel, g))
                 };
                 let pr = prepared[b].as_ref().expect("blended entries are prepared");
-                let d_t = intersect_vjp(&pr.transform, px, py, du, dv, d_depth);
+                let plane = pr.view_plane();
+                let d_t = intersect_vjp_with(&pr.transform, px, py, |_, _| plane.depth(ray), du, dv, d_depth);
                 let rec = &mut records[bl.slot as usize];
                 add_transform(&mut rec.transform, &d_t);
                 rec.rgb += d_colour;

@@ -277,6 +277,7 @@ mod tests {
                                 tw: Vec3::Z,
                             },
                             normal: Vec3::Z,
+                            plane_offset: -1.0,
                             // Few distinct depths: many ties, broken by index.
                             depth: 2.0 + next(8) as f32 * 0.25,
                             rgb: Vec3::ZERO,

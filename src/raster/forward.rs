@@ -7,7 +7,7 @@ use crate::camera::Camera;
 use crate::memory::{refill, resize_for_overwrite};
 use crate::stages::bilinear::{self, BilinearTaps};
 use crate::stages::composite::{CompositeState, Step};
-use crate::stages::ray_plane::intersect;
+use crate::stages::ray_plane::{intersect_with, pixel_ray};
 use crate::stages::splat_transform::{pixel_range, support_quad};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -282,6 +282,7 @@ impl TileCandidates {
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn build<'a>(
         &mut self,
+        camera: &Camera,
         set: &BillboardSet<'_>,
         prepared: &[Option<Prepared>],
         list: &[u32],
@@ -302,12 +303,16 @@ impl TileCandidates {
         let (mut i, mut j) = (i0 + (first % tw) as u32, j0 + (first / tw) as u32);
         while q < n && self.items.len() < CANDIDATE_CHUNK {
             let (px, py) = (i as f32 + 0.5, j as f32 + 0.5);
+            let ray = pixel_ray(camera, px, py);
             for &k in slots(q) {
                 let b = list[k as usize] as usize;
                 let Some(p) = prepared[b].as_ref() else {
                     continue;
                 };
-                let Some(hit) = intersect(&p.transform, px, py) else {
+                // Hit depths by the plane equation (see `ViewPlane`), as the backward's near-plane
+                // test takes them.
+                let plane = p.view_plane();
+                let Some(hit) = intersect_with(&p.transform, px, py, |_, _| plane.depth(ray)) else {
                     continue;
                 };
                 let Some(taps) = bilinear::taps(hit.u, hit.v, ts) else {
@@ -646,7 +651,7 @@ pub fn render_with(
                 blended_slots.clear();
                 let mut first = 0;
                 while first < n_q {
-                    let end = candidates.build(set, &prepared, list, rect, first, own, |_, _| {});
+                    let end = candidates.build(camera, set, &prepared, list, rect, first, own, |_, _| {});
                     for q in first..end {
                         pixels.push(shade_pixel(
                             set,

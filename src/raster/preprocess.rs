@@ -3,9 +3,10 @@
 use super::{BillboardSet, RenderSettings};
 use crate::camera::Camera;
 use crate::memory::resize_for_overwrite;
+use crate::stages::ray_plane::ViewPlane;
 use crate::stages::sh::{ShColour, sh_colour, sh_colour_batch};
 use crate::stages::splat_transform::{
-    SplatFrame, SplatTransform, splat_frame, splat_frames_x4, square_screen_bounds, support_half_side,
+    SplatFrame, SplatTransform, splat_frame, splat_frames_x4, square_screen_bounds, support_half_side, view_plane,
 };
 use glam::Vec3;
 use rayon::prelude::*;
@@ -15,8 +16,12 @@ use rayon::prelude::*;
 pub struct Prepared {
     /// Rows of the ray-splat matrix `T`.
     pub transform: SplatTransform,
-    /// Unit normal in view space, flipped to face the camera.
+    /// Unit normal in view space, flipped to face the camera ([`view_plane`]: the f64 normal of
+    /// the raw parameters, rounded once).
     pub normal: Vec3,
+    /// `normal · p_view` in f64, rounded once ([`view_plane`]): with `normal` the plane of the
+    /// hit depths ([`Prepared::view_plane`]).
+    pub plane_offset: f32,
     /// View-space depth of the centre, the sort key.
     pub depth: f32,
     /// SH colour (`Σ + 0.5`, clamped at 0), added to the sampled colour texture.
@@ -48,7 +53,27 @@ pub fn prepare_one(set: &BillboardSet<'_>, i: usize, camera: &Camera, settings: 
 /// [`prepare_one`] without the SH colour (`rgb` zero, no channel clamped).
 fn prepare_geometry(set: &BillboardSet<'_>, i: usize, camera: &Camera) -> Option<Prepared> {
     let projected = splat_frame(set.positions[i], set.log_scales[i], set.quaternions[i], camera)?;
-    geometry_record(&projected, support_half_side(set.texture_size), camera)
+    let record = geometry_record(&projected, support_half_side(set.texture_size), camera)?;
+    Some(with_plane(record, set, i, camera))
+}
+
+/// `record` with its [`Prepared::plane_offset`] (billboard `i` of `set`).
+#[inline]
+fn with_plane(mut record: Prepared, set: &BillboardSet<'_>, i: usize, camera: &Camera) -> Prepared {
+    let sign = if record.normal_flipped { -1.0 } else { 1.0 };
+    (record.normal, record.plane_offset) = view_plane(set.positions[i], set.quaternions[i], camera, sign);
+    record
+}
+
+impl Prepared {
+    /// The billboard's plane for hit depths ([`ViewPlane`]).
+    #[inline(always)]
+    pub fn view_plane(&self) -> ViewPlane {
+        ViewPlane {
+            normal: self.normal,
+            offset: self.plane_offset,
+        }
+    }
 }
 
 /// The record of a billboard with frame `projected` (SH colour unset), or `None` when the
@@ -60,6 +85,7 @@ fn geometry_record(projected: &SplatFrame, half_side: f32, camera: &Camera) -> O
     Some(Prepared {
         transform: projected.transform,
         normal: projected.normal_view,
+        plane_offset: 0.0,
         depth: projected.view_depth,
         rgb: Vec3::ZERO,
         sh_clamped: [false; 3],
@@ -122,7 +148,10 @@ pub fn preprocess_into(
                     camera,
                 );
                 for (l, (slot, frame)) in group.iter_mut().zip(&frames).enumerate() {
-                    *slot = frame.as_ref().and_then(|f| geometry_record(f, half_side, camera));
+                    *slot = frame
+                        .as_ref()
+                        .and_then(|f| geometry_record(f, half_side, camera))
+                        .map(|r| with_plane(r, set, i0 + l, camera));
                     if slot.is_some() {
                         live.push(4 * g + l);
                     }
@@ -194,11 +223,11 @@ mod tests {
         }
     }
 
-    /// The backward's two flags (`sh_clamped`, `normal_flipped`) live in what was padding:
-    /// the record every per-pixel pass reads stays 84 bytes (80 before the flags, plus the
-    /// `Option` tag, which the flags' `bool` niche now absorbs).
+    /// The backward's two flags (`sh_clamped`, `normal_flipped`) live in what was padding, and
+    /// the `Option` tag in their `bool` niche: the record every per-pixel pass reads is 88 bytes
+    /// (84 before `plane_offset`).
     #[test]
-    fn prepared_record_stays_84_bytes() {
-        assert_eq!(size_of::<Option<Prepared>>(), 84);
+    fn prepared_record_stays_88_bytes() {
+        assert_eq!(size_of::<Option<Prepared>>(), 88);
     }
 }

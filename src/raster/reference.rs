@@ -11,9 +11,9 @@ use crate::billboards::planar_textures;
 use crate::camera::Camera;
 use crate::stages::bilinear;
 use crate::stages::composite::composite;
-use crate::stages::ray_plane::intersect;
+use crate::stages::ray_plane::{ViewPlane, intersect_with, pixel_ray};
 use crate::stages::sh::sh_colour;
-use crate::stages::splat_transform::splat_frame;
+use crate::stages::splat_transform::{splat_frame, view_plane};
 
 /// Output of the reference renderer.
 #[derive(Clone, Debug, PartialEq)]
@@ -36,9 +36,13 @@ pub fn render_reference(set: &BillboardSet<'_>, camera: &Camera, settings: &Rend
     let mut order: Vec<(usize, f32)> = Vec::new();
     let mut projected = Vec::with_capacity(set.len());
     for b in 0..set.len() {
-        let p = splat_frame(set.positions[b], set.log_scales[b], set.quaternions[b], camera);
-        if let Some(p) = &p {
-            order.push((b, p.view_depth));
+        let p = splat_frame(set.positions[b], set.log_scales[b], set.quaternions[b], camera).map(|f| {
+            let (normal, offset) = view_plane(set.positions[b], set.quaternions[b], camera, f.normal_sign);
+            let plane = ViewPlane { normal, offset };
+            (f, plane)
+        });
+        if let Some((f, _)) = &p {
+            order.push((b, f.view_depth));
         }
         projected.push(p);
     }
@@ -75,8 +79,9 @@ pub fn render_reference(set: &BillboardSet<'_>, camera: &Camera, settings: &Rend
             features.clear();
             ids.clear();
             for &(b, _) in &order {
-                let p = projected[b].as_ref().expect("sorted billboards are projected");
-                let Some(hit) = intersect(&p.transform, px, py) else {
+                let (p, plane) = projected[b].as_ref().expect("sorted billboards are projected");
+                let ray = pixel_ray(camera, px, py);
+                let Some(hit) = intersect_with(&p.transform, px, py, |_, _| plane.depth(ray)) else {
                     continue;
                 };
                 let mut a = [0.0f32];

@@ -7,7 +7,12 @@
 //! the homogeneous lines of the billboard plane that project onto the image column `x` and row `y`;
 //! their intersection `p = k × l` is the hit in homogeneous plane coordinates, so
 //! `(u, v) = (p.x/p.z, p.y/p.z)` and the hit's view depth is `Tw·(u, v, 1)`.
+//!
+//! [`intersect`] computes that depth from `T` alone; the rasterizer calls [`intersect_with`]
+//! (the same guards, plane coordinates and near-plane test) with the depth by the plane equation
+//! of [`ViewPlane`], which does not cancel when a plane is seen obliquely or far from its centre.
 
+use crate::camera::Camera;
 use crate::stages::splat_transform::{NEAR_PLANE, SplatTransform};
 use glam::Vec3;
 
@@ -94,14 +99,63 @@ fn guarded_lines(t: &SplatTransform, px: f32, py: f32) -> Option<(Vec3, Vec3, Ve
 /// ```
 #[inline]
 pub fn intersect(t: &SplatTransform, px: f32, py: f32) -> Option<PlaneHit> {
+    intersect_with(t, px, py, |u, v| expanded_depth(t, u, v))
+}
+
+/// The hit depth `u·Tw.x + v·Tw.y + Tw.z` from the transform alone ([`intersect`]'s depth).
+#[inline(always)]
+fn expanded_depth(t: &SplatTransform, u: f32, v: f32) -> f32 {
+    u * t.tw.x + v * t.tw.y + t.tw.z
+}
+
+/// [`intersect`] with the hit's view depth given by `depth(u, v)` instead of the expanded form:
+/// the same guards, plane coordinates and near-plane test. The rasterizer passes the plane
+/// equation ([`ViewPlane::depth`]), which keeps its accuracy where the expanded form cancels.
+#[inline(always)]
+pub fn intersect_with(t: &SplatTransform, px: f32, py: f32, depth: impl FnOnce(f32, f32) -> f32) -> Option<PlaneHit> {
     let (_, _, p) = guarded_lines(t, px, py)?;
     let inv = 1.0 / p.z;
     let (u, v) = (p.x * inv, p.y * inv);
-    let depth = u * t.tw.x + v * t.tw.y + t.tw.z;
+    let depth = depth(u, v);
     // Written so that NaN and +inf depths are rejected too.
     (NEAR_PLANE..f32::INFINITY)
         .contains(&depth)
         .then_some(PlaneHit { u, v, depth })
+}
+
+/// A billboard's plane in view space, for hit depths by the plane equation: with `n` the plane's
+/// unit normal facing the camera and `offset = n·p_view` (`p_view` the centre in view space), the
+/// ray of pixel `(x, y)`, `r = ((x − cx)/fx, (y − cy)/fy, 1)`, meets the plane at view depth
+/// `offset / (n·r)`.
+///
+/// Why: the expanded form `u·Tw.x + v·Tw.y + Tw.z` adds terms of size `|u·Tw.x|` that cancel when
+/// a plane is seen obliquely or far from its centre (a large plane whose centre is 500 units
+/// away and which passes 0.06 from the camera loses 1e-3 of a hit depth of 0.2, enough to move
+/// hits across the near plane). Here `offset` is taken in f64 from the raw parameters
+/// ([`crate::stages::splat_transform::view_plane`]), so it keeps its accuracy however far the
+/// centre is, and `n·r` is a three-term dot product that cancels only for rays grazing the
+/// plane, which the grazing guard rejects. Measured in `tests/suite/stage_ray_plane.rs`
+/// (`plane_equation_depth_is_more_accurate`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ViewPlane {
+    /// Unit normal in view space, facing the camera.
+    pub normal: Vec3,
+    /// `normal · p_view` (negative for a plane in front of the camera that faces it).
+    pub offset: f32,
+}
+
+impl ViewPlane {
+    /// View depth where the pixel ray `ray` ([`pixel_ray`]) meets the plane.
+    #[inline(always)]
+    pub fn depth(&self, ray: Vec3) -> f32 {
+        self.offset / self.normal.dot(ray)
+    }
+}
+
+/// The ray of pixel centre `(px, py)` scaled to view depth 1: `((px − cx)/fx, (py − cy)/fy, 1)`.
+#[inline(always)]
+pub fn pixel_ray(camera: &Camera, px: f32, py: f32) -> Vec3 {
+    Vec3::new((px - camera.cx) / camera.fx, (py - camera.cy) / camera.fy, 1.0)
 }
 
 /// Backward pass of [`intersect`]: given `∂L/∂u`, `∂L/∂v`, `∂L/∂depth` at the hit of pixel
@@ -123,13 +177,29 @@ pub fn intersect(t: &SplatTransform, px: f32, py: f32) -> Option<PlaneHit> {
 /// ```
 #[inline]
 pub fn intersect_vjp(t: &SplatTransform, px: f32, py: f32, d_u: f32, d_v: f32, d_depth: f32) -> SplatTransform {
+    intersect_vjp_with(t, px, py, |u, v| expanded_depth(t, u, v), d_u, d_v, d_depth)
+}
+
+/// [`intersect_vjp`] for a forward made with [`intersect_with`] and the same `depth`: the
+/// near-plane decision uses `depth`, as the forward did. The gradient is that of the exact
+/// depth as a function of `T` (every depth formula computes the same exact value, so the
+/// derivative does not depend on the formula).
+#[inline(always)]
+pub fn intersect_vjp_with(
+    t: &SplatTransform,
+    px: f32,
+    py: f32,
+    depth: impl FnOnce(f32, f32) -> f32,
+    d_u: f32,
+    d_v: f32,
+    d_depth: f32,
+) -> SplatTransform {
     let Some((k, l, p)) = guarded_lines(t, px, py) else {
         return SplatTransform::default();
     };
     let inv = 1.0 / p.z;
     let (u, v) = (p.x * inv, p.y * inv);
-    let depth = u * t.tw.x + v * t.tw.y + t.tw.z;
-    if !(NEAR_PLANE..f32::INFINITY).contains(&depth) {
+    if !(NEAR_PLANE..f32::INFINITY).contains(&depth(u, v)) {
         return SplatTransform::default();
     }
     let gu = d_u + d_depth * t.tw.x;

@@ -37,6 +37,25 @@ fn normalise(q: [f32; 4]) -> Option<([f32; 4], f32)> {
     Some((q.map(|c| c * inv), inv))
 }
 
+/// The third column of [`quat_to_rotation`] (the billboard's normal in world coordinates),
+/// computed in f64 from the same raw quaternion: normalised in f64, with the same degenerate
+/// rule (decided in f32, exactly as [`quat_to_rotation`] decides it). For quantities that must
+/// not inherit the f32 rounding of the matrix, such as a plane's offset from a distant camera.
+#[inline]
+pub fn quat_normal_f64(q: [f32; 4]) -> glam::DVec3 {
+    if normalise(q).is_none() {
+        return glam::DVec3::Z;
+    }
+    let [w, x, y, z] = q.map(f64::from);
+    let inv = 1.0 / (w * w + x * x + y * y + z * z);
+    // R(q/|q|) e_z = (2(xz + wy), 2(yz − wx), 1 − 2(x² + y²)) / |q|² for the raw components.
+    glam::DVec3::new(
+        2.0 * (x * z + w * y) * inv,
+        2.0 * (y * z - w * x) * inv,
+        1.0 - 2.0 * (x * x + y * y) * inv,
+    )
+}
+
 /// The rotation matrix of a unit quaternion `[w, x, y, z]` (no normalisation).
 #[inline]
 fn unit_quat_matrix([w, x, y, z]: [f32; 4]) -> Mat3 {

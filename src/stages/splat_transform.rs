@@ -160,6 +160,24 @@ fn view_point(camera: &Camera, position: Vec3) -> Vec3 {
     (camera.rotation.as_dmat3() * position.as_dvec3() + camera.translation.as_dvec3()).as_vec3()
 }
 
+/// The billboard's plane for hit depths ([`crate::stages::ray_plane::ViewPlane`]): the unit
+/// normal facing the camera (the normal times `normal_sign`, [`SplatFrame::normal_sign`]) and its
+/// offset `n·p_view`.
+///
+/// The normal is the f64 normal of the raw quaternion ([`crate::stages::rotation::quat_normal_f64`]
+/// rotated by the f64 `R_cw`) rounded once to f32, and the offset is taken in f64 with that
+/// rounded normal and the f64 view point, then rounded once: the f32 plane passes exactly
+/// through the billboard's centre (normal and offset describe the same plane, so the offset
+/// does not cancel against a slightly different normal), and the normal carries half an ulp of
+/// error instead of the few ulps of the f32 rotation chain.
+#[inline]
+pub fn view_plane(position: Vec3, quaternion: [f32; 4], camera: &Camera, normal_sign: f32) -> (Vec3, f32) {
+    let rcw = camera.rotation.as_dmat3();
+    let normal = (f64::from(normal_sign) * (rcw * crate::stages::rotation::quat_normal_f64(quaternion))).as_vec3();
+    let c = rcw * position.as_dvec3() + camera.translation.as_dvec3();
+    (normal, normal.as_dvec3().dot(c) as f32)
+}
+
 /// `K·[a | b | c]` as rows.
 #[inline]
 fn transform_of(a: Vec3, b: Vec3, c: Vec3, camera: &Camera) -> SplatTransform {
