@@ -1,6 +1,6 @@
 //! The trainable billboard model: raw parameters, initialisation and activation.
 //!
-//! Raw parameters follow `bbsplat-spec.md` §1: position, raw quaternion (w, x, y, z), two log
+//! Raw parameters follow the BBSplat spec, §1: position, raw quaternion (w, x, y, z), two log
 //! half side lengths, 48 SH coefficients (`[coeff][rgb]`), and alpha and colour texture
 //! *logits*. Activated textures (`sigmoid(logit)`) are what the rasterizer sees. Alpha texels
 //! that start at exactly zero in the reference initialisation (15 of 256 at TS = 16) stay zero

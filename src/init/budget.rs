@@ -13,13 +13,15 @@
 //!    of the training views, clamped to `[`[`MIN_BUDGET`]`, `[`MAX_BUDGET`]`]` (the upper end
 //!    is the reference default cap).
 //! 2. **Points.** With `m` SfM points, never more than `m + sky(m)` billboards
-//!    (`sky` = [`sky_point_count`]): initialisation cannot place more, and the trainer's growth
-//!    and relocation move billboards where the images need them.
+//!    (`sky` = [`sky_point_count`]): initialisation cannot place more, and the trainer never adds
+//!    billboards (there is no growth; relocation only moves dead billboards onto alive ones).
 //!
 //! The budget is the smaller of the two. Figures for the test scenes (TS 16): NeRF-synthetic
 //! lego at 400×400 (100 views, no points) → 10 000; the fox (225×400 cropped by undistortion
 //! to a median 87 912 px, no points) → 5 495; beer_colmap (median 87 074 px, pixel bound 5 443)
-//! with 4 414 points → 4 414 (point bound); the demo at 96×96 with 3 000 points → 576. See `docs/numerics-init-loss.md` §5.
+//! with 4 414 points → 4 414 (point bound); the demo scene exported at the CLI defaults (35 train
+//! views at 96×96, 6 000 points) → 576. `bbsplat demo` itself does not use the budget. See
+//! `docs/numerics-init-loss.md` §9.
 //!
 //! ```
 //! use bbsplat::init::budget::{budget_for, BudgetInputs};

@@ -522,7 +522,7 @@ pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings
 /// tile lists and images of a render are several megabytes, and whether the allocator keeps
 /// freed memory between calls or returns it to the kernel (a page fault and a page clear per
 /// 4 KiB on the next call) depends on the process: measured about 2000 faults per call in one
-/// harness and none in another (`docs/perf.md`). Recycled buffers do not fault in either.
+/// harness and none in another (`docs/perf-log.md`). Recycled buffers do not fault in either.
 #[derive(Clone, Debug, Default)]
 pub struct RenderBuffers {
     /// rgb, alpha, depth, median depth, normal, final transmittance.

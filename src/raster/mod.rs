@@ -1,7 +1,7 @@
 //! The image rasterizer: every billboard of a view, forward and backward, tiled, parallel and
 //! deterministic.
 //!
-//! Pipeline (method: `bbsplat-spec.md` §3-§4):
+//! Pipeline (method: the BBSplat spec, §3-§4):
 //! 1. [`preprocess`]: per billboard, the ray-splat transform, the facing normal, the centre
 //!    depth, the SH colour and a tight screen bounding box of the texture support.
 //! 2. [`binning`]: 16×16-pixel tiles; each tile lists the billboards whose box touches it, sorted

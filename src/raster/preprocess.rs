@@ -118,7 +118,7 @@ pub fn preprocess(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSett
 ///
 /// Each task takes [`PREPROCESS_CHUNK`] billboards: first their geometry, the splat frames four
 /// at a time ([`splat_frames_x4`], in vector lanes: 6-17 % less time for the whole preprocess
-/// on the benchmark scene, depending on the host's phase, `docs/perf.md`), then the SH colours
+/// on the benchmark scene, depending on the host's phase, `docs/perf-log.md`), then the SH colours
 /// of those that
 /// survived, [`SH_BATCH`] at a time ([`sh_colour_batch`], whose interleaved dependency chains
 /// take 21.8 ns a colour against 36.5 ns one at a time, `cargo bench --bench appearance --

@@ -19,7 +19,7 @@
 //! ```no_run
 //! use bbsplat::scene::{load, Background, LoadOptions};
 //! let options = LoadOptions { background: Background::White, downscale: 2, ..Default::default() };
-//! let scene = load("../shared/data/lego".as_ref(), &options)?;
+//! let scene = load("data/lego".as_ref(), &options)?;
 //! println!("{} train / {} test views, extent {}", scene.train.len(), scene.test.len(), scene.extent);
 //! # Ok::<(), bbsplat::scene::SceneError>(())
 //! ```

@@ -1,7 +1,7 @@
 //! Training: one view per step, photometric loss + regularisers, analytic gradients, Adam,
 //! relocation of dead billboards, checkpoints.
 //!
-//! What a step does ([`Trainer::step`], method: `bbsplat-spec.md` §5-§7, details and measurements
+//! What a step does ([`Trainer::step`], method: the BBSplat spec, §5-§7; details and measurements
 //! in `docs/training.md`):
 //! 1. draws the next view from a shuffled stack (without replacement, refilled when empty);
 //! 2. renders it, evaluates `0.8·L1 + 0.2·(1 − SSIM)` and back-propagates it to every billboard;

@@ -1,4 +1,4 @@
-//! Regularisers of the training loss (`bbsplat-spec.md` §5.4-5.5), as pure functions.
+//! Regularisers of the training loss (the BBSplat spec, §5.4-5.5), as pure functions.
 //!
 //! Conventions: textures are *activated* values (sigmoid of the logits) laid out as in
 //! [`crate::raster::BillboardSet::textures`]: `T = TS²` RGBA texels `[r, g, b, alpha]` per

@@ -1,4 +1,4 @@
-//! Relocation of dead billboards (`bbsplat-spec.md` §6, "MCMC-style").
+//! Relocation of dead billboards (the BBSplat spec, §6, "MCMC-style").
 //!
 //! A billboard is *dead* when its mean alpha over all `TS²` texels (masked texels count as 0) is
 //! at most [`DEAD_OPACITY`]. Each dead slot receives a copy of a source drawn, with replacement,

@@ -1,5 +1,5 @@
 //! The float64 reference renderer: every billboard at every pixel, written from the method's
-//! specification (`bbsplat-spec.md` §3) and the crate's documented conventions, without calling
+//! specification (the BBSplat spec, §3) and the crate's documented conventions, without calling
 //! any of the crate's stage functions. Only the crate's data types are read (billboard arrays,
 //! the camera's public fields, the compositing thresholds' values).
 //!
