@@ -6,7 +6,7 @@
 //!
 //! The crate is built from small pure stages, each with a forward pass and an analytic backward
 //! pass (a vector-Jacobian product) that is checked against central finite differences by the
-//! public [`gradcheck`] module. Conventions (frames, units, ranges, thresholds) are collected in
+//! public `gradcheck` module (feature `testing`). Conventions (frames, units, ranges, thresholds) are collected in
 //! `docs/numerics.md`; every module states the ones it relies on.
 
 #![warn(missing_docs)]
@@ -16,8 +16,10 @@
 
 pub mod billboards;
 pub mod camera;
+#[cfg(feature = "tools")]
 pub mod demo;
 pub mod eval;
+#[cfg(feature = "testing")]
 pub mod gradcheck;
 pub mod init;
 pub mod loss;
@@ -29,6 +31,8 @@ pub mod report;
 pub mod rng;
 pub mod scene;
 pub mod stages;
+#[cfg(feature = "testing")]
 pub mod strategies;
+#[cfg(feature = "tools")]
 pub mod sweep;
 pub mod train;
