@@ -140,4 +140,5 @@ pub use model::Model;
 pub use model_file::{ModelFileError, ModelMeta, load_model, save_model};
 pub use raster::{BillboardSet, RenderOutput, RenderSettings, render, render_backward};
 pub use scene::{LoadOptions, Scene, SceneError, load};
-pub use train::{RunConfig, RunError, RunOutcome, StopSignal, TrainConfig, TrainEvent, TrainView, Trainer, run};
+pub use train::run::run;
+pub use train::{RunConfig, RunError, RunOutcome, StopSignal, TrainConfig, TrainEvent, TrainView, Trainer};
