@@ -134,7 +134,7 @@ impl RandomSceneConfig {
 /// The identity-pose camera of the random scenes: at the origin looking along +z,
 /// `fx = fy = width`, principal point at the image centre.
 pub fn random_scene_camera(width: u32, height: u32) -> Camera {
-    crate::strategies::identity_camera(width, height)
+    Camera::identity(width, height)
 }
 
 /// A seeded random scene in front of [`random_scene_camera`]: centres at uniform pixel positions

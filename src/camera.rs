@@ -33,6 +33,29 @@ pub struct Camera {
 }
 
 impl Camera {
+    /// The identity-pose camera: centre at the world origin, axes the world axes (looking along
+    /// +z, y down), `width × height` pixels, `fx = fy = width` (a 53° horizontal field of
+    /// view), principal point at the image centre.
+    ///
+    /// ```
+    /// use bbsplat::camera::Camera;
+    /// use glam::Vec3;
+    /// let cam = Camera::identity(64, 48);
+    /// assert_eq!(cam.project(Vec3::new(0.0, 0.0, 2.0)), Some((32.0, 24.0)));
+    /// ```
+    pub fn identity(width: u32, height: u32) -> Self {
+        Self {
+            rotation: Mat3::IDENTITY,
+            translation: Vec3::ZERO,
+            fx: width as f32,
+            fy: width as f32,
+            cx: width as f32 * 0.5,
+            cy: height as f32 * 0.5,
+            width,
+            height,
+        }
+    }
+
     /// A camera at `eye` looking at `target`, with `up` pointing roughly to the top of the
     /// image, principal point at the image centre.
     ///

@@ -6,18 +6,116 @@
 //!
 //! The crate is built from small pure stages, each with a forward pass and an analytic backward
 //! pass (a vector-Jacobian product) that is checked against central finite differences by the
-//! public [`gradcheck`] module. Conventions (frames, units, ranges, thresholds) are collected in
-//! `docs/numerics.md`; every module states the ones it relies on.
+//! `gradcheck` module (feature `testing`). Conventions (frames, units, ranges, thresholds) are
+//! collected in `docs/numerics.md`; every module states the ones it relies on.
+//!
+//! # The front door
+//!
+//! The crate root re-exports what a program embedding the crate needs, from loading a dataset to
+//! rendering a trained model; the modules they come from hold the rest (schedules, losses,
+//! stages, formats):
+//!
+//! | step | items | module |
+//! |---|---|---|
+//! | load posed photographs (COLMAP, NeRF-synthetic, instant-ngp) | [`load`], [`LoadOptions`], [`Scene`], [`SceneError`] | [`scene`] |
+//! | initial billboards from the scene's points | [`init_model`], [`InitError`] | [`init`] |
+//! | the parameters, their activated values, the renderer's view of them | [`Model`], [`Billboards`], [`BillboardSet`] | [`model`], [`billboards`], [`raster`] |
+//! | train: the whole run (evaluations, checkpoints, stop requests) or single steps | [`run`], [`RunConfig`], [`TrainEvent`], [`RunOutcome`], [`RunError`], [`StopSignal`], [`Trainer`], [`TrainConfig`], [`TrainView`] | [`train`] |
+//! | model folders in the reference's format (PLY + 8-bit npz textures) | [`save_model`], [`load_model`], [`ModelMeta`], [`ModelFileError`] | [`model_file`] |
+//! | render, and back-propagate an image gradient | [`render`], [`render_backward`], [`RenderSettings`], [`RenderOutput`], [`Camera`] | [`raster`], [`camera`] |
+//!
+//! A whole round trip: a small dataset on disk (here the embedded demo scene written as a COLMAP
+//! model, feature `tools`; any dataset folder loads the same way), loaded, initialised, trained
+//! for a few steps, saved, loaded back and rendered. Images are linear RGB in `[0, 1]`,
+//! interleaved, rows from the top; cameras are world-to-camera with OpenCV axes (x right, y
+//! down, z forward).
+//!
+//! ```
+//! use bbsplat::{
+//!     LoadOptions, ModelMeta, RenderSettings, RunConfig, RunOutcome, StopSignal, TrainConfig,
+//!     TrainEvent, TrainView, Trainer, init_model, load, load_model, render, run, save_model,
+//! };
+//! use bbsplat::demo::{DemoConfig, export_colmap, generate};
+//! use glam::Vec3;
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let dir = std::env::temp_dir().join(format!("bbsplat-front-door-{}", std::process::id()));
+//! let demo = generate(&DemoConfig { resolution: 24, train_views: 7, test_views: 1, points: 300, seed: 0 });
+//! export_colmap(&demo, &dir.join("data"))?;
+//!
+//! // Load: 8 views, every 8th held out for testing, images undistorted to pinhole cameras.
+//! let scene = load(&dir.join("data"), &LoadOptions::default())?;
+//! assert_eq!((scene.train.len(), scene.test.len()), (7, 1));
+//!
+//! // Initialise 200 billboards with 4×4 textures from the scene's points, and train 30 steps.
+//! let (model, _report) = init_model(&scene, 200, 4, 0)?;
+//! let config = TrainConfig {
+//!     iterations: 30,
+//!     background: Vec3::from_array(scene.background.rgb()),
+//!     extent: scene.extent,
+//!     ..TrainConfig::default()
+//! };
+//! let mut trainer = Trainer::new(model, config);
+//! let (train, test) = (TrainView::from_views(&scene.train), TrainView::from_views(&scene.test));
+//! let mut steps = 0;
+//! // No output folder: nothing is written, the final evaluation renders the float model.
+//! let outcome = run(&mut trainer, &train, &test, &RunConfig::default(), &StopSignal::new(), |event| {
+//!     if let TrainEvent::Step { .. } = event {
+//!         steps += 1;
+//!     }
+//! })?;
+//! let RunOutcome::Finished(summary) = outcome else { panic!("nothing asked the run to stop") };
+//! assert_eq!(steps, 30);
+//! assert!(summary.test_psnr.is_finite());
+//!
+//! // Save the model folder (8-bit textures) and load it back.
+//! let model = trainer.export_model();
+//! let meta = ModelMeta::for_model(&model, 3, scene.background.rgb());
+//! save_model(&dir.join("model"), &model, &meta)?;
+//! let (loaded, meta) = load_model(&dir.join("model"))?;
+//! assert_eq!(loaded.len(), model.len());
+//!
+//! // Render the held-out view with the settings the model was saved with.
+//! let settings = RenderSettings {
+//!     background: Vec3::from_array(meta.background),
+//!     sh_degree: meta.sh_degree,
+//!     ..RenderSettings::default()
+//! };
+//! let camera = scene.test[0].camera;
+//! let out = render(&loaded.activate().as_set(), &camera, &settings);
+//! assert_eq!(out.rgb.len(), camera.pixel_count() * 3);
+//! assert!(out.rgb.iter().all(|v| v.is_finite()));
+//! # std::fs::remove_dir_all(&dir)?;
+//! # Ok(())
+//! # }
+//! ```
+//!
+//! # Features
+//!
+//! - `cli` (default): the `bbsplat` binary and its dependencies (clap, indicatif, ctrlc,
+//!   anyhow); enables `tools`.
+//! - `tools`: the embedded demo scene (`demo`), the budget/setting sweep tool (`sweep`, with
+//!   plotters for its SVG plots) and the process-CPU clock of the benchmark harnesses
+//!   (`report::process_cpu_ms`).
+//! - `testing`: the gradient checker (`gradcheck`), the proptest strategies (`strategies`, with
+//!   proptest) and the parser fuzzing entry points (`scene::fuzz`).
+//!
+//! Without features (`default-features = false`) the crate is the core above (scene input,
+//! initialisation, model, training, model files, rendering, evaluation), built on glam, rayon,
+//! image, serde, serde_json, thiserror, kiddo, zip and libc.
 
-#![warn(missing_docs)]
+#![deny(missing_docs)]
+#![warn(clippy::undocumented_unsafe_blocks, clippy::missing_safety_doc)]
 // Numeric kernels index several parallel arrays with one loop counter; iterator chains would hide
 // the index arithmetic the docs describe.
 #![allow(clippy::needless_range_loop)]
 
 pub mod billboards;
 pub mod camera;
+#[cfg(feature = "tools")]
 pub mod demo;
 pub mod eval;
+#[cfg(feature = "testing")]
 pub mod gradcheck;
 pub mod init;
 pub mod loss;
@@ -29,6 +127,18 @@ pub mod report;
 pub mod rng;
 pub mod scene;
 pub mod stages;
+#[cfg(feature = "testing")]
 pub mod strategies;
+#[cfg(feature = "tools")]
 pub mod sweep;
 pub mod train;
+
+pub use billboards::Billboards;
+pub use camera::Camera;
+pub use init::scene_init::{InitError, init_model};
+pub use model::Model;
+pub use model_file::{ModelFileError, ModelMeta, load_model, save_model};
+pub use raster::{BillboardSet, RenderOutput, RenderSettings, render, render_backward};
+pub use scene::{LoadOptions, Scene, SceneError, load};
+pub use train::run::run;
+pub use train::{RunConfig, RunError, RunOutcome, StopSignal, TrainConfig, TrainEvent, TrainView, Trainer};

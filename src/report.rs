@@ -116,11 +116,14 @@ pub fn peak_rss_bytes() -> u64 {
 /// done rather than wall time; the benchmark harnesses (`examples/raster_stats`,
 /// `examples/model_stats`) report both.
 ///
+/// Part of the `tools` feature.
+///
 /// ```
 /// let before = bbsplat::report::process_cpu_ms();
 /// let x: f64 = (0..100_000).map(|i| (i as f64).sqrt()).sum();
 /// assert!(x > 0.0 && bbsplat::report::process_cpu_ms() >= before);
 /// ```
+#[cfg(feature = "tools")]
 pub fn process_cpu_ms() -> f64 {
     let Ok(tasks) = std::fs::read_dir("/proc/self/task") else {
         return 0.0;

@@ -108,18 +108,9 @@ pub fn camera() -> impl Strategy<Value = Camera> {
 }
 
 /// The identity-pose test camera: at the origin looking along +z, `width × height` pixels,
-/// `fx = fy = width`, principal point at the image centre.
+/// `fx = fy = width`, principal point at the image centre ([`Camera::identity`]).
 pub fn identity_camera(width: u32, height: u32) -> Camera {
-    Camera {
-        rotation: glam::Mat3::IDENTITY,
-        translation: Vec3::ZERO,
-        fx: width as f32,
-        fy: width as f32,
-        cx: width as f32 * 0.5,
-        cy: height as f32 * 0.5,
-        width,
-        height,
-    }
+    Camera::identity(width, height)
 }
 
 /// A billboard in front of `camera`: centre at view depth 2-6 projecting inside the image,

@@ -90,6 +90,7 @@ const CHOSEN: f64 = -1.0;
 
 /// Errors of [`farthest_point_sampling`].
 #[derive(Clone, Debug, PartialEq, Error)]
+#[non_exhaustive]
 pub enum FpsError {
     /// A coordinate of the point at `index` is NaN or infinite.
     #[error("point {index} has a non-finite coordinate {point:?}: farthest point sampling needs finite points")]

@@ -54,6 +54,7 @@ impl Default for HullConfig {
 
 /// Errors of [`visual_hull_points`].
 #[derive(Debug, Error, PartialEq)]
+#[non_exhaustive]
 pub enum HullError {
     /// No training view has a coverage mask (the images have no alpha channel, or needed
     /// undistortion).

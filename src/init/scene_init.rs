@@ -124,6 +124,7 @@ pub struct SceneInit {
 
 /// Errors of [`init_points`].
 #[derive(Debug, Error, PartialEq)]
+#[non_exhaustive]
 pub enum InitError {
     /// A budget of zero billboards.
     #[error("the billboard budget is 0")]

@@ -38,6 +38,7 @@ use thiserror::Error;
 
 /// Errors of the loss functions: shapes that do not match the buffers.
 #[derive(Clone, Debug, PartialEq, Eq, Error)]
+#[non_exhaustive]
 pub enum LossError {
     /// A buffer does not hold the number of values its shape implies.
     #[error("{which} holds {got} values but {expected} were expected")]

@@ -112,6 +112,7 @@ struct MetaFile {
 
 /// Errors of [`save_model`] and [`load_model`]; each names the file involved.
 #[derive(Debug, Error)]
+#[non_exhaustive]
 pub enum ModelFileError {
     /// An operating-system error on `path`.
     #[error("{path}: {source}")]

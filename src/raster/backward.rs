@@ -155,6 +155,8 @@ struct SoleEntryRows {
 // the tile ranges are disjoint, so no two tasks write the same row. The buffer outlives the tile
 // pass, during which nothing else accesses it.
 unsafe impl Sync for SoleEntryRows {}
+// SAFETY: the struct is a pointer into a buffer that outlives the tile pass plus two sizes;
+// moving it to a worker thread moves no data, and the writes through it follow the rules above.
 unsafe impl Send for SoleEntryRows {}
 
 impl SoleEntryRows {

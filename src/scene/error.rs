@@ -40,6 +40,7 @@ impl fmt::Display for Location {
 
 /// An error while loading a scene. The `Display` text is complete (file, record, problem).
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum SceneError {
     /// A file could not be read (or written).
     #[error("{}: cannot access file: {source}", path.display())]

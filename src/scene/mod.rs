@@ -30,6 +30,7 @@ mod colmap_scene;
 pub mod colmap_text;
 pub mod distortion;
 mod error;
+#[cfg(feature = "testing")]
 pub mod fuzz;
 pub(crate) mod image_io;
 mod json_scene;

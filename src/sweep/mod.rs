@@ -54,6 +54,7 @@ use std::path::PathBuf;
 
 /// Errors of the sweep tool; file errors name the file.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum SweepError {
     /// A file could not be read, written or renamed.
     #[error("{path}: {source}")]

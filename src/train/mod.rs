@@ -75,7 +75,8 @@ impl TrainView {
         views.iter().map(Self::from_view).collect()
     }
 
-    /// A view of the embedded demo scene ([`crate::demo`]).
+    /// A view of the embedded demo scene ([`crate::demo`], feature `tools`).
+    #[cfg(feature = "tools")]
     pub fn from_demo(view: &crate::demo::DemoView) -> Self {
         Self {
             camera: view.camera,

@@ -4,11 +4,12 @@
 //! --nocapture measure` (worst case over 40 seeds × 256 cases per property); the numbers are in
 //! `docs/numerics-geometry.md` and next to each constant.
 
+use approx::abs_diff_eq;
 use bbsplat::gradcheck::{GradReport, GradTolerance, StepRule, check_vjp};
 use bbsplat::stages::rotation::{QUAT_NORM_SQ_MIN, quat_to_rotation, quat_to_rotation_vjp};
 use bbsplat::strategies::{quaternion, seeded_config, unit_quaternion};
 use glam::Mat3;
-use nalgebra::{Quaternion, UnitQuaternion};
+use nalgebra::{Matrix3, Quaternion, UnitQuaternion};
 use proptest::prelude::*;
 use proptest::strategy::ValueTree;
 use proptest::test_runner::{RngSeed, TestRunner};
@@ -122,12 +123,9 @@ proptest! {
         let nq = UnitQuaternion::from_quaternion(Quaternion::new(q[0] as f64, q[1] as f64, q[2] as f64, q[3] as f64));
         let m = nq.to_rotation_matrix();
         let r = quat_to_rotation(q);
-        for i in 0..3 {
-            for j in 0..3 {
-                let ours = r.col(j)[i] as f64;
-                prop_assert!((ours - m[(i, j)]).abs() <= 1e-6, "R[{i}][{j}] = {ours} vs {}", m[(i, j)]);
-            }
-        }
+        // Elementwise |ours − nalgebra| ≤ 1e-6 (approx's comparison on nalgebra matrices).
+        let ours = Matrix3::from_fn(|i, j| r.col(j)[i] as f64);
+        prop_assert!(abs_diff_eq!(ours, *m.matrix(), epsilon = 1e-6), "R = {ours} vs {}", m.matrix());
     }
 }
 
