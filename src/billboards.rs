@@ -45,6 +45,25 @@ impl Billboards {
         self.positions.is_empty()
     }
 
+    /// The mean alpha of each billboard ([`crate::model::mean_alpha`] of its texels' alpha
+    /// channel), in billboard order.
+    pub fn mean_alphas(&self) -> Vec<f32> {
+        let t = self.texture_size * self.texture_size;
+        self.textures
+            .chunks_exact(t.max(1))
+            .map(|row| crate::model::mean_alpha(row.iter().map(|x| x[3]), t))
+            .collect()
+    }
+
+    /// Billboards that are alive ([`crate::model::is_alive`]: mean alpha above
+    /// [`crate::model::DEAD_ALPHA`]).
+    pub fn alive_count(&self) -> usize {
+        self.mean_alphas()
+            .into_iter()
+            .filter(|&m| crate::model::is_alive(m))
+            .count()
+    }
+
     /// Borrowed view for the rasterizer.
     pub fn as_set(&self) -> BillboardSet<'_> {
         BillboardSet {

@@ -86,9 +86,29 @@ pub fn standard_alpha_mask(ts: usize) -> Vec<bool> {
     alpha_asset(ts).iter().map(|&g| g > 0.0).collect()
 }
 
-/// Billboards whose mean activated alpha is at most this are *dead* (spec §6,
-/// `dead_opacity`).
+/// Billboards whose mean activated alpha is at most this are *dead* (spec §6, the reference's
+/// `dead_opacity`): relocation moves them, [`is_alive`] and the `alive_count` methods count the
+/// others.
 pub const DEAD_ALPHA: f32 = 0.005;
+
+/// The mean alpha of one billboard: its `texels` activated alpha values (`TS²`, masked texels
+/// included as 0) summed in f64 in texel order and divided by `texels` (an empty row gives 0).
+/// The one definition used by relocation, the alive counts and the Gaussian-mode opacity.
+///
+/// ```
+/// assert_eq!(bbsplat::model::mean_alpha([0.5, 0.0, 0.25, 0.25], 4), 0.25);
+/// ```
+pub fn mean_alpha(alphas: impl IntoIterator<Item = f32>, texels: usize) -> f32 {
+    let sum: f64 = alphas.into_iter().map(f64::from).sum();
+    (sum / texels.max(1) as f64) as f32
+}
+
+/// True when a billboard of mean alpha `mean_alpha` is alive: strictly above [`DEAD_ALPHA`]
+/// (NaN is dead).
+#[inline]
+pub fn is_alive(mean_alpha: f32) -> bool {
+    mean_alpha > DEAD_ALPHA
+}
 
 /// `ln(p / (1 − p))`.
 #[inline]
@@ -137,35 +157,32 @@ impl Model {
         self.positions.is_empty()
     }
 
-    /// Mean activated alpha of billboard `i` over all `TS²` texels: `sigmoid(logit)` on
-    /// unmasked texels, 0 on masked ones (they count in the mean), summed in f64 in texel
-    /// order. Panics if `i ≥ len()`.
+    /// Mean activated alpha of billboard `i` over all `TS²` texels: [`mean_alpha`] of
+    /// `sigmoid(logit)` on unmasked texels and 0 on masked ones. Panics if `i ≥ len()`.
     ///
     /// ```
     /// use bbsplat::model::Model;
     /// use glam::Vec3;
     /// let m = Model::from_points(&[Vec3::ZERO, Vec3::X], &[[0.5; 3]; 2], 16, 0);
     /// assert!((m.mean_alpha(0) - 0.0875).abs() < 1e-3); // the initial texture's mean
-    /// assert_eq!(m.alive_count(0.005), 2);
-    /// assert_eq!(m.alive_count(0.1), 0);
+    /// assert_eq!(m.alive_count(), 2);
     /// ```
     pub fn mean_alpha(&self, i: usize) -> f32 {
         let t = self.texture_size * self.texture_size;
         assert!(i < self.len(), "billboard {i} of {}", self.len());
         let row = &self.alpha_logits[i * t..(i + 1) * t];
-        let sum: f64 = row
-            .iter()
-            .zip(&self.alpha_mask)
-            .map(|(&l, &m)| if m { sigmoid(l) as f64 } else { 0.0 })
-            .sum();
-        (sum / t.max(1) as f64) as f32
+        mean_alpha(
+            row.iter()
+                .zip(&self.alpha_mask)
+                .map(|(&l, &m)| if m { sigmoid(l) } else { 0.0 }),
+            t,
+        )
     }
 
-    /// Billboards whose [`mean_alpha`](Self::mean_alpha) is strictly above `threshold`. With
-    /// [`DEAD_ALPHA`] (0.005) this counts the billboards the reference would not relocate
-    /// (dead = mean alpha `≤ 0.005`).
-    pub fn alive_count(&self, threshold: f32) -> usize {
-        (0..self.len()).filter(|&i| self.mean_alpha(i) > threshold).count()
+    /// Billboards that are alive ([`is_alive`]: mean alpha above [`DEAD_ALPHA`]), the ones
+    /// relocation would not move.
+    pub fn alive_count(&self) -> usize {
+        (0..self.len()).filter(|&i| is_alive(self.mean_alpha(i))).count()
     }
 
     /// Initialises one billboard per point (spec §1.1): alpha `0.5·G`, colour texture 0.1,

@@ -48,8 +48,8 @@ pub use checkpoint::CheckpointError;
 pub use error::TrainError;
 pub use finite::{NonFinite, ParamGroup};
 use glam::Vec3;
-use regularise::{gaussian_opacity_grad, mean_alpha, opacity_regulariser, texture_regulariser};
-use relocate::{DEAD_OPACITY, apply_relocation, plan_relocation, split_alpha_logit};
+use regularise::{gaussian_opacity_grad, opacity_regulariser, texture_regulariser};
+use relocate::{apply_relocation, plan_relocation, split_alpha_logit};
 pub use run::{RunConfig, RunError, RunOutcome, RunWarning, StopReason, StopSignal, TrainEvent, run};
 
 /// A posed image: camera and interleaved RGB values in `[0, 1]`.
@@ -432,7 +432,8 @@ impl Trainer {
             TextureMode::Full => Vec::new(),
             TextureMode::Gaussian => {
                 let mean_shape = shape.iter().map(|&x| x as f64).sum::<f64>() / t.max(1) as f64;
-                mean_alpha(&activated.textures, t)
+                activated
+                    .mean_alphas()
                     .iter()
                     .map(|&m| logit((m as f64 / mean_shape.max(1e-12)).clamp(1e-4, 1.0 - 1e-4) as f32))
                     .collect()
@@ -506,13 +507,10 @@ impl Trainer {
         model
     }
 
-    /// Billboards whose mean alpha exceeds the relocation threshold 0.005.
+    /// Billboards whose mean alpha exceeds the relocation threshold
+    /// [`crate::model::DEAD_ALPHA`] (0.005), measured on the textures the renderer uses.
     pub fn alive_count(&self) -> usize {
-        let t = self.model.texture_size * self.model.texture_size;
-        mean_alpha(&self.activated.textures, t)
-            .iter()
-            .filter(|&&m| m > DEAD_OPACITY)
-            .count()
+        self.activated.alive_count()
     }
 
     fn next_view(&mut self, views: usize) -> usize {
@@ -810,8 +808,7 @@ impl Trainer {
     /// of both the sources and the dead slots are zeroed (the reference zeroes only the sources;
     /// a dead slot's stale moments belong to the billboard that died there).
     pub fn relocate(&mut self) -> usize {
-        let t = self.model.texture_size * self.model.texture_size;
-        let plan = plan_relocation(&mean_alpha(&self.activated.textures, t), &mut self.rng);
+        let plan = plan_relocation(&self.activated.mean_alphas(), &mut self.rng);
         if plan.is_empty() {
             return 0;
         }

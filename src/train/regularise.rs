@@ -136,14 +136,6 @@ pub fn chain_sigmoid(activated: &[f32], d_activated: &[f32], mask: Option<&[bool
     }
 }
 
-/// Mean alpha of each billboard over its `t` RGBA texels.
-pub fn mean_alpha(textures: &[[f32; 4]], t: usize) -> Vec<f32> {
-    textures
-        .chunks_exact(t.max(1))
-        .map(|row| (row.iter().map(|x| x[3] as f64).sum::<f64>() / t as f64) as f32)
-        .collect()
-}
-
 /// Gaussian-billboard alpha (texture mode [`super::TextureMode::Gaussian`]): texel `k` of billboard
 /// `i` is `sigmoid(ω_i) · shape_k`, with `shape` the fixed initial Gaussian (peak ≤ 1).
 pub fn gaussian_alpha(opacity_logits: &[f32], shape: &[f32]) -> Vec<f32> {

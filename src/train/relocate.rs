@@ -1,7 +1,7 @@
 //! Relocation of dead billboards (`bbsplat-spec.md` §6, "MCMC-style").
 //!
 //! A billboard is *dead* when its mean alpha over all `TS²` texels (masked texels count as 0) is
-//! at most [`DEAD_OPACITY`]. Each dead slot receives a copy of a source drawn, with replacement,
+//! at most [`DEAD_ALPHA`]. Each dead slot receives a copy of a source drawn, with replacement,
 //! from the alive billboards with probability proportional to their mean alpha. A source drawn
 //! `n` times ends up with `n + 1` identical copies (itself included), and every copy's alpha is
 //! split texel-wise: `a' = 1 − (1 − a)^{1/(n+1)}`, so that compositing the `n + 1` copies on top
@@ -16,12 +16,11 @@
 //!
 //! The optimiser-state side (zeroing moments) is done by the trainer.
 
-use crate::model::Model;
+#[cfg(doc)]
+use crate::model::DEAD_ALPHA;
+use crate::model::{Model, is_alive};
 use crate::raster::SH_FLOATS;
 use crate::rng::Rng;
-
-/// Mean alpha at or below which a billboard is dead (reference `dead_opacity`).
-pub const DEAD_OPACITY: f32 = 0.005;
 
 /// Relocated alpha logits are clamped to `[−LOGIT_CLAMP, LOGIT_CLAMP]` (alpha within
 /// `[9.4e-14, 1 − 9.4e-14]` in f64).
@@ -51,7 +50,7 @@ impl RelocationPlan {
 /// Returns an empty plan (and draws nothing) when no billboard is dead or none is alive.
 pub fn plan_relocation(mean_alpha: &[f32], rng: &mut Rng) -> RelocationPlan {
     // A NaN mean alpha counts as dead (it is not above the threshold).
-    let is_alive = |i: usize| mean_alpha[i] > DEAD_OPACITY;
+    let is_alive = |i: usize| is_alive(mean_alpha[i]);
     let dead: Vec<usize> = (0..mean_alpha.len()).filter(|&i| !is_alive(i)).collect();
     let alive: Vec<usize> = (0..mean_alpha.len()).filter(|&i| is_alive(i)).collect();
     if dead.is_empty() || alive.is_empty() {
