@@ -10,8 +10,9 @@
 use bbsplat::demo::{DemoConfig, generate};
 use bbsplat::init::fps::farthest_point_sampling;
 use bbsplat::model::Model;
+use bbsplat::scene::split::camera_extent;
 use bbsplat::train::adam::{AdamGroup, AdamParams};
-use bbsplat::train::{TrainConfig, TrainView, Trainer, scene_extent};
+use bbsplat::train::{TrainConfig, TrainView, Trainer};
 use criterion::{BenchmarkId, Criterion, Throughput, black_box, criterion_group, criterion_main};
 use glam::Vec3;
 use std::time::{Duration, Instant};
@@ -53,7 +54,7 @@ fn demo_setup(resolution: u32, billboards: usize) -> Setup {
         sh_degree: 3,
         background: Vec3::from_array(scene.background),
         seed: 0,
-        extent: scene_extent(&cameras),
+        extent: camera_extent(&cameras),
         ..TrainConfig::default()
     };
     Setup { model, views, config }

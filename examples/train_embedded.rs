@@ -7,7 +7,8 @@
 use bbsplat::demo::{DemoConfig, generate};
 use bbsplat::model::Model;
 use bbsplat::raster::{RenderSettings, render};
-use bbsplat::train::{RunConfig, RunOutcome, StopSignal, TrainConfig, TrainEvent, TrainView, Trainer, scene_extent};
+use bbsplat::scene::split::camera_extent;
+use bbsplat::train::{RunConfig, RunOutcome, StopSignal, TrainConfig, TrainEvent, TrainView, Trainer};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let out = std::env::args()
@@ -24,7 +25,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let config = TrainConfig {
         iterations: 300,
         background: glam::Vec3::from_array(scene.background),
-        extent: scene_extent(&cameras),
+        extent: camera_extent(&cameras),
         ..TrainConfig::default()
     };
     let mut trainer = Trainer::new(Model::from_points(&scene.points, &scene.colours, 8, 0), config);

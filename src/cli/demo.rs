@@ -6,9 +6,8 @@ use bbsplat::demo::{DemoConfig, generate};
 use bbsplat::init::fps::farthest_point_sampling;
 use bbsplat::model::Model;
 use bbsplat::raster::{RenderSettings, render};
-use bbsplat::train::{
-    self, RunConfig, RunOutcome, StopSignal, TrainConfig, TrainEvent, TrainView, Trainer, scene_extent,
-};
+use bbsplat::scene::split::camera_extent;
+use bbsplat::train::{self, RunConfig, RunOutcome, StopSignal, TrainConfig, TrainEvent, TrainView, Trainer};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
@@ -58,7 +57,7 @@ pub fn run(
         sh_degree: 3,
         background: Vec3::from_array(scene.background),
         seed,
-        extent: scene_extent(&cameras),
+        extent: camera_extent(&cameras),
         ..TrainConfig::default()
     };
     println!(

@@ -124,7 +124,7 @@ pub struct TrainConfig {
     /// Seed of the view order and of relocation sampling.
     pub seed: u64,
     /// Spatial scale `E` of the position learning rate (1.1 × the largest camera-centre
-    /// distance from their mean; see [`scene_extent`]).
+    /// distance from their mean; see [`crate::scene::split::camera_extent`]).
     pub extent: f32,
     /// Impact threshold σ of the texture regulariser (default 500, the paper's value).
     pub impact_threshold: f32,
@@ -216,19 +216,6 @@ impl Default for TrainConfig {
             clamp_gradient: ClampGradient::Exact,
         }
     }
-}
-
-/// `1.1 ×` the largest distance of a camera centre from the mean centre.
-pub fn scene_extent(cameras: &[Camera]) -> f32 {
-    if cameras.is_empty() {
-        return 1.0;
-    }
-    let mean = cameras.iter().map(Camera::centre).sum::<Vec3>() / cameras.len() as f32;
-    1.1 * cameras
-        .iter()
-        .map(|c| c.centre().distance(mean))
-        .fold(0.0, f32::max)
-        .max(1e-6)
 }
 
 /// Reference iteration count, the 100 % point of every milestone.

@@ -4,10 +4,11 @@
 
 use bbsplat::demo::{DemoConfig, generate};
 use bbsplat::model::Model;
+use bbsplat::scene::split::camera_extent;
 use bbsplat::train::checkpoint::{MAGIC, OLDEST_VERSION, VERSION};
 use bbsplat::train::{
     AdamMode, CheckpointError, ClampGradient, LearningRateScales, TextureMode, TrainConfig, TrainError, TrainView,
-    Trainer, scene_extent,
+    Trainer,
 };
 use glam::Vec3;
 use std::path::PathBuf;
@@ -41,7 +42,7 @@ fn setup(adam: AdamMode, texture_mode: TextureMode) -> (Trainer, Vec<TrainView>)
         iterations: 128,
         seed: 8,
         background: Vec3::from_array(scene.background),
-        extent: scene_extent(&cams),
+        extent: camera_extent(&cams),
         relocate_every: 3,
         adam,
         texture_mode,

@@ -2,7 +2,8 @@
 
 use bbsplat::demo::{DemoConfig, generate};
 use bbsplat::model::Model;
-use bbsplat::train::{AdamMode, LearningRateScales, TextureMode, TrainConfig, TrainView, Trainer, scene_extent};
+use bbsplat::scene::split::camera_extent;
+use bbsplat::train::{AdamMode, LearningRateScales, TextureMode, TrainConfig, TrainView, Trainer};
 use glam::Vec3;
 use std::time::Instant;
 
@@ -46,7 +47,7 @@ fn run(
         sh_degree: 3,
         background: Vec3::from_array(scene.background),
         seed: demo.seed,
-        extent: scene_extent(&cams),
+        extent: camera_extent(&cams),
         ..TrainConfig::default()
     };
     let mut trainer = Trainer::new(model, tweak(config));

@@ -4,10 +4,11 @@
 
 use bbsplat::demo::{DemoConfig, generate};
 use bbsplat::model::{Model, logit};
+use bbsplat::scene::split::camera_extent;
 use bbsplat::train::run::{CHECKPOINT_FILE, MODEL_DIR, SUMMARY_FILE};
 use bbsplat::train::{
     ClampGradient, NonFinite, ParamGroup, RunConfig, RunError, RunOutcome, StopReason, StopSignal, TrainConfig,
-    TrainError, TrainEvent, TrainView, Trainer, run, scene_extent,
+    TrainError, TrainEvent, TrainView, Trainer, run,
 };
 use glam::Vec3;
 use std::path::PathBuf;
@@ -36,7 +37,7 @@ fn setup(iterations: usize, tweak: impl Fn(TrainConfig) -> TrainConfig) -> Setup
         iterations,
         seed: 4,
         background: Vec3::from_array(scene.background),
-        extent: scene_extent(&cameras),
+        extent: camera_extent(&cameras),
         ..TrainConfig::default()
     };
     Setup {
@@ -558,7 +559,7 @@ fn measure_non_finite_check_cost() {
         TrainConfig {
             iterations: 1000,
             background: Vec3::from_array(scene.background),
-            extent: scene_extent(&cameras),
+            extent: camera_extent(&cameras),
             ..TrainConfig::default()
         },
     );
