@@ -51,6 +51,7 @@ use glam::Vec3;
 use regularise::{gaussian_opacity_grad, opacity_regulariser, texture_regulariser};
 use relocate::{apply_relocation, plan_relocation, split_alpha_logit};
 pub use run::{RunConfig, RunError, RunOutcome, RunWarning, StopReason, StopSignal, TrainEvent, run};
+use serde::{Deserialize, Serialize};
 
 /// A posed image: camera and interleaved RGB values in `[0, 1]`.
 #[derive(Clone, Debug)]
@@ -99,7 +100,12 @@ pub enum AdamMode {
 }
 
 /// What the alpha and colour textures are allowed to be (the "textures on vs off" ablation).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+///
+/// Its text form ([`TextureMode::as_str`], `Display`, `FromStr`, serde) is `full` or
+/// `gaussian`: the value of `bbsplat train --texture-mode` and of a sweep grid's `texture_mode`
+/// axis (JSON `"texture_mode": ["full", "gaussian"]`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum TextureMode {
     /// Learned alpha and colour textures (BBSplat).
     #[default]
@@ -109,6 +115,43 @@ pub enum TextureMode {
     /// the fixed initial Gaussian (`G/255` of the reference asset, peak 0.984, masked texels 0);
     /// the colour texture stays at its initial value, so colour is learned through SH only.
     Gaussian,
+}
+
+impl TextureMode {
+    /// Every mode, in declaration order.
+    pub const ALL: [TextureMode; 2] = [TextureMode::Full, TextureMode::Gaussian];
+
+    /// The text form: `full` or `gaussian`.
+    ///
+    /// ```
+    /// use bbsplat::train::TextureMode;
+    /// for mode in TextureMode::ALL {
+    ///     assert_eq!(mode.as_str().parse::<TextureMode>(), Ok(mode));
+    /// }
+    /// assert!("none".parse::<TextureMode>().is_err());
+    /// ```
+    pub fn as_str(self) -> &'static str {
+        match self {
+            TextureMode::Full => "full",
+            TextureMode::Gaussian => "gaussian",
+        }
+    }
+}
+
+impl std::fmt::Display for TextureMode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl std::str::FromStr for TextureMode {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        TextureMode::ALL
+            .into_iter()
+            .find(|m| m.as_str() == s)
+            .ok_or_else(|| "expected `full` or `gaussian`".into())
+    }
 }
 
 /// Training settings.
