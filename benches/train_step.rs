@@ -9,7 +9,7 @@
 //! run, so every timed step has textures on and SH degree 3 (as in most of a real run).
 use bbsplat::demo::{DemoConfig, generate};
 use bbsplat::init::fps::farthest_point_sampling;
-use bbsplat::model::Model;
+use bbsplat::model::RawBillboards;
 use bbsplat::scene::split::camera_extent;
 use bbsplat::train::adam::{AdamGroup, AdamParams};
 use bbsplat::train::{TrainConfig, TrainView, Trainer};
@@ -23,7 +23,7 @@ fn step(trainer: &mut Trainer, views: &[TrainView]) {
 }
 
 struct Setup {
-    model: Model,
+    model: RawBillboards,
     views: Vec<TrainView>,
     config: TrainConfig,
 }
@@ -39,7 +39,7 @@ fn demo_setup(resolution: u32, billboards: usize) -> Setup {
     let keep = farthest_point_sampling(&scene.points, billboards).expect("enough points");
     let points: Vec<Vec3> = keep.iter().map(|&i| scene.points[i]).collect();
     let colours: Vec<[f32; 3]> = keep.iter().map(|&i| scene.colours[i]).collect();
-    let model = Model::from_points(&points, &colours, 16, 0);
+    let model = RawBillboards::from_points(&points, &colours, 16, 0);
     let views: Vec<TrainView> = scene
         .train
         .iter()

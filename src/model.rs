@@ -1,4 +1,5 @@
-//! The trainable billboard model: raw parameters, initialisation and activation.
+//! The trainable billboard set in its raw form ([`RawBillboards`]): raw parameters,
+//! initialisation and activation.
 //!
 //! Raw parameters follow `bbsplat-spec.md` §1: position, raw quaternion (w, x, y, z), two log
 //! half side lengths, 48 SH coefficients (`[coeff][rgb]`), and alpha and colour texture
@@ -6,7 +7,7 @@
 //! that start at exactly zero in the reference initialisation (15 of 256 at TS = 16) stay zero
 //! through an explicit mask shared by every billboard, instead of infinite logits.
 
-use crate::billboards::Billboards;
+use crate::billboards::ActivatedBillboards;
 use crate::init::knn::mean_sq_dist_3nn;
 use crate::raster::SH_FLOATS;
 use crate::rng::Rng;
@@ -74,7 +75,7 @@ pub fn alpha_asset(ts: usize) -> Vec<f32> {
 /// The initial alpha texture for side `ts`: `0.5·G` with `G` = [`alpha_asset`]`(ts)` (the
 /// 16×16 table / 255, resampled with align-corners bilinear interpolation for other sizes).
 /// Values in `[0, 0.5)`; texels that are exactly zero stay zero during training (see
-/// [`Model::alpha_mask`]). Scaling by 0.5 is exact in floating point, so this is bit for bit
+/// [`RawBillboards::alpha_mask`]). Scaling by 0.5 is exact in floating point, so this is bit for bit
 /// half of the asset.
 pub fn initial_alpha(ts: usize) -> Vec<f32> {
     alpha_asset(ts).into_iter().map(|g| 0.5 * g).collect()
@@ -122,9 +123,12 @@ pub fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + (-x).exp())
 }
 
-/// Raw, trainable billboard parameters.
+/// The *raw* form of the billboard set: the trainable parameters as optimised and saved
+/// (texture logits, log half sides, raw quaternions, SH). [`RawBillboards::activate`] gives the
+/// [`ActivatedBillboards`] the renderer needs. The three forms of the set:
+/// [`crate::billboards`].
 #[derive(Clone, Debug, PartialEq)]
-pub struct Model {
+pub struct RawBillboards {
     /// Centres (world).
     pub positions: Vec<Vec3>,
     /// Raw quaternions (w, x, y, z).
@@ -133,7 +137,7 @@ pub struct Model {
     pub log_scales: Vec<Vec2>,
     /// SH coefficients, 48 per billboard.
     pub sh: Vec<f32>,
-    /// Alpha logits, `TS²` per billboard. The crate's constructors ([`Model::from_points`],
+    /// Alpha logits, `TS²` per billboard. The crate's constructors ([`RawBillboards::from_points`],
     /// `model_file::load_model`, checkpoints) allocate both logit arrays with
     /// [`crate::memory`]'s huge-page hint; a model assembled by hand works the same, only
     /// without the hint.
@@ -146,7 +150,7 @@ pub struct Model {
     pub texture_size: usize,
 }
 
-impl Model {
+impl RawBillboards {
     /// Number of billboards.
     pub fn len(&self) -> usize {
         self.positions.len()
@@ -161,9 +165,9 @@ impl Model {
     /// `sigmoid(logit)` on unmasked texels and 0 on masked ones. Panics if `i ≥ len()`.
     ///
     /// ```
-    /// use bbsplat::model::Model;
+    /// use bbsplat::model::RawBillboards;
     /// use glam::Vec3;
-    /// let m = Model::from_points(&[Vec3::ZERO, Vec3::X], &[[0.5; 3]; 2], 16, 0);
+    /// let m = RawBillboards::from_points(&[Vec3::ZERO, Vec3::X], &[[0.5; 3]; 2], 16, 0);
     /// assert!((m.mean_alpha(0) - 0.0875).abs() < 1e-3); // the initial texture's mean
     /// assert_eq!(m.alive_count(), 2);
     /// ```
@@ -202,7 +206,7 @@ impl Model {
         let alpha_row: Vec<f32> = alpha0.iter().map(|&a| if a > 0.0 { logit(a) } else { 0.0 }).collect();
         let mean_sq_3nn = mean_sq_dist_3nn(points);
         let mut rng = Rng::new(seed);
-        let mut model = Model {
+        let mut model = RawBillboards {
             positions: points.to_vec(),
             quaternions: Vec::with_capacity(n),
             log_scales: Vec::with_capacity(n),
@@ -228,8 +232,8 @@ impl Model {
     /// Activated textures and geometry in the layout of the rasterizer: the planar alpha and
     /// colour logits become interleaved RGBA texels `[sigmoid(r), sigmoid(g), sigmoid(b),
     /// sigmoid(alpha)]` (masked alpha texels 0).
-    pub fn activate(&self) -> Billboards {
-        let mut b = Billboards {
+    pub fn activate(&self) -> ActivatedBillboards {
+        let mut b = ActivatedBillboards {
             positions: self.positions.clone(),
             quaternions: self.quaternions.clone(),
             log_scales: self.log_scales.clone(),
@@ -244,7 +248,7 @@ impl Model {
     }
 
     /// Refreshes billboard `i` of `out` (geometry, SH and activated textures) from the model.
-    pub fn activate_row(&self, i: usize, out: &mut Billboards) {
+    pub fn activate_row(&self, i: usize, out: &mut ActivatedBillboards) {
         let t = self.texture_size * self.texture_size;
         out.positions[i] = self.positions[i];
         out.quaternions[i] = self.quaternions[i];
@@ -287,7 +291,7 @@ mod tests {
     #[test]
     fn masked_texels_stay_zero_and_scales_follow_neighbours() {
         let pts = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z, Vec3::splat(5.0)];
-        let m = Model::from_points(&pts, &[[0.5; 3]; 5], 16, 0);
+        let m = RawBillboards::from_points(&pts, &[[0.5; 3]; 5], 16, 0);
         let b = m.activate();
         assert_eq!(b.textures[0][3], 0.0);
         assert!((b.textures[7][1] - 0.1).abs() < 1e-6);

@@ -1,6 +1,6 @@
 //! Per-billboard preprocessing: transform, normal, depth, SH colour and a tight screen box.
 
-use super::{BillboardSet, RenderSettings};
+use super::{ActivatedRef, RenderSettings};
 use crate::camera::Camera;
 use crate::memory::resize_for_overwrite;
 use crate::stages::sh::{ShColour, sh_colour, sh_colour_batch};
@@ -38,7 +38,7 @@ pub struct Prepared {
 ///
 /// The plain per-billboard reference of [`preprocess`] (which gives the same records bit for
 /// bit, its SH colours evaluated several billboards at a time).
-pub fn prepare_one(set: &BillboardSet<'_>, i: usize, camera: &Camera, settings: &RenderSettings) -> Option<Prepared> {
+pub fn prepare_one(set: &ActivatedRef<'_>, i: usize, camera: &Camera, settings: &RenderSettings) -> Option<Prepared> {
     let mut prepared = prepare_geometry(set, i, camera)?;
     let colour = sh_colour(settings.sh_degree, set.sh_of(i), camera.view_offset(set.positions[i]));
     set_colour(&mut prepared, colour);
@@ -46,7 +46,7 @@ pub fn prepare_one(set: &BillboardSet<'_>, i: usize, camera: &Camera, settings: 
 }
 
 /// [`prepare_one`] without the SH colour (`rgb` zero, no channel clamped).
-fn prepare_geometry(set: &BillboardSet<'_>, i: usize, camera: &Camera) -> Option<Prepared> {
+fn prepare_geometry(set: &ActivatedRef<'_>, i: usize, camera: &Camera) -> Option<Prepared> {
     let projected = splat_frame(set.positions[i], set.log_scales[i], set.quaternions[i], camera)?;
     geometry_record(&projected, support_half_side(set.texture_size), camera)
 }
@@ -82,7 +82,7 @@ const PREPROCESS_CHUNK: usize = 256;
 const SH_BATCH: usize = 4;
 
 /// Prepares every billboard in parallel; entry `i` belongs to billboard `i`.
-pub fn preprocess(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings) -> Vec<Option<Prepared>> {
+pub fn preprocess(set: &ActivatedRef<'_>, camera: &Camera, settings: &RenderSettings) -> Vec<Option<Prepared>> {
     let mut prepared = Vec::new();
     preprocess_into(set, camera, settings, &mut prepared);
     prepared
@@ -98,7 +98,7 @@ pub fn preprocess(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSett
 /// take 21.8 ns a colour against 36.5 ns one at a time, `cargo bench --bench appearance --
 /// eval`). Every record equals [`prepare_one`]'s bit for bit (tested).
 pub fn preprocess_into(
-    set: &BillboardSet<'_>,
+    set: &ActivatedRef<'_>,
     camera: &Camera,
     settings: &RenderSettings,
     prepared: &mut Vec<Option<Prepared>>,
@@ -174,7 +174,7 @@ mod tests {
     fn preprocess_equals_prepare_one() {
         use crate::billboards::{RandomSceneConfig, random_scene, random_scene_camera};
         let scene = random_scene(&RandomSceneConfig::benchmark(2 * PREPROCESS_CHUNK + 77, 48, 40));
-        let (set, camera) = (scene.as_set(), random_scene_camera(48, 40));
+        let (set, camera) = (scene.borrowed(), random_scene_camera(48, 40));
         for sh_degree in 0..=3 {
             let settings = RenderSettings {
                 sh_degree,

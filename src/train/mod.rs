@@ -34,11 +34,11 @@ pub mod resolution;
 pub mod run;
 pub mod texture_step;
 
-use crate::billboards::Billboards;
+use crate::billboards::ActivatedBillboards;
 use crate::camera::Camera;
 use crate::loss::TrainingLoss;
 use crate::loss::psnr::psnr_u8;
-use crate::model::{Model, initial_alpha, logit, sigmoid};
+use crate::model::{RawBillboards, initial_alpha, logit, sigmoid};
 use crate::raster::backward::ImageGradients;
 use crate::raster::{RenderBuffers, RenderGradients, RenderSettings, SH_FLOATS, render_backward, render_with};
 use crate::rng::Rng;
@@ -402,9 +402,9 @@ pub mod group {
 pub struct Trainer {
     /// The raw parameters. Edit only between steps and through the trainer's own methods: the
     /// activated copy is refreshed row by row.
-    pub model: Model,
+    pub model: RawBillboards,
     /// Activated copy the rasterizer reads (kept in sync row by row).
-    pub activated: Billboards,
+    pub activated: ActivatedBillboards,
     adam: [AdamGroup; group::COUNT],
     grads: RenderGradients,
     config: TrainConfig,
@@ -441,14 +441,14 @@ impl Trainer {
     /// `clamp(mean alpha / mean shape, 1e-4, 1 − 1e-4)` (0.5 for a freshly initialised model) and
     /// its alpha logits are overwritten with `logit(o · shape)` so that the model alone renders
     /// what the trainer renders.
-    pub fn new(model: Model, config: TrainConfig) -> Self {
+    pub fn new(model: RawBillboards, config: TrainConfig) -> Self {
         let adam = adam_groups(model.len(), model.texture_size * model.texture_size);
         Self::with_adam(model, config, adam)
     }
 
     /// [`Trainer::new`] with given optimiser state (a checkpoint's), so that loading does not
     /// first allocate zero moments only to replace them.
-    pub(crate) fn with_adam(model: Model, config: TrainConfig, adam: [AdamGroup; group::COUNT]) -> Self {
+    pub(crate) fn with_adam(model: RawBillboards, config: TrainConfig, adam: [AdamGroup; group::COUNT]) -> Self {
         let n = model.len();
         let t = model.texture_size * model.texture_size;
         let alpha0: Vec<f32> = initial_alpha(model.texture_size)
@@ -522,7 +522,7 @@ impl Trainer {
     /// [`TextureMode::Gaussian`] taken from the textures the renderer used (opacity × the fixed
     /// shape, clamped to `[1e-6, 1 − 1e-6]`; masked texels 0). In full-texture mode a copy of
     /// [`Trainer::model`].
-    pub fn export_model(&self) -> Model {
+    pub fn export_model(&self) -> RawBillboards {
         let mut model = self.model.clone();
         if self.config.texture_mode == TextureMode::Gaussian {
             let t = model.texture_size * model.texture_size;
@@ -612,7 +612,7 @@ impl Trainer {
         let cam = &view.camera;
         let settings = self.settings();
         let buffers = std::mem::take(&mut self.render_buffers);
-        let out = render_with(&self.activated.as_set(), cam, &settings, buffers);
+        let out = render_with(&self.activated.borrowed(), cam, &settings, buffers);
         let loss = TrainingLoss::default()
             .evaluate(&out.rgb, &view.rgb, cam.width as usize, cam.height as usize, 3)
             .expect("sizes validated above");
@@ -622,7 +622,7 @@ impl Trainer {
             alpha: None,
             depth: None,
         };
-        let touched = render_backward(&self.activated.as_set(), &out, &ig, &mut self.grads);
+        let touched = render_backward(&self.activated.borrowed(), &out, &ig, &mut self.grads);
         let texture_reg = if self.config.texture_reg_weight != 0.0 {
             texture_regulariser(
                 &self.activated.textures,
@@ -878,7 +878,7 @@ impl Trainer {
             .iter()
             .map(|v| {
                 let out = render_with(
-                    &self.activated.as_set(),
+                    &self.activated.borrowed(),
                     &v.camera,
                     &settings,
                     std::mem::take(&mut buffers),

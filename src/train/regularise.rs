@@ -1,7 +1,7 @@
 //! Regularisers of the training loss (`bbsplat-spec.md` §5.4-5.5), as pure functions.
 //!
 //! Conventions: textures are *activated* values (sigmoid of the logits) laid out as in
-//! [`crate::raster::BillboardSet::textures`]: `T = TS²` RGBA texels `[r, g, b, alpha]` per
+//! [`crate::raster::ActivatedRef::textures`]: `T = TS²` RGBA texels `[r, g, b, alpha]` per
 //! billboard. Every function returns the value in f64 and *adds* its gradient with respect to the
 //! activated textures into a buffer of the same layout; [`chain_sigmoid`] carries an
 //! activated-space gradient (planar, as the model's logits) to the logits and applies the alpha

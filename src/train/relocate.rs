@@ -18,7 +18,7 @@
 
 #[cfg(doc)]
 use crate::model::DEAD_ALPHA;
-use crate::model::{Model, is_alive};
+use crate::model::{RawBillboards, is_alive};
 use crate::raster::SH_FLOATS;
 use crate::rng::Rng;
 
@@ -94,7 +94,7 @@ pub fn split_alpha_logit(x: f32, copies: u32) -> f32 {
 
 /// Applies `plan` to the raw parameters: splits the alpha logits of every source (texels inside
 /// `alpha_mask` only) and copies all parameters of the source into its dead slots.
-pub fn apply_relocation(model: &mut Model, plan: &RelocationPlan) {
+pub fn apply_relocation(model: &mut RawBillboards, plan: &RelocationPlan) {
     let t = model.texture_size * model.texture_size;
     for &(s, n) in &plan.multiplicity {
         for k in 0..t {
@@ -110,7 +110,7 @@ pub fn apply_relocation(model: &mut Model, plan: &RelocationPlan) {
 }
 
 /// Copies every parameter of billboard `src` into billboard `dst`.
-pub fn copy_row(model: &mut Model, src: usize, dst: usize) {
+pub fn copy_row(model: &mut RawBillboards, src: usize, dst: usize) {
     let t = model.texture_size * model.texture_size;
     model.positions[dst] = model.positions[src];
     model.quaternions[dst] = model.quaternions[src];

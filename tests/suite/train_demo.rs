@@ -1,7 +1,7 @@
 //! The trainer improves held-out PSNR on a tiny demo scene within seconds, deterministically.
 
 use bbsplat::demo::{DemoConfig, generate};
-use bbsplat::model::Model;
+use bbsplat::model::RawBillboards;
 use bbsplat::scene::split::camera_extent;
 use bbsplat::train::{AdamMode, LearningRateScales, TextureMode, TrainConfig, TrainView, Trainer};
 use glam::Vec3;
@@ -31,7 +31,7 @@ fn run(
     tweak: impl Fn(TrainConfig) -> TrainConfig,
 ) -> (f64, f64, Vec<f64>, Trainer) {
     let scene = generate(demo);
-    let model = Model::from_points(&scene.points, &scene.colours, texture_size, demo.seed);
+    let model = RawBillboards::from_points(&scene.points, &scene.colours, texture_size, demo.seed);
     let views = |v: &[bbsplat::demo::DemoView]| -> Vec<TrainView> {
         v.iter()
             .map(|v| TrainView {
