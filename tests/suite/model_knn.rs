@@ -6,18 +6,7 @@ use bbsplat::model::RawBillboards;
 use bbsplat::rng::Rng;
 use glam::Vec3;
 
-fn cloud(n: usize, seed: u64, scale: [f32; 3]) -> Vec<Vec3> {
-    let mut rng = Rng::new(seed);
-    (0..n)
-        .map(|_| {
-            Vec3::new(
-                rng.range(-scale[0], scale[0]),
-                rng.range(-scale[1], scale[1]),
-                rng.range(-scale[2], scale[2]),
-            )
-        })
-        .collect()
-}
+use bbsplat::strategies::box_cloud as cloud;
 
 fn check(points: &[Vec3], what: &str) {
     let tree = mean_sq_dist_3nn(points);
