@@ -6,15 +6,11 @@
 use bbsplat::init::fibonacci::{fibonacci_sphere, sky_radius};
 use bbsplat::init::fps::{farthest_point_sampling, farthest_point_sampling_dense};
 use bbsplat::init::knn::{mean_sq_dist_3nn, mean_sq_dist_3nn_brute};
-use bbsplat::rng::Rng;
 use criterion::{BenchmarkId, Criterion, black_box, criterion_group, criterion_main};
 use glam::Vec3;
 
 fn cloud(n: usize) -> Vec<Vec3> {
-    let mut rng = Rng::new(42);
-    (0..n)
-        .map(|_| Vec3::new(rng.range(-10.0, 10.0), rng.range(-10.0, 10.0), rng.range(-3.0, 3.0)))
-        .collect()
+    bbsplat::strategies::box_cloud(n, 42, [10.0, 10.0, 3.0])
 }
 
 fn fps(c: &mut Criterion) {

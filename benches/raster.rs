@@ -21,7 +21,7 @@ fn bench(c: &mut Criterion) {
             let scene = random_scene(&RandomSceneConfig::benchmark(n, size, size));
             let cam = random_scene_camera(size, size);
             let settings = RenderSettings::default();
-            let set = scene.as_set();
+            let set = scene.borrowed();
             // Storage recycled from call to call, as the trainer and `eval` do (`render_with`).
             let mut buffers = RenderBuffers::default();
             group.bench_function(format!("fwd/{size}/{n}"), |b| {

@@ -9,9 +9,10 @@
 //! run, so every timed step has textures on and SH degree 3 (as in most of a real run).
 use bbsplat::demo::{DemoConfig, generate};
 use bbsplat::init::fps::farthest_point_sampling;
-use bbsplat::model::Model;
+use bbsplat::model::RawBillboards;
+use bbsplat::scene::split::camera_extent;
 use bbsplat::train::adam::{AdamGroup, AdamParams};
-use bbsplat::train::{TrainConfig, TrainView, Trainer, scene_extent};
+use bbsplat::train::{TrainConfig, TrainView, Trainer};
 use criterion::{BenchmarkId, Criterion, Throughput, black_box, criterion_group, criterion_main};
 use glam::Vec3;
 use std::time::{Duration, Instant};
@@ -22,7 +23,7 @@ fn step(trainer: &mut Trainer, views: &[TrainView]) {
 }
 
 struct Setup {
-    model: Model,
+    model: RawBillboards,
     views: Vec<TrainView>,
     config: TrainConfig,
 }
@@ -38,7 +39,7 @@ fn demo_setup(resolution: u32, billboards: usize) -> Setup {
     let keep = farthest_point_sampling(&scene.points, billboards).expect("enough points");
     let points: Vec<Vec3> = keep.iter().map(|&i| scene.points[i]).collect();
     let colours: Vec<[f32; 3]> = keep.iter().map(|&i| scene.colours[i]).collect();
-    let model = Model::from_points(&points, &colours, 16, 0);
+    let model = RawBillboards::from_points(&points, &colours, 16, 0);
     let views: Vec<TrainView> = scene
         .train
         .iter()
@@ -53,7 +54,7 @@ fn demo_setup(resolution: u32, billboards: usize) -> Setup {
         sh_degree: 3,
         background: Vec3::from_array(scene.background),
         seed: 0,
-        extent: scene_extent(&cameras),
+        extent: camera_extent(&cameras),
         ..TrainConfig::default()
     };
     Setup { model, views, config }

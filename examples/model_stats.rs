@@ -15,7 +15,7 @@
 //! wall clock and process CPU time (all threads, without the time spent waiting for a core:
 //! the steadier figure on a shared machine).
 use bbsplat::billboards::planar_textures;
-use bbsplat::model::Model;
+use bbsplat::model::RawBillboards;
 use bbsplat::model_file::load_model;
 use bbsplat::raster::backward::ImageGradients;
 use bbsplat::raster::{RenderGradients, RenderSettings, render, render_backward};
@@ -28,7 +28,7 @@ use std::path::Path;
 use std::time::Instant;
 
 /// The model, its SH degree and its background, from a model folder or a checkpoint.
-fn load_any(path: &Path) -> Result<(Model, u32, [f32; 3]), Box<dyn std::error::Error>> {
+fn load_any(path: &Path) -> Result<(RawBillboards, u32, [f32; 3]), Box<dyn std::error::Error>> {
     if path.is_dir() {
         let (model, meta) = load_model(path)?;
         Ok((model, meta.sh_degree, meta.background))
@@ -63,7 +63,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let scene = load(Path::new(&args[2]), &options)?;
     let activated = model.activate();
-    let set = activated.as_set();
+    let set = activated.borrowed();
     let settings = RenderSettings {
         background: Vec3::from_array(background.rgb()),
         sh_degree,

@@ -21,7 +21,7 @@ fn main() {
     let scene = random_scene(&RandomSceneConfig::benchmark(n, size, size));
     let cam = random_scene_camera(size, size);
     let settings = RenderSettings::default();
-    let set = scene.as_set();
+    let set = scene.borrowed();
     if args.get(3).map(String::as_str) == Some("loopf") {
         let calls: usize = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(20);
         let mut out = render(&set, &cam, &settings);

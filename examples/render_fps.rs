@@ -53,7 +53,7 @@ fn main() -> Result<()> {
         for &n in &args.budgets {
             let scene = random_scene(&RandomSceneConfig::benchmark(n, size, size));
             let cam = random_scene_camera(size, size);
-            let set = scene.as_set();
+            let set = scene.borrowed();
             std::hint::black_box(render(&set, &cam, &settings));
             let mut ms: Vec<f64> = (0..args.frames)
                 .map(|_| {

@@ -5,9 +5,10 @@
 //! system's temporary directory).
 
 use bbsplat::demo::{DemoConfig, generate};
-use bbsplat::model::Model;
+use bbsplat::model::RawBillboards;
 use bbsplat::raster::{RenderSettings, render};
-use bbsplat::train::{RunConfig, RunOutcome, StopSignal, TrainConfig, TrainEvent, TrainView, Trainer, scene_extent};
+use bbsplat::scene::split::camera_extent;
+use bbsplat::train::{RunConfig, RunOutcome, StopSignal, TrainConfig, TrainEvent, TrainView, Trainer};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let out = std::env::args()
@@ -24,10 +25,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let config = TrainConfig {
         iterations: 300,
         background: glam::Vec3::from_array(scene.background),
-        extent: scene_extent(&cameras),
+        extent: camera_extent(&cameras),
         ..TrainConfig::default()
     };
-    let mut trainer = Trainer::new(Model::from_points(&scene.points, &scene.colours, 8, 0), config);
+    let mut trainer = Trainer::new(RawBillboards::from_points(&scene.points, &scene.colours, 8, 0), config);
     let settings = RunConfig {
         eval_every: 100,
         output: Some(out.clone()),
@@ -55,7 +56,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             ..RenderSettings::default()
         },
     );
-    let rgb: Vec<u8> = render(&trainer.activated.as_set(), cam, &settings)
+    let rgb: Vec<u8> = render(&trainer.activated.borrowed(), cam, &settings)
         .rgb
         .iter()
         .map(|&c| bbsplat::loss::psnr::quantize_u8(c))

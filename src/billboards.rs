@@ -1,13 +1,31 @@
-//! Owned billboard parameters (structure of arrays) and a seeded random-scene generator.
+//! The activated, owned billboard set ([`ActivatedBillboards`], structure of arrays) and a seeded
+//! random-scene generator.
+//!
+//! The billboard set has three forms, one type each:
+//!
+//! | type | holds | made by |
+//! | --- | --- | --- |
+//! | [`RawBillboards`] | the optimised parameters: alpha and colour texture *logits* (planar, `[billboard][channel][texel]`), log half sides, raw quaternions, SH; what training updates and model files and checkpoints save | `RawBillboards::from_points`, `model_file::load_model`, `Trainer::export_model` |
+//! | [`ActivatedBillboards`] | the same billboards, owned and *activated*: textures `sigmoid(logit)` in `[0, 1]` as interleaved RGBA texels (masked alpha texels 0), geometry and SH copied | [`RawBillboards::activate`] (one row: [`RawBillboards::activate_row`]), [`random_scene`] |
+//! | [`ActivatedRef<'a>`](ActivatedRef) | the activated arrays, borrowed: what the rasterizer reads | [`ActivatedBillboards::borrowed`], or a struct literal over any slices in the layout |
+//!
+//! Raw → activated is one way (`activate`); where the raw form is needed back from activated
+//! values, the caller takes the `logit` (e.g. `Trainer::export_model` in Gaussian mode).
 
 use crate::camera::Camera;
-use crate::raster::{BillboardSet, SH_FLOATS};
+#[cfg(doc)]
+use crate::model::RawBillboards;
+use crate::raster::{ActivatedRef, SH_FLOATS};
 use crate::rng::Rng;
 use glam::{Vec2, Vec3};
 
-/// Owned billboard parameters with *activated* textures, laid out as [`BillboardSet`] expects.
+/// The *activated*, owned form of the billboard set: textures in `[0, 1]` as interleaved RGBA
+/// texels, laid out as [`ActivatedRef`] expects; made from the raw parameters by
+/// [`RawBillboards::activate`](crate::model::RawBillboards::activate), borrowed for the
+/// rasterizer by [`ActivatedBillboards::borrowed`]. The three forms of the set: the
+/// [module documentation](self).
 #[derive(Clone, Debug, PartialEq)]
-pub struct Billboards {
+pub struct ActivatedBillboards {
     /// Centres in world coordinates.
     pub positions: Vec<Vec3>,
     /// Raw quaternions (w, x, y, z).
@@ -22,7 +40,7 @@ pub struct Billboards {
     pub texture_size: usize,
 }
 
-impl Billboards {
+impl ActivatedBillboards {
     /// An empty set with textures of side `texture_size`.
     pub fn empty(texture_size: usize) -> Self {
         Self {
@@ -45,9 +63,28 @@ impl Billboards {
         self.positions.is_empty()
     }
 
-    /// Borrowed view for the rasterizer.
-    pub fn as_set(&self) -> BillboardSet<'_> {
-        BillboardSet {
+    /// The mean alpha of each billboard ([`crate::model::mean_alpha`] of its texels' alpha
+    /// channel), in billboard order.
+    pub fn mean_alphas(&self) -> Vec<f32> {
+        let t = self.texture_size * self.texture_size;
+        self.textures
+            .chunks_exact(t.max(1))
+            .map(|row| crate::model::mean_alpha(row.iter().map(|x| x[3]), t))
+            .collect()
+    }
+
+    /// Billboards that are alive ([`crate::model::is_alive`]: mean alpha above
+    /// [`crate::model::DEAD_ALPHA`]).
+    pub fn alive_count(&self) -> usize {
+        self.mean_alphas()
+            .into_iter()
+            .filter(|&m| crate::model::is_alive(m))
+            .count()
+    }
+
+    /// The borrowed form ([`ActivatedRef`]) the rasterizer reads.
+    pub fn borrowed(&self) -> ActivatedRef<'_> {
+        ActivatedRef {
             positions: &self.positions,
             quaternions: &self.quaternions,
             log_scales: &self.log_scales,
@@ -58,7 +95,7 @@ impl Billboards {
     }
 
     /// Appends billboard `i` of `other` (same texture size).
-    pub fn push_from(&mut self, other: &Billboards, i: usize) {
+    pub fn push_from(&mut self, other: &ActivatedBillboards, i: usize) {
         assert_eq!(self.texture_size, other.texture_size, "texture sizes differ");
         let t = self.texture_size * self.texture_size;
         self.positions.push(other.positions[i]);
@@ -69,7 +106,7 @@ impl Billboards {
     }
 
     /// Concatenation of `self` and `other`.
-    pub fn concat(&self, other: &Billboards) -> Billboards {
+    pub fn concat(&self, other: &ActivatedBillboards) -> ActivatedBillboards {
         let mut out = self.clone();
         for i in 0..other.len() {
             out.push_from(other, i);
@@ -79,7 +116,7 @@ impl Billboards {
 }
 
 /// Planar copies of RGBA texels (`texels = TS²` per billboard): alpha `[billboard][texel]` and
-/// colour `[billboard][channel][texel]`, the layout of [`crate::model::Model`]'s logits.
+/// colour `[billboard][channel][texel]`, the layout of [`crate::model::RawBillboards`]'s logits.
 ///
 /// ```
 /// let tex = [[0.1, 0.2, 0.3, 0.9], [0.4, 0.5, 0.6, 0.8]];
@@ -141,12 +178,12 @@ pub fn random_scene_camera(width: u32, height: u32) -> Camera {
 /// and view depth in `[2, 8]`, uniformly random rotations, half sides giving the requested
 /// footprint, uniform random textures and SH coefficients (DC around mid-grey, higher bands
 /// small).
-pub fn random_scene(config: &RandomSceneConfig) -> Billboards {
+pub fn random_scene(config: &RandomSceneConfig) -> ActivatedBillboards {
     let mut rng = Rng::new(config.seed);
     let cam = random_scene_camera(config.width, config.height);
     let ts = config.texture_size;
     let t = ts * ts;
-    let mut b = Billboards::empty(ts);
+    let mut b = ActivatedBillboards::empty(ts);
     // The textures are the arrays the rasterizer reads at random rows: huge-page storage.
     b.textures = crate::memory::with_capacity(config.billboards * t);
     let mut colour = vec![0.0f32; 3 * t];

@@ -20,7 +20,7 @@ use crate::camera::Camera;
 use crate::loss::LossError;
 use crate::loss::psnr::{psnr_u8, quantize_u8};
 use crate::loss::ssim::{Padding, ssim};
-use crate::raster::{BillboardSet, RenderBuffers, RenderSettings, render_with};
+use crate::raster::{ActivatedRef, RenderBuffers, RenderSettings, render_with};
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
@@ -123,7 +123,7 @@ pub struct EvalView<'a> {
 ///
 /// [`LossError`] when a ground-truth image does not match its camera's size.
 pub fn evaluate_views<'a>(
-    set: &BillboardSet<'_>,
+    set: &ActivatedRef<'_>,
     views: impl IntoIterator<Item = EvalView<'a>>,
     settings: &RenderSettings,
     mut on_render: impl FnMut(&EvalView<'a>, &[f32]),
@@ -193,13 +193,13 @@ mod tests {
     #[test]
     fn a_mismatched_image_is_an_error() {
         let cam = Camera::look_at(glam::Vec3::Z * 3.0, glam::Vec3::ZERO, glam::Vec3::Y, 8.0, 8.0, 8, 8);
-        let b = crate::billboards::Billboards::empty(4);
+        let b = crate::billboards::ActivatedBillboards::empty(4);
         let short = vec![0.0f32; 10];
         let v = EvalView {
             name: "x",
             camera: &cam,
             rgb: &short,
         };
-        assert!(evaluate_views(&b.as_set(), [v], &RenderSettings::default(), |_, _| {}).is_err());
+        assert!(evaluate_views(&b.borrowed(), [v], &RenderSettings::default(), |_, _| {}).is_err());
     }
 }

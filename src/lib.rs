@@ -19,7 +19,7 @@
 //! |---|---|---|
 //! | load posed photographs (COLMAP, NeRF-synthetic, instant-ngp) | [`load`], [`LoadOptions`], [`Scene`], [`SceneError`] | [`scene`] |
 //! | initial billboards from the scene's points | [`init_model`], [`InitError`] | [`init`] |
-//! | the parameters, their activated values, the renderer's view of them | [`Model`], [`Billboards`], [`BillboardSet`] | [`model`], [`billboards`], [`raster`] |
+//! | the three forms of the billboard set: raw optimised parameters (saved), activated (owned), activated (borrowed, what the renderer reads) | [`RawBillboards`], [`ActivatedBillboards`], [`ActivatedRef`] | [`model`], [`billboards`], [`raster`] |
 //! | train: the whole run (evaluations, checkpoints, stop requests) or single steps | [`run`], [`RunConfig`], [`TrainEvent`], [`RunOutcome`], [`RunError`], [`StopSignal`], [`Trainer`], [`TrainConfig`], [`TrainView`] | [`train`] |
 //! | model folders in the reference's format (PLY + 8-bit npz textures) | [`save_model`], [`load_model`], [`ModelMeta`], [`ModelFileError`] | [`model_file`] |
 //! | render, and back-propagate an image gradient | [`render`], [`render_backward`], [`RenderSettings`], [`RenderOutput`], [`Camera`] | [`raster`], [`camera`] |
@@ -82,7 +82,7 @@
 //!     ..RenderSettings::default()
 //! };
 //! let camera = scene.test[0].camera;
-//! let out = render(&loaded.activate().as_set(), &camera, &settings);
+//! let out = render(&loaded.activate().borrowed(), &camera, &settings);
 //! assert_eq!(out.rgb.len(), camera.pixel_count() * 3);
 //! assert!(out.rgb.iter().all(|v| v.is_finite()));
 //! # std::fs::remove_dir_all(&dir)?;
@@ -133,12 +133,12 @@ pub mod strategies;
 pub mod sweep;
 pub mod train;
 
-pub use billboards::Billboards;
+pub use billboards::ActivatedBillboards;
 pub use camera::Camera;
 pub use init::scene_init::{InitError, init_model};
-pub use model::Model;
+pub use model::RawBillboards;
 pub use model_file::{ModelFileError, ModelMeta, load_model, save_model};
-pub use raster::{BillboardSet, RenderOutput, RenderSettings, render, render_backward};
+pub use raster::{ActivatedRef, RenderOutput, RenderSettings, render, render_backward};
 pub use scene::{LoadOptions, Scene, SceneError, load};
 pub use train::run::run;
 pub use train::{RunConfig, RunError, RunOutcome, StopSignal, TrainConfig, TrainEvent, TrainView, Trainer};

@@ -1,4 +1,5 @@
-//! The trainable billboard model: raw parameters, initialisation and activation.
+//! The trainable billboard set in its raw form ([`RawBillboards`]): raw parameters,
+//! initialisation and activation.
 //!
 //! Raw parameters follow the BBSplat spec, §1: position, raw quaternion (w, x, y, z), two log
 //! half side lengths, 48 SH coefficients (`[coeff][rgb]`), and alpha and colour texture
@@ -6,7 +7,7 @@
 //! that start at exactly zero in the reference initialisation (15 of 256 at TS = 16) stay zero
 //! through an explicit mask shared by every billboard, instead of infinite logits.
 
-use crate::billboards::Billboards;
+use crate::billboards::ActivatedBillboards;
 use crate::init::knn::mean_sq_dist_3nn;
 use crate::raster::SH_FLOATS;
 use crate::rng::Rng;
@@ -74,7 +75,7 @@ pub fn alpha_asset(ts: usize) -> Vec<f32> {
 /// The initial alpha texture for side `ts`: `0.5·G` with `G` = [`alpha_asset`]`(ts)` (the
 /// 16×16 table / 255, resampled with align-corners bilinear interpolation for other sizes).
 /// Values in `[0, 0.5)`; texels that are exactly zero stay zero during training (see
-/// [`Model::alpha_mask`]). Scaling by 0.5 is exact in floating point, so this is bit for bit
+/// [`RawBillboards::alpha_mask`]). Scaling by 0.5 is exact in floating point, so this is bit for bit
 /// half of the asset.
 pub fn initial_alpha(ts: usize) -> Vec<f32> {
     alpha_asset(ts).into_iter().map(|g| 0.5 * g).collect()
@@ -86,9 +87,29 @@ pub fn standard_alpha_mask(ts: usize) -> Vec<bool> {
     alpha_asset(ts).iter().map(|&g| g > 0.0).collect()
 }
 
-/// Billboards whose mean activated alpha is at most this are *dead* (spec §6,
-/// `dead_opacity`).
+/// Billboards whose mean activated alpha is at most this are *dead* (spec §6, the reference's
+/// `dead_opacity`): relocation moves them, [`is_alive`] and the `alive_count` methods count the
+/// others.
 pub const DEAD_ALPHA: f32 = 0.005;
+
+/// The mean alpha of one billboard: its `texels` activated alpha values (`TS²`, masked texels
+/// included as 0) summed in f64 in texel order and divided by `texels` (an empty row gives 0).
+/// The one definition used by relocation, the alive counts and the Gaussian-mode opacity.
+///
+/// ```
+/// assert_eq!(bbsplat::model::mean_alpha([0.5, 0.0, 0.25, 0.25], 4), 0.25);
+/// ```
+pub fn mean_alpha(alphas: impl IntoIterator<Item = f32>, texels: usize) -> f32 {
+    let sum: f64 = alphas.into_iter().map(f64::from).sum();
+    (sum / texels.max(1) as f64) as f32
+}
+
+/// True when a billboard of mean alpha `mean_alpha` is alive: strictly above [`DEAD_ALPHA`]
+/// (NaN is dead).
+#[inline]
+pub fn is_alive(mean_alpha: f32) -> bool {
+    mean_alpha > DEAD_ALPHA
+}
 
 /// `ln(p / (1 − p))`.
 #[inline]
@@ -102,9 +123,12 @@ pub fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + (-x).exp())
 }
 
-/// Raw, trainable billboard parameters.
+/// The *raw* form of the billboard set: the trainable parameters as optimised and saved
+/// (texture logits, log half sides, raw quaternions, SH). [`RawBillboards::activate`] gives the
+/// [`ActivatedBillboards`] the renderer needs. The three forms of the set:
+/// [`crate::billboards`].
 #[derive(Clone, Debug, PartialEq)]
-pub struct Model {
+pub struct RawBillboards {
     /// Centres (world).
     pub positions: Vec<Vec3>,
     /// Raw quaternions (w, x, y, z).
@@ -113,7 +137,7 @@ pub struct Model {
     pub log_scales: Vec<Vec2>,
     /// SH coefficients, 48 per billboard.
     pub sh: Vec<f32>,
-    /// Alpha logits, `TS²` per billboard. The crate's constructors ([`Model::from_points`],
+    /// Alpha logits, `TS²` per billboard. The crate's constructors ([`RawBillboards::from_points`],
     /// `model_file::load_model`, checkpoints) allocate both logit arrays with
     /// [`crate::memory`]'s huge-page hint; a model assembled by hand works the same, only
     /// without the hint.
@@ -126,7 +150,7 @@ pub struct Model {
     pub texture_size: usize,
 }
 
-impl Model {
+impl RawBillboards {
     /// Number of billboards.
     pub fn len(&self) -> usize {
         self.positions.len()
@@ -137,35 +161,32 @@ impl Model {
         self.positions.is_empty()
     }
 
-    /// Mean activated alpha of billboard `i` over all `TS²` texels: `sigmoid(logit)` on
-    /// unmasked texels, 0 on masked ones (they count in the mean), summed in f64 in texel
-    /// order. Panics if `i ≥ len()`.
+    /// Mean activated alpha of billboard `i` over all `TS²` texels: [`mean_alpha`] of
+    /// `sigmoid(logit)` on unmasked texels and 0 on masked ones. Panics if `i ≥ len()`.
     ///
     /// ```
-    /// use bbsplat::model::Model;
+    /// use bbsplat::model::RawBillboards;
     /// use glam::Vec3;
-    /// let m = Model::from_points(&[Vec3::ZERO, Vec3::X], &[[0.5; 3]; 2], 16, 0);
+    /// let m = RawBillboards::from_points(&[Vec3::ZERO, Vec3::X], &[[0.5; 3]; 2], 16, 0);
     /// assert!((m.mean_alpha(0) - 0.0875).abs() < 1e-3); // the initial texture's mean
-    /// assert_eq!(m.alive_count(0.005), 2);
-    /// assert_eq!(m.alive_count(0.1), 0);
+    /// assert_eq!(m.alive_count(), 2);
     /// ```
     pub fn mean_alpha(&self, i: usize) -> f32 {
         let t = self.texture_size * self.texture_size;
         assert!(i < self.len(), "billboard {i} of {}", self.len());
         let row = &self.alpha_logits[i * t..(i + 1) * t];
-        let sum: f64 = row
-            .iter()
-            .zip(&self.alpha_mask)
-            .map(|(&l, &m)| if m { sigmoid(l) as f64 } else { 0.0 })
-            .sum();
-        (sum / t.max(1) as f64) as f32
+        mean_alpha(
+            row.iter()
+                .zip(&self.alpha_mask)
+                .map(|(&l, &m)| if m { sigmoid(l) } else { 0.0 }),
+            t,
+        )
     }
 
-    /// Billboards whose [`mean_alpha`](Self::mean_alpha) is strictly above `threshold`. With
-    /// [`DEAD_ALPHA`] (0.005) this counts the billboards the reference would not relocate
-    /// (dead = mean alpha `≤ 0.005`).
-    pub fn alive_count(&self, threshold: f32) -> usize {
-        (0..self.len()).filter(|&i| self.mean_alpha(i) > threshold).count()
+    /// Billboards that are alive ([`is_alive`]: mean alpha above [`DEAD_ALPHA`]), the ones
+    /// relocation would not move.
+    pub fn alive_count(&self) -> usize {
+        (0..self.len()).filter(|&i| is_alive(self.mean_alpha(i))).count()
     }
 
     /// Initialises one billboard per point (spec §1.1): alpha `0.5·G`, colour texture 0.1,
@@ -185,7 +206,7 @@ impl Model {
         let alpha_row: Vec<f32> = alpha0.iter().map(|&a| if a > 0.0 { logit(a) } else { 0.0 }).collect();
         let mean_sq_3nn = mean_sq_dist_3nn(points);
         let mut rng = Rng::new(seed);
-        let mut model = Model {
+        let mut model = RawBillboards {
             positions: points.to_vec(),
             quaternions: Vec::with_capacity(n),
             log_scales: Vec::with_capacity(n),
@@ -211,8 +232,8 @@ impl Model {
     /// Activated textures and geometry in the layout of the rasterizer: the planar alpha and
     /// colour logits become interleaved RGBA texels `[sigmoid(r), sigmoid(g), sigmoid(b),
     /// sigmoid(alpha)]` (masked alpha texels 0).
-    pub fn activate(&self) -> Billboards {
-        let mut b = Billboards {
+    pub fn activate(&self) -> ActivatedBillboards {
+        let mut b = ActivatedBillboards {
             positions: self.positions.clone(),
             quaternions: self.quaternions.clone(),
             log_scales: self.log_scales.clone(),
@@ -227,7 +248,7 @@ impl Model {
     }
 
     /// Refreshes billboard `i` of `out` (geometry, SH and activated textures) from the model.
-    pub fn activate_row(&self, i: usize, out: &mut Billboards) {
+    pub fn activate_row(&self, i: usize, out: &mut ActivatedBillboards) {
         let t = self.texture_size * self.texture_size;
         out.positions[i] = self.positions[i];
         out.quaternions[i] = self.quaternions[i];
@@ -270,7 +291,7 @@ mod tests {
     #[test]
     fn masked_texels_stay_zero_and_scales_follow_neighbours() {
         let pts = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z, Vec3::splat(5.0)];
-        let m = Model::from_points(&pts, &[[0.5; 3]; 5], 16, 0);
+        let m = RawBillboards::from_points(&pts, &[[0.5; 3]; 5], 16, 0);
         let b = m.activate();
         assert_eq!(b.textures[0][3], 0.0);
         assert!((b.textures[7][1] - 0.1).abs() < 1e-6);

@@ -107,6 +107,22 @@ pub fn camera() -> impl Strategy<Value = Camera> {
     )
 }
 
+/// `n` seeded points uniform in the box `[−half, half]` per axis (a zero half width gives a
+/// flat or linear cloud): the test and benchmark point cloud of the initialisation checks.
+/// Draws x, y, z of each point in turn from [`crate::rng::Rng::new`]`(seed)`.
+pub fn box_cloud(n: usize, seed: u64, half: [f32; 3]) -> Vec<Vec3> {
+    let mut rng = crate::rng::Rng::new(seed);
+    (0..n)
+        .map(|_| {
+            Vec3::new(
+                rng.range(-half[0], half[0]),
+                rng.range(-half[1], half[1]),
+                rng.range(-half[2], half[2]),
+            )
+        })
+        .collect()
+}
+
 /// The identity-pose test camera: at the origin looking along +z, `width × height` pixels,
 /// `fx = fy = width`, principal point at the image centre ([`Camera::identity`]).
 pub fn identity_camera(width: u32, height: u32) -> Camera {

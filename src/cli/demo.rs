@@ -4,11 +4,10 @@ use super::common::write_png_atomic;
 use anyhow::{Context, Result};
 use bbsplat::demo::{DemoConfig, generate};
 use bbsplat::init::fps::farthest_point_sampling;
-use bbsplat::model::Model;
+use bbsplat::model::RawBillboards;
 use bbsplat::raster::{RenderSettings, render};
-use bbsplat::train::{
-    self, RunConfig, RunOutcome, StopSignal, TrainConfig, TrainEvent, TrainView, Trainer, scene_extent,
-};
+use bbsplat::scene::split::camera_extent;
+use bbsplat::train::{self, RunConfig, RunOutcome, StopSignal, TrainConfig, TrainEvent, TrainView, Trainer};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
@@ -49,7 +48,7 @@ pub fn run(
     let keep = farthest_point_sampling(&scene.points, billboards).context("sampling the initial points")?;
     let points: Vec<Vec3> = keep.iter().map(|&i| scene.points[i]).collect();
     let colours: Vec<[f32; 3]> = keep.iter().map(|&i| scene.colours[i]).collect();
-    let model = Model::from_points(&points, &colours, texture_size, seed);
+    let model = RawBillboards::from_points(&points, &colours, texture_size, seed);
     let train: Vec<TrainView> = scene.train.iter().map(TrainView::from_demo).collect();
     let test: Vec<TrainView> = scene.test.iter().map(TrainView::from_demo).collect();
     let cameras: Vec<_> = train.iter().map(|v| v.camera).collect();
@@ -58,7 +57,7 @@ pub fn run(
         sh_degree: 3,
         background: Vec3::from_array(scene.background),
         seed,
-        extent: scene_extent(&cameras),
+        extent: camera_extent(&cameras),
         ..TrainConfig::default()
     };
     println!(
@@ -107,7 +106,7 @@ pub fn run(
             ..Default::default()
         };
         for (i, v) in test.iter().enumerate() {
-            let out = render(&trainer.activated.as_set(), &v.camera, &settings);
+            let out = render(&trainer.activated.borrowed(), &v.camera, &settings);
             write_png_atomic(
                 &dir.join(format!("test_{i:03}_render.png")),
                 &out.rgb,

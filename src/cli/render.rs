@@ -79,7 +79,7 @@ fn run_views(
     let mut failure = None;
     let mut index = 0;
     let report = evaluate_views(
-        &activated.as_set(),
+        &activated.borrowed(),
         views.iter().zip(&truths).map(|(v, rgb)| EvalView {
             name: &v.name,
             camera: &v.camera,

@@ -10,6 +10,7 @@ use bbsplat::train::{
     AdamMode, ClampGradient, LearningRateScales, RunConfig, RunOutcome, StopReason, StopSignal, TextureMode,
     TrainConfig, TrainEvent, TrainView, Trainer,
 };
+use clap::builder::{PossibleValuesParser, TypedValueParser};
 use clap::{Args, ValueEnum};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -65,8 +66,8 @@ pub struct TrainArgs {
     pub texture_threshold: f32,
     /// `full`: learned alpha and colour textures (BBSplat); `gaussian`: plain Gaussian billboards
     /// with one opacity each and SH colour only (the "textures off" ablation).
-    #[arg(long, value_enum, default_value_t = TextureModeArg::Full)]
-    pub texture_mode: TextureModeArg,
+    #[arg(long, default_value_t = TextureMode::Full, value_parser = texture_mode())]
+    pub texture_mode: TextureMode,
     /// `dense`: every billboard takes an Adam step each iteration (the reference); `sparse`:
     /// only billboards the view touched.
     #[arg(long, value_enum, default_value_t = AdamModeArg::Dense)]
@@ -130,6 +131,13 @@ fn non_negative(text: &str) -> Result<f32, String> {
     }
 }
 
+/// `--texture-mode`: the library's names ([`TextureMode::as_str`]), listed in `--help` and in
+/// the error for any other value.
+fn texture_mode() -> impl TypedValueParser<Value = TextureMode> {
+    PossibleValuesParser::new(TextureMode::ALL.map(TextureMode::as_str))
+        .map(|name| name.parse::<TextureMode>().expect("one of the listed names"))
+}
+
 impl TrainArgs {
     /// The learning-rate multipliers of the flags.
     pub fn lr_scales(&self) -> LearningRateScales {
@@ -149,15 +157,6 @@ pub enum InitArg {
     Random,
     /// Points on the surface of the visual hull of the alpha masks.
     Hull,
-}
-
-/// `--texture-mode`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum TextureModeArg {
-    /// Learned textures.
-    Full,
-    /// Gaussian billboards, SH colour only.
-    Gaussian,
 }
 
 /// `--clamp-gradient`.
@@ -220,10 +219,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
             AdamModeArg::Dense => AdamMode::Dense,
             AdamModeArg::Sparse => AdamMode::Sparse,
         },
-        texture_mode: match args.texture_mode {
-            TextureModeArg::Full => TextureMode::Full,
-            TextureModeArg::Gaussian => TextureMode::Gaussian,
-        },
+        texture_mode: args.texture_mode,
         relocate: !args.no_relocate,
         lr_scales: args.lr_scales(),
         clamp_gradient: args.clamp_gradient.into(),

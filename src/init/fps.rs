@@ -406,6 +406,7 @@ fn spread_bits(x: u64) -> u64 {
 mod tests {
     use super::*;
     use crate::rng::Rng;
+    use crate::strategies::box_cloud as cloud;
 
     #[test]
     fn better_is_a_total_order() {
@@ -440,19 +441,6 @@ mod tests {
                 assert!(lb <= squared(p[0] - c[0], p[1] - c[1], p[2] - c[2]));
             }
         }
-    }
-
-    fn cloud(n: usize, seed: u64, scale: [f32; 3]) -> Vec<Vec3> {
-        let mut rng = Rng::new(seed);
-        (0..n)
-            .map(|_| {
-                Vec3::new(
-                    rng.range(-scale[0], scale[0]),
-                    rng.range(-scale[1], scale[1]),
-                    rng.range(-scale[2], scale[2]),
-                )
-            })
-            .collect()
     }
 
     #[test]

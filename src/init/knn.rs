@@ -12,7 +12,7 @@
 //!   Both functions below use this exact expression, so they agree bit for bit.
 //! - **Degenerate input**: a point with no finite neighbour (a cloud of one point) and every
 //!   non-finite point (NaN or ±∞ coordinate) gets `0.0`; non-finite points are never anyone's
-//!   neighbour. (`Model::from_points` floors the value at `1e-7`, as the reference.)
+//!   neighbour. (`RawBillboards::from_points` floors the value at `1e-7`, as the reference.)
 //!
 //! [`mean_sq_dist_3nn`] uses a k-d tree ([`kiddo`]); [`mean_sq_dist_3nn_brute`] is the `O(N²)`
 //! oracle. The tree only proposes candidates: a first query returns the 5 nearest items by the

@@ -30,7 +30,7 @@
 use crate::init::fibonacci::{fibonacci_sphere, sky_point_count, sky_radius, sky_radius_reference};
 use crate::init::fps::farthest_point_sampling;
 use crate::init::hull::{HullConfig, HullError, visual_hull_points};
-use crate::model::Model;
+use crate::model::RawBillboards;
 use crate::rng::Rng;
 use crate::scene::{Scene, SceneFormat};
 use crate::stages::sh::SH_C0;
@@ -264,7 +264,7 @@ pub fn init_points_with(
     })
 }
 
-/// [`init_points`] then [`Model::from_points`] with the same seed.
+/// [`init_points`] then [`RawBillboards::from_points`] with the same seed.
 ///
 /// # Errors
 ///
@@ -274,11 +274,11 @@ pub fn init_model(
     budget: usize,
     texture_size: usize,
     seed: u64,
-) -> Result<(Model, InitReport), InitError> {
+) -> Result<(RawBillboards, InitReport), InitError> {
     init_model_with(scene, budget, texture_size, seed, &PointlessInit::Random)
 }
 
-/// [`init_points_with`] then [`Model::from_points`] with the same seed.
+/// [`init_points_with`] then [`RawBillboards::from_points`] with the same seed.
 ///
 /// # Errors
 ///
@@ -289,10 +289,10 @@ pub fn init_model_with(
     texture_size: usize,
     seed: u64,
     pointless: &PointlessInit,
-) -> Result<(Model, InitReport), InitError> {
+) -> Result<(RawBillboards, InitReport), InitError> {
     let init = init_points_with(scene, budget, seed, pointless)?;
     Ok((
-        Model::from_points(&init.points, &init.colours, texture_size, seed),
+        RawBillboards::from_points(&init.points, &init.colours, texture_size, seed),
         init.report,
     ))
 }

@@ -11,7 +11,7 @@
 //! | `bbsplat.json` | [`ModelMeta`] plus the format name and version |
 //!
 //! Rounding is half to even, like `numpy.round`. Decoding (as the reference): colour `q/255`,
-//! alpha `clip(2q/255 − 1 + G, 0, 1)`; texels outside [`Model::alpha_mask`] decode to 0 whatever
+//! alpha `clip(2q/255 − 1 + G, 0, 1)`; texels outside [`RawBillboards::alpha_mask`] decode to 0 whatever
 //! is stored. Logits are `logit(clamp(p, 1e-6, 1 − 1e-6))` ([`LOGIT_CLAMP`]); in the rare case
 //! where that clamp would move a texel that decoded to exactly 0 or 1 into another quantisation
 //! bin on the next save (only at exact ties), the saturating logit ±[`SATURATED_LOGIT`] (or
@@ -24,11 +24,11 @@
 //! in place.
 //!
 //! ```
-//! use bbsplat::model::Model;
+//! use bbsplat::model::RawBillboards;
 //! use bbsplat::model_file::{load_model, save_model, ModelMeta};
 //! use glam::Vec3;
 //! let dir = std::env::temp_dir().join(format!("bbsplat-doc-{}", std::process::id()));
-//! let model = Model::from_points(&[Vec3::ZERO, Vec3::X], &[[0.2, 0.4, 0.6]; 2], 16, 0);
+//! let model = RawBillboards::from_points(&[Vec3::ZERO, Vec3::X], &[[0.2, 0.4, 0.6]; 2], 16, 0);
 //! let meta = ModelMeta::for_model(&model, 3, [1.0; 3]);
 //! let bytes = save_model(&dir.join("model"), &model, &meta)?;
 //! assert!(bytes > 2 * 240);
@@ -42,7 +42,7 @@
 mod npz;
 pub mod ply;
 
-use crate::model::{Model, alpha_asset, logit, sigmoid, standard_alpha_mask};
+use crate::model::{RawBillboards, alpha_asset, logit, sigmoid, standard_alpha_mask};
 use crate::raster::SH_FLOATS;
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
@@ -91,7 +91,7 @@ pub struct ModelMeta {
 
 impl ModelMeta {
     /// The metadata of `model` with the given SH degree and background.
-    pub fn for_model(model: &Model, sh_degree: u32, background: [f32; 3]) -> Self {
+    pub fn for_model(model: &RawBillboards, sh_degree: u32, background: [f32; 3]) -> Self {
         ModelMeta {
             texture_size: model.texture_size,
             sh_degree,
@@ -241,7 +241,7 @@ fn stable_logit(p: f32, q: u8, encode: impl Fn(f32) -> u8) -> f32 {
     if encode(sigmoid(saturated)) == q { saturated } else { l }
 }
 
-fn check_model(dir: &Path, model: &Model, meta: &ModelMeta) -> Result<(), ModelFileError> {
+fn check_model(dir: &Path, model: &RawBillboards, meta: &ModelMeta) -> Result<(), ModelFileError> {
     let n = model.len();
     let ts = model.texture_size;
     let t = ts * ts;
@@ -287,7 +287,7 @@ fn check_model(dir: &Path, model: &Model, meta: &ModelMeta) -> Result<(), ModelF
 }
 
 /// The encoded files of a model, in memory: `(name, bytes)`.
-fn encode(dir: &Path, model: &Model, meta: &ModelMeta) -> Result<Vec<(&'static str, Vec<u8>)>, ModelFileError> {
+fn encode(dir: &Path, model: &RawBillboards, meta: &ModelMeta) -> Result<Vec<(&'static str, Vec<u8>)>, ModelFileError> {
     check_model(dir, model, meta)?;
     let n = model.len();
     let ts = model.texture_size;
@@ -372,7 +372,7 @@ fn sibling(dir: &Path, tag: &str) -> PathBuf {
 /// [`ModelFileError::NotAModelFolder`] when `dir` exists but is a file or a folder that is not
 /// empty and has neither `bbsplat.json` nor `point_cloud.ply`; [`ModelFileError::Io`] on
 /// file-system errors (the temporary folder is removed, the previous model stays in place).
-pub fn save_model(dir: &Path, model: &Model, meta: &ModelMeta) -> Result<u64, ModelFileError> {
+pub fn save_model(dir: &Path, model: &RawBillboards, meta: &ModelMeta) -> Result<u64, ModelFileError> {
     if dir.file_name().is_none() {
         return Err(ModelFileError::InvalidModel {
             path: dir.to_path_buf(),
@@ -479,7 +479,7 @@ fn read(path: &Path) -> Result<Vec<u8>, ModelFileError> {
 /// header, wrong fields or a wrong length; [`ModelFileError::CountMismatch`] when the metadata
 /// and the PLY disagree; [`ModelFileError::Npz`] / [`ModelFileError::Shape`] for bad texture
 /// archives. Never panics on malformed files.
-pub fn load_model(dir: &Path) -> Result<(Model, ModelMeta), ModelFileError> {
+pub fn load_model(dir: &Path) -> Result<(RawBillboards, ModelMeta), ModelFileError> {
     let meta_path = dir.join(META_FILE);
     let meta = parse_meta(&meta_path, &read(&meta_path)?)?;
     let ply_path = dir.join(PLY_FILE);
@@ -499,7 +499,7 @@ pub fn load_model(dir: &Path) -> Result<(Model, ModelMeta), ModelFileError> {
     let alpha_path = dir.join(ALPHA_FILE);
     let alpha = npz::read_npz_u8(&alpha_path, &read(&alpha_path)?, ALPHA_ARRAY, &[n, ts, ts])?;
 
-    let mut model = Model {
+    let mut model = RawBillboards {
         positions: Vec::with_capacity(n),
         quaternions: Vec::with_capacity(n),
         log_scales: Vec::with_capacity(n),

@@ -3,13 +3,12 @@
 //! `x y z nx ny nz f_dc_0..2 f_rest_0..44 scale_0 scale_1 rot_0..3` (normals are written as 0).
 
 use super::ModelFileError;
+use crate::scene::Location;
+use crate::scene::ply::layout::{Encoding, Scalar, read_header};
 use std::path::Path;
 
 /// Float32 properties per vertex.
 pub const PLY_FLOATS: usize = 3 + 3 + 3 + 45 + 2 + 4;
-
-/// Largest header we look for `end_header` in.
-const MAX_HEADER: usize = 16 * 1024;
 
 /// The property names, in file order.
 pub fn property_names() -> Vec<String> {
@@ -39,58 +38,48 @@ pub fn header_len(count: usize) -> usize {
     header(count).len()
 }
 
-/// Parses a model PLY: checks the header (format, one `vertex` element, the exact property
-/// list) and the body length, and returns the vertex rows (`PLY_FLOATS` floats each).
+/// Parses a model PLY: reads the header with the crate's PLY reader
+/// ([`crate::scene::ply::layout`]), checks it (format, one `vertex` element, the exact float
+/// property list) and the body length, and returns the vertex rows (`PLY_FLOATS` floats each).
 pub(crate) fn parse(path: &Path, bytes: &[u8]) -> Result<Vec<f32>, ModelFileError> {
     let bad = |reason: String| ModelFileError::Ply {
         path: path.to_path_buf(),
         reason,
     };
-    let window = &bytes[..bytes.len().min(MAX_HEADER)];
-    let end = window
-        .windows(11)
-        .position(|w| w == b"end_header\n")
-        .ok_or_else(|| bad("no `end_header` line in the first 16 KiB (not a PLY file, or truncated)".into()))?;
-    let body_start = end + 11;
-    let text = std::str::from_utf8(&bytes[..end]).map_err(|_| bad("header is not text".into()))?;
-    let mut lines = text.lines().map(str::trim_end);
-    if lines.next() != Some("ply") {
-        return Err(bad("first line is not `ply`".into()));
+    let header = read_header(bytes).map_err(|e| match e.location {
+        Location::File => bad(e.message),
+        at => bad(format!("{at}: {}", e.message)),
+    })?;
+    if header.encoding != Encoding::BinaryLittleEndian || header.version != "1.0" {
+        return Err(bad(format!(
+            "format `{} {}` is not binary_little_endian 1.0",
+            header.encoding.name(),
+            header.version
+        )));
     }
-    let mut count: Option<usize> = None;
-    let mut properties = Vec::new();
-    let mut format_ok = false;
-    for line in lines {
-        let words: Vec<&str> = line.split_whitespace().collect();
-        match words.as_slice() {
-            [] => {}
-            ["comment", ..] | ["obj_info", ..] => {}
-            ["format", "binary_little_endian", "1.0"] => format_ok = true,
-            ["format", other @ ..] => {
-                return Err(bad(format!(
-                    "format `{}` is not binary_little_endian 1.0",
-                    other.join(" ")
-                )));
-            }
-            ["element", "vertex", n] if count.is_none() => {
-                count = Some(n.parse().map_err(|_| bad(format!("bad vertex count `{n}`")))?);
-            }
-            ["element", name, ..] => {
-                return Err(bad(format!("unexpected element `{name}` (only `vertex` is allowed)")));
-            }
-            ["property", ty, name] if count.is_some() => {
-                if !matches!(*ty, "float" | "float32") {
-                    return Err(bad(format!("property `{name}` has type `{ty}`, expected float")));
-                }
-                properties.push(name.to_string());
-            }
-            _ => return Err(bad(format!("unexpected header line `{line}`"))),
+    let vertex = match header.elements.as_slice() {
+        [] => return Err(bad("no `element vertex` line".into())),
+        [vertex] if vertex.name == "vertex" => vertex,
+        elements => {
+            let other = elements.iter().find(|e| e.name != "vertex").unwrap_or(&elements[1]);
+            return Err(bad(format!(
+                "unexpected element `{}` (only one `vertex` element is allowed)",
+                other.name
+            )));
         }
+    };
+    if let Some(p) = vertex
+        .properties
+        .iter()
+        .find(|p| p.list.is_some() || p.kind != Scalar::F32)
+    {
+        let ty = match p.list {
+            Some(_) => "list",
+            None => p.kind.name(),
+        };
+        return Err(bad(format!("property `{}` has type `{ty}`, expected float", p.name)));
     }
-    if !format_ok {
-        return Err(bad("no `format binary_little_endian 1.0` line".into()));
-    }
-    let count = count.ok_or_else(|| bad("no `element vertex` line".into()))?;
+    let properties: Vec<&str> = vertex.properties.iter().map(|p| p.name.as_str()).collect();
     let expected = property_names();
     if properties != expected {
         let first = properties
@@ -107,7 +96,8 @@ pub(crate) fn parse(path: &Path, bytes: &[u8]) -> Result<Vec<f32>, ModelFileErro
             expected.get(first)
         )));
     }
-    let body = &bytes[body_start..];
+    let count = vertex.count;
+    let body = &bytes[header.body_start..];
     let need = (count as u128) * (PLY_FLOATS as u128) * 4;
     if body.len() as u128 != need {
         return Err(bad(format!(
@@ -115,8 +105,45 @@ pub(crate) fn parse(path: &Path, bytes: &[u8]) -> Result<Vec<f32>, ModelFileErro
             body.len()
         )));
     }
+    // Every property is a little-endian float32 (checked above): the rows are the body's floats.
     Ok(body
         .chunks_exact(4)
         .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
         .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn reason(bytes: &[u8]) -> String {
+        match parse(Path::new("m/point_cloud.ply"), bytes) {
+            Err(ModelFileError::Ply { path, reason }) => {
+                assert!(path.ends_with("point_cloud.ply"));
+                reason
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_written_header_reads_back_and_bad_headers_say_where() {
+        let mut file = header(2).into_bytes();
+        file.extend(std::iter::repeat_n(0u8, 2 * PLY_FLOATS * 4));
+        assert_eq!(parse(Path::new("p.ply"), &file).unwrap(), vec![0.0; 2 * PLY_FLOATS]);
+        // The shared reader's errors keep their line; the model's own checks name the field.
+        let truncated = &file[..30];
+        assert!(
+            reason(truncated).starts_with("line 2: file ends inside the header"),
+            "{}",
+            reason(truncated)
+        );
+        let ascii = String::from_utf8_lossy(&file[..header_len(2)]).replace("binary_little_endian", "ascii");
+        assert!(reason(ascii.as_bytes()).contains("`ascii 1.0` is not binary_little_endian"));
+        let list = header(0).replace("property float x\n", "property list uchar float x\n");
+        assert!(reason(list.as_bytes()).contains("`x` has type `list`"));
+        let points =
+            "ply\nformat binary_little_endian 1.0\nelement vertex 0\nproperty float x\nelement face 0\nend_header\n";
+        assert!(reason(points.as_bytes()).contains("unexpected element `face`"));
+    }
 }

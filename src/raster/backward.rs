@@ -20,7 +20,7 @@ use super::forward::{
     RenderOutput, TileCandidates, prefetch, prefetch_record, prefetch_ref, prefetch_taps, split_by_lengths, tile_pixels,
 };
 use super::preprocess::Prepared;
-use super::{BillboardSet, SH_FLOATS};
+use super::{ActivatedRef, SH_FLOATS};
 use crate::stages::bilinear::BilinearTaps;
 use crate::stages::composite::{Blend, CompositeBackState, Step, classify};
 use crate::stages::ray_plane::{intersect_vjp_with, pixel_ray};
@@ -31,7 +31,7 @@ use rayon::prelude::*;
 
 /// Gradients of a scalar loss with respect to every billboard parameter and the background.
 ///
-/// Dense per billboard, laid out like [`BillboardSet`]. [`render_backward`] *adds* into it, so
+/// Dense per billboard, laid out like [`ActivatedRef`]. [`render_backward`] *adds* into it, so
 /// several views can be accumulated; rows of billboards that received nothing are untouched.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RenderGradients {
@@ -44,7 +44,7 @@ pub struct RenderGradients {
     /// `∂L/∂SH`, 48 floats per billboard.
     pub sh: Vec<f32>,
     /// `∂L/∂texel`, `[∂r, ∂g, ∂b, ∂alpha]` of the activated texture values, laid out like
-    /// [`BillboardSet::textures`].
+    /// [`ActivatedRef::textures`].
     pub textures: Vec<[f32; 4]>,
     /// `∂L/∂background`.
     pub background: Vec3,
@@ -347,7 +347,7 @@ fn texel_sums_reference(log: &[(u32, u32, [f32; 4])], slots: usize) -> (Vec<u32>
 
 #[allow(clippy::too_many_arguments)]
 fn backward_tile(
-    set: &BillboardSet<'_>,
+    set: &ActivatedRef<'_>,
     out: &RenderOutput,
     grads_in: &ImageGradients<'_>,
     tile: usize,
@@ -516,7 +516,7 @@ fn backward_tile(
 /// the output's tile bins were altered so that the tiles' entry ranges no longer partition the
 /// entries in order.
 pub fn render_backward(
-    set: &BillboardSet<'_>,
+    set: &ActivatedRef<'_>,
     out: &RenderOutput,
     image_grads: &ImageGradients<'_>,
     grads: &mut RenderGradients,

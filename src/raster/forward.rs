@@ -2,7 +2,7 @@
 
 use super::binning::{BinScratch, TileBins, bin_into};
 use super::preprocess::{Prepared, preprocess_into};
-use super::{BillboardSet, RenderSettings, TILE_SIZE};
+use super::{ActivatedRef, RenderSettings, TILE_SIZE};
 use crate::camera::Camera;
 use crate::memory::{refill, resize_for_overwrite};
 use crate::stages::bilinear::{self, BilinearTaps};
@@ -124,7 +124,7 @@ const FORWARD_FEATURES: usize = 8;
 #[inline]
 #[allow(clippy::too_many_arguments)]
 fn shade_pixel(
-    set: &BillboardSet<'_>,
+    set: &ActivatedRef<'_>,
     settings: &RenderSettings,
     prepared: &[Option<Prepared>],
     list: &[u32],
@@ -184,7 +184,7 @@ fn shade_pixel(
 }
 
 /// Billboards of `set` with a non-finite position, log-scale or quaternion component.
-fn count_non_finite(set: &BillboardSet<'_>) -> u64 {
+fn count_non_finite(set: &ActivatedRef<'_>) -> u64 {
     (set.positions, set.log_scales, set.quaternions)
         .into_par_iter()
         .filter(|(p, s, q)| !(p.is_finite() && s.is_finite() && q.iter().all(|x| x.is_finite())))
@@ -283,7 +283,7 @@ impl TileCandidates {
     pub(crate) fn build<'a>(
         &mut self,
         camera: &Camera,
-        set: &BillboardSet<'_>,
+        set: &ActivatedRef<'_>,
         prepared: &[Option<Prepared>],
         list: &[u32],
         (i0, j0, i1, j1): (u32, u32, u32, u32),
@@ -509,8 +509,8 @@ pub(crate) fn tile_pixels(bins: &TileBins, t: usize, width: u32, height: u32) ->
 /// [`render_with`].
 ///
 /// # Panics
-/// When the slices of `set` have inconsistent lengths (see [`BillboardSet::assert_consistent`]).
-pub fn render(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings) -> RenderOutput {
+/// When the slices of `set` have inconsistent lengths (see [`ActivatedRef::assert_consistent`]).
+pub fn render(set: &ActivatedRef<'_>, camera: &Camera, settings: &RenderSettings) -> RenderOutput {
     render_with(set, camera, settings, RenderBuffers::default())
 }
 
@@ -580,7 +580,7 @@ impl RenderOutput {
 /// use bbsplat::billboards::{RandomSceneConfig, random_scene, random_scene_camera};
 /// use bbsplat::raster::{RenderBuffers, RenderSettings, render, render_with};
 /// let scene = random_scene(&RandomSceneConfig::benchmark(200, 32, 32));
-/// let (set, camera, settings) = (scene.as_set(), random_scene_camera(32, 32), RenderSettings::default());
+/// let (set, camera, settings) = (scene.borrowed(), random_scene_camera(32, 32), RenderSettings::default());
 /// let mut buffers = RenderBuffers::default();
 /// for _ in 0..3 {
 ///     let out = render_with(&set, &camera, &settings, buffers);
@@ -590,9 +590,9 @@ impl RenderOutput {
 /// ```
 ///
 /// # Panics
-/// When the slices of `set` have inconsistent lengths (see [`BillboardSet::assert_consistent`]).
+/// When the slices of `set` have inconsistent lengths (see [`ActivatedRef::assert_consistent`]).
 pub fn render_with(
-    set: &BillboardSet<'_>,
+    set: &ActivatedRef<'_>,
     camera: &Camera,
     settings: &RenderSettings,
     buffers: RenderBuffers,

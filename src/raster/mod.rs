@@ -37,9 +37,12 @@ pub const TILE_SIZE: u32 = 16;
 /// SH storage per billboard: 16 coefficients × 3 channels, `[coeff][rgb]` (defined by the SH stage).
 pub use crate::stages::sh::{SH_COEFFS, SH_FLOATS};
 
-/// Read-only view of a set of billboards in structure-of-arrays layout.
+/// The *activated*, borrowed form of the billboard set, in structure-of-arrays layout: what the
+/// rasterizer reads. [`ActivatedBillboards::borrowed`](crate::billboards::ActivatedBillboards::borrowed)
+/// makes one; any slices in this layout will do. The three forms of the set:
+/// [`crate::billboards`].
 #[derive(Clone, Copy, Debug)]
-pub struct BillboardSet<'a> {
+pub struct ActivatedRef<'a> {
     /// Centres in world coordinates.
     pub positions: &'a [Vec3],
     /// Raw quaternions (w, x, y, z), normalised at use.
@@ -56,7 +59,7 @@ pub struct BillboardSet<'a> {
     pub texture_size: usize,
 }
 
-impl BillboardSet<'_> {
+impl ActivatedRef<'_> {
     /// Number of billboards.
     pub fn len(&self) -> usize {
         self.positions.len()

@@ -1,6 +1,6 @@
 //! Per-billboard preprocessing: transform, normal, depth, SH colour and a tight screen box.
 
-use super::{BillboardSet, RenderSettings};
+use super::{ActivatedRef, RenderSettings};
 use crate::camera::Camera;
 use crate::memory::resize_for_overwrite;
 use crate::stages::ray_plane::ViewPlane;
@@ -43,7 +43,7 @@ pub struct Prepared {
 ///
 /// The plain per-billboard reference of [`preprocess`] (which gives the same records bit for
 /// bit, its SH colours evaluated several billboards at a time).
-pub fn prepare_one(set: &BillboardSet<'_>, i: usize, camera: &Camera, settings: &RenderSettings) -> Option<Prepared> {
+pub fn prepare_one(set: &ActivatedRef<'_>, i: usize, camera: &Camera, settings: &RenderSettings) -> Option<Prepared> {
     let mut prepared = prepare_geometry(set, i, camera)?;
     let colour = sh_colour(settings.sh_degree, set.sh_of(i), camera.view_offset(set.positions[i]));
     set_colour(&mut prepared, colour);
@@ -51,7 +51,7 @@ pub fn prepare_one(set: &BillboardSet<'_>, i: usize, camera: &Camera, settings: 
 }
 
 /// [`prepare_one`] without the SH colour (`rgb` zero, no channel clamped).
-fn prepare_geometry(set: &BillboardSet<'_>, i: usize, camera: &Camera) -> Option<Prepared> {
+fn prepare_geometry(set: &ActivatedRef<'_>, i: usize, camera: &Camera) -> Option<Prepared> {
     let projected = splat_frame(set.positions[i], set.log_scales[i], set.quaternions[i], camera)?;
     let record = geometry_record(&projected, support_half_side(set.texture_size), camera)?;
     Some(with_plane(record, set, i, camera))
@@ -59,7 +59,7 @@ fn prepare_geometry(set: &BillboardSet<'_>, i: usize, camera: &Camera) -> Option
 
 /// `record` with its [`Prepared::plane_offset`] (billboard `i` of `set`).
 #[inline]
-fn with_plane(mut record: Prepared, set: &BillboardSet<'_>, i: usize, camera: &Camera) -> Prepared {
+fn with_plane(mut record: Prepared, set: &ActivatedRef<'_>, i: usize, camera: &Camera) -> Prepared {
     let sign = if record.normal_flipped { -1.0 } else { 1.0 };
     (record.normal, record.plane_offset) = view_plane(set.positions[i], set.quaternions[i], camera, sign);
     record
@@ -108,7 +108,7 @@ const PREPROCESS_CHUNK: usize = 256;
 const SH_BATCH: usize = 4;
 
 /// Prepares every billboard in parallel; entry `i` belongs to billboard `i`.
-pub fn preprocess(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings) -> Vec<Option<Prepared>> {
+pub fn preprocess(set: &ActivatedRef<'_>, camera: &Camera, settings: &RenderSettings) -> Vec<Option<Prepared>> {
     let mut prepared = Vec::new();
     preprocess_into(set, camera, settings, &mut prepared);
     prepared
@@ -124,7 +124,7 @@ pub fn preprocess(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSett
 /// take 21.8 ns a colour against 36.5 ns one at a time, `cargo bench --bench appearance --
 /// eval`). Every record equals [`prepare_one`]'s bit for bit (tested).
 pub fn preprocess_into(
-    set: &BillboardSet<'_>,
+    set: &ActivatedRef<'_>,
     camera: &Camera,
     settings: &RenderSettings,
     prepared: &mut Vec<Option<Prepared>>,
@@ -203,7 +203,7 @@ mod tests {
     fn preprocess_equals_prepare_one() {
         use crate::billboards::{RandomSceneConfig, random_scene, random_scene_camera};
         let scene = random_scene(&RandomSceneConfig::benchmark(2 * PREPROCESS_CHUNK + 77, 48, 40));
-        let (set, camera) = (scene.as_set(), random_scene_camera(48, 40));
+        let (set, camera) = (scene.borrowed(), random_scene_camera(48, 40));
         for sh_degree in 0..=3 {
             let settings = RenderSettings {
                 sh_degree,

@@ -6,7 +6,7 @@
 //! renderer is tested against it; any contribution lost to binning or per-pixel culling shows
 //! up as a difference.
 
-use super::{BillboardSet, RenderSettings};
+use super::{ActivatedRef, RenderSettings};
 use crate::billboards::planar_textures;
 use crate::camera::Camera;
 use crate::stages::bilinear;
@@ -29,7 +29,7 @@ pub struct ReferenceOutput {
 }
 
 /// Renders with the brute-force method. `O(pixels · billboards)`: for tests on small scenes.
-pub fn render_reference(set: &BillboardSet<'_>, camera: &Camera, settings: &RenderSettings) -> ReferenceOutput {
+pub fn render_reference(set: &ActivatedRef<'_>, camera: &Camera, settings: &RenderSettings) -> ReferenceOutput {
     set.assert_consistent();
     let n_pix = camera.pixel_count();
     let ts = set.texture_size;

@@ -26,9 +26,13 @@ pub fn split_every<T>(items: Vec<T>, n: usize) -> (Vec<T>, Vec<T>) {
     (train, test)
 }
 
-/// Scene extent: `1.1 ×` the largest distance of a camera centre from the mean camera centre
-/// (computed in f64), as 3DGS's `getNerfppNorm`. When there are no cameras or all centres
-/// coincide the radius is taken as 1 (extent 1.1).
+/// Scene extent `E`, the spatial scale of the position learning rate: `1.1 ×` the largest
+/// distance of a camera centre from the mean camera centre, computed in f64 (as 3DGS's
+/// `getNerfppNorm`, whose numpy arithmetic is float64). When there are no cameras, or all
+/// centres coincide (radius ≤ 1e-9), the radius is taken as 1 (extent 1.1), so that positions
+/// still train. The one definition: [`crate::scene::load`] fills `Scene::extent` with it from the
+/// training cameras, and callers that build a [`crate::train::TrainConfig`] from their own
+/// cameras call it directly.
 ///
 /// ```
 /// use bbsplat::camera::Camera;
@@ -37,10 +41,12 @@ pub fn split_every<T>(items: Vec<T>, n: usize) -> (Vec<T>, Vec<T>) {
 /// let cams: Vec<Camera> = [-2.0f32, 2.0].iter()
 ///     .map(|&x| Camera::look_at(Vec3::new(x, 0.0, -3.0), Vec3::ZERO, Vec3::Y, 50.0, 50.0, 8, 8))
 ///     .collect();
-/// assert!((camera_extent(cams.iter()) - 2.2).abs() < 1e-5);
+/// assert!((camera_extent(&cams) - 2.2).abs() < 1e-5);
+/// assert_eq!(camera_extent(&cams[..1]), 1.1); // one camera: radius 1
+/// assert_eq!(camera_extent(std::iter::empty()), 1.1);
 /// ```
-pub fn camera_extent<'a>(cameras: impl Iterator<Item = &'a Camera>) -> f32 {
-    let centres: Vec<DVec3> = cameras.map(|c| c.centre().as_dvec3()).collect();
+pub fn camera_extent<'a>(cameras: impl IntoIterator<Item = &'a Camera>) -> f32 {
+    let centres: Vec<DVec3> = cameras.into_iter().map(|c| c.centre().as_dvec3()).collect();
     if centres.is_empty() {
         return 1.1;
     }

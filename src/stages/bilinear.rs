@@ -307,7 +307,7 @@ impl BilinearTaps {
     }
 
     /// Samples an RGBA texture: `ts × ts` texels `[r, g, b, alpha]`, row-major (the rasterizer's
-    /// layout, see [`crate::raster::BillboardSet::textures`]). Each channel is exactly what
+    /// layout, see [`crate::raster::ActivatedRef::textures`]). Each channel is exactly what
     /// [`BilinearTaps::sample`] gives on that channel's plane (same products, same order).
     ///
     /// # Panics

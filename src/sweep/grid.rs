@@ -1,48 +1,11 @@
 //! The sweep grid: a list of values per budget axis, expanded to [`Setting`]s in a stable order.
 
 use super::SweepError;
+use crate::train::TextureMode;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::path::Path;
 use std::str::FromStr;
-
-/// Whether billboards learn textures (`full`) or stay Gaussian-like with SH colour only
-/// (`gaussian`): the `--texture-mode` flag of `bbsplat train`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum TextureMode {
-    /// RGB and alpha textures are trained.
-    Full,
-    /// Textures are off: a fixed Gaussian alpha and the SH colour only.
-    Gaussian,
-}
-
-impl TextureMode {
-    /// The flag value (`full` or `gaussian`).
-    pub fn as_str(self) -> &'static str {
-        match self {
-            TextureMode::Full => "full",
-            TextureMode::Gaussian => "gaussian",
-        }
-    }
-}
-
-impl fmt::Display for TextureMode {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-impl FromStr for TextureMode {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "full" => Ok(TextureMode::Full),
-            "gaussian" => Ok(TextureMode::Gaussian),
-            _ => Err("expected `full` or `gaussian`".into()),
-        }
-    }
-}
 
 /// One point of the grid: the budget flags of one `bbsplat train` run. `None` means the flag is
 /// not passed, so the trainer's default applies.
@@ -69,7 +32,8 @@ impl Setting {
     /// `it2000_bb3000_ts16_w800_tt0.5_full_s0`; `default` when no axis is set.
     ///
     /// ```
-    /// use bbsplat::sweep::{Setting, TextureMode};
+    /// use bbsplat::sweep::Setting;
+    /// use bbsplat::train::TextureMode;
     /// let s = Setting {
     ///     iterations: Some(500),
     ///     billboards: Some(1000),

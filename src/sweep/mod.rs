@@ -42,7 +42,7 @@ mod pareto;
 mod plot;
 mod runner;
 
-pub use grid::{AXES, Setting, SweepGrid, TextureMode, parse_list};
+pub use grid::{AXES, Setting, SweepGrid, parse_list};
 pub use output::{CSV_HEADER, SweepFiles, csv_table, markdown_table, write_atomic, write_outputs};
 pub use pareto::pareto_front;
 pub use plot::{plot_curves_svg, plot_psnr_vs_size_svg, plot_psnr_vs_time_svg};
@@ -183,6 +183,7 @@ pub(crate) mod fake {
     //! A deterministic stand-in for `bbsplat train` used by the tests of this module.
     use super::*;
     use crate::report::{CurvePoint, SUMMARY_VERSION};
+    use crate::train::TextureMode;
 
     /// Rounds to 1e-6 so that values survive serde_json's (not exactly round-tripping) float
     /// parser bit for bit.

@@ -78,7 +78,7 @@ impl AdamGroup {
     /// [`AdamGroup::global_step`] once per optimiser step). Also counts the update in `steps`.
     pub fn step_row_global(&mut self, row: usize, params: &mut [f32], grads: &[f32], lr: f32, hp: &AdamParams, t: u64) {
         self.steps[row] = self.steps[row].saturating_add(1);
-        update(self.row_len, &mut self.m, &mut self.v, row, params, grads, lr, hp, t);
+        self.update(row, params, grads, lr, hp, t);
     }
 
     /// One Adam step for billboard `row`: `params -= lr · m̂ / (√v̂ + ε)`, with bias correction by
@@ -89,32 +89,29 @@ impl AdamGroup {
     pub fn step_row(&mut self, row: usize, params: &mut [f32], grads: &[f32], lr: f32, hp: &AdamParams) {
         self.steps[row] = self.steps[row].saturating_add(1);
         let t = self.steps[row] as u64;
-        update(self.row_len, &mut self.m, &mut self.v, row, params, grads, lr, hp, t);
+        self.update(row, params, grads, lr, hp, t);
+    }
+
+    fn update(&mut self, row: usize, params: &mut [f32], grads: &[f32], lr: f32, hp: &AdamParams, t: u64) {
+        let span = row * self.row_len..(row + 1) * self.row_len;
+        update_row(&mut self.m[span.clone()], &mut self.v[span], params, grads, lr, hp, t);
     }
 }
 
-#[allow(clippy::too_many_arguments)]
+/// The Adam update of one row (`m`, `v`, `params` and `grads` of equal length) at bias-correction
+/// step `t ≥ 1`, in PyTorch's arrangement `p -= (lr / (1 − β₁ᵗ)) · m / (√v / √(1 − β₂ᵗ) + ε)`.
+/// The one copy of the update: [`AdamGroup::step_row`], [`AdamGroup::step_row_global`] and the
+/// parallel texture step ([`super::texture_step`]) all call it.
 #[inline]
-fn update(
-    n: usize,
-    m: &mut [f32],
-    v: &mut [f32],
-    row: usize,
-    params: &mut [f32],
-    grads: &[f32],
-    lr: f32,
-    hp: &AdamParams,
-    t: u64,
-) {
-    debug_assert_eq!(params.len(), n);
-    debug_assert_eq!(grads.len(), n);
+pub fn update_row(m: &mut [f32], v: &mut [f32], params: &mut [f32], grads: &[f32], lr: f32, hp: &AdamParams, t: u64) {
+    debug_assert_eq!(m.len(), params.len());
+    debug_assert_eq!(v.len(), params.len());
+    debug_assert_eq!(grads.len(), params.len());
     let t = t.min(i32::MAX as u64) as i32;
     let bc1 = 1.0 - hp.beta1.powi(t);
     let bc2_sqrt = (1.0 - hp.beta2.powi(t)).sqrt();
     let step_size = lr / bc1;
-    let m = &mut m[row * n..(row + 1) * n];
-    let v = &mut v[row * n..(row + 1) * n];
-    for k in 0..n {
+    for k in 0..params.len() {
         let g = grads[k];
         m[k] = hp.beta1 * m[k] + (1.0 - hp.beta1) * g;
         v[k] = hp.beta2 * v[k] + (1.0 - hp.beta2) * g * g;

@@ -47,7 +47,7 @@
 
 use super::adam::AdamGroup;
 use super::{AdamMode, ClampGradient, LearningRateScales, TextureMode, TrainConfig, Trainer, adam_groups, group};
-use crate::model::Model;
+use crate::model::RawBillboards;
 use crate::raster::SH_FLOATS;
 use crate::rng::Rng;
 use glam::{Vec2, Vec3};
@@ -516,7 +516,7 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
     let sh = r.f32s(SH_FLOATS * n, "SH")?;
     let alpha_logits = r.f32s(t * n, "alpha logits")?;
     let colour_logits = r.f32s(3 * t * n, "colour logits")?;
-    let model = Model {
+    let model = RawBillboards {
         positions: positions.chunks_exact(3).map(Vec3::from_slice).collect(),
         quaternions: quaternions.chunks_exact(4).map(|q| [q[0], q[1], q[2], q[3]]).collect(),
         log_scales: log_scales.chunks_exact(2).map(Vec2::from_slice).collect(),

@@ -8,7 +8,7 @@
 //! rayon pool; the answer (which group, checked in a fixed order) does not depend on the thread
 //! count.
 
-use crate::model::Model;
+use crate::model::RawBillboards;
 use crate::raster::RenderGradients;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -135,7 +135,7 @@ pub fn non_finite_gradient(g: &RenderGradients) -> Option<ParamGroup> {
 
 /// The first group (in the order of [`ParamGroup`]) of `model` and `opacity_logits` holding a
 /// non-finite value.
-pub fn non_finite_parameter(model: &Model, opacity_logits: &[f32]) -> Option<ParamGroup> {
+pub fn non_finite_parameter(model: &RawBillboards, opacity_logits: &[f32]) -> Option<ParamGroup> {
     if !finite_vec3(&model.positions) {
         return Some(ParamGroup::Positions);
     }
@@ -201,7 +201,7 @@ mod tests {
     #[test]
     fn parameter_groups_are_named() {
         let points = [Vec3::ZERO, Vec3::X, Vec3::Y];
-        let mut m = Model::from_points(&points, &[[0.5; 3]; 3], 4, 0);
+        let mut m = RawBillboards::from_points(&points, &[[0.5; 3]; 3], 4, 0);
         let mut o = vec![0.0; 3];
         assert_eq!(non_finite_parameter(&m, &o), None);
         o[2] = f32::NAN;

@@ -34,11 +34,11 @@ pub mod resolution;
 pub mod run;
 pub mod texture_step;
 
-use crate::billboards::Billboards;
+use crate::billboards::ActivatedBillboards;
 use crate::camera::Camera;
 use crate::loss::TrainingLoss;
 use crate::loss::psnr::psnr_u8;
-use crate::model::{Model, initial_alpha, logit, sigmoid};
+use crate::model::{RawBillboards, initial_alpha, logit, sigmoid};
 use crate::raster::backward::ImageGradients;
 use crate::raster::{RenderBuffers, RenderGradients, RenderSettings, SH_FLOATS, render_backward, render_with};
 use crate::rng::Rng;
@@ -48,9 +48,10 @@ pub use checkpoint::CheckpointError;
 pub use error::TrainError;
 pub use finite::{NonFinite, ParamGroup};
 use glam::Vec3;
-use regularise::{gaussian_opacity_grad, mean_alpha, opacity_regulariser, texture_regulariser};
-use relocate::{DEAD_OPACITY, apply_relocation, plan_relocation, split_alpha_logit};
+use regularise::{gaussian_opacity_grad, opacity_regulariser, texture_regulariser};
+use relocate::{apply_relocation, plan_relocation, split_alpha_logit};
 pub use run::{RunConfig, RunError, RunOutcome, RunWarning, StopReason, StopSignal, TrainEvent, run};
+use serde::{Deserialize, Serialize};
 
 /// A posed image: camera and interleaved RGB values in `[0, 1]`.
 #[derive(Clone, Debug)]
@@ -100,7 +101,12 @@ pub enum AdamMode {
 }
 
 /// What the alpha and colour textures are allowed to be (the "textures on vs off" ablation).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+///
+/// Its text form ([`TextureMode::as_str`], `Display`, `FromStr`, serde) is `full` or
+/// `gaussian`: the value of `bbsplat train --texture-mode` and of a sweep grid's `texture_mode`
+/// axis (JSON `"texture_mode": ["full", "gaussian"]`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum TextureMode {
     /// Learned alpha and colour textures (BBSplat).
     #[default]
@@ -110,6 +116,43 @@ pub enum TextureMode {
     /// the fixed initial Gaussian (`G/255` of the reference asset, peak 0.984, masked texels 0);
     /// the colour texture stays at its initial value, so colour is learned through SH only.
     Gaussian,
+}
+
+impl TextureMode {
+    /// Every mode, in declaration order.
+    pub const ALL: [TextureMode; 2] = [TextureMode::Full, TextureMode::Gaussian];
+
+    /// The text form: `full` or `gaussian`.
+    ///
+    /// ```
+    /// use bbsplat::train::TextureMode;
+    /// for mode in TextureMode::ALL {
+    ///     assert_eq!(mode.as_str().parse::<TextureMode>(), Ok(mode));
+    /// }
+    /// assert!("none".parse::<TextureMode>().is_err());
+    /// ```
+    pub fn as_str(self) -> &'static str {
+        match self {
+            TextureMode::Full => "full",
+            TextureMode::Gaussian => "gaussian",
+        }
+    }
+}
+
+impl std::fmt::Display for TextureMode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl std::str::FromStr for TextureMode {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        TextureMode::ALL
+            .into_iter()
+            .find(|m| m.as_str() == s)
+            .ok_or_else(|| "expected `full` or `gaussian`".into())
+    }
 }
 
 /// Training settings.
@@ -125,7 +168,7 @@ pub struct TrainConfig {
     /// Seed of the view order and of relocation sampling.
     pub seed: u64,
     /// Spatial scale `E` of the position learning rate (1.1 × the largest camera-centre
-    /// distance from their mean; see [`scene_extent`]).
+    /// distance from their mean; see [`crate::scene::split::camera_extent`]).
     pub extent: f32,
     /// Impact threshold σ of the texture regulariser (default 500, the paper's value).
     pub impact_threshold: f32,
@@ -217,19 +260,6 @@ impl Default for TrainConfig {
             clamp_gradient: ClampGradient::Exact,
         }
     }
-}
-
-/// `1.1 ×` the largest distance of a camera centre from the mean centre.
-pub fn scene_extent(cameras: &[Camera]) -> f32 {
-    if cameras.is_empty() {
-        return 1.0;
-    }
-    let mean = cameras.iter().map(Camera::centre).sum::<Vec3>() / cameras.len() as f32;
-    1.1 * cameras
-        .iter()
-        .map(|c| c.centre().distance(mean))
-        .fold(0.0, f32::max)
-        .max(1e-6)
 }
 
 /// Reference iteration count, the 100 % point of every milestone.
@@ -373,9 +403,9 @@ pub mod group {
 pub struct Trainer {
     /// The raw parameters. Edit only between steps and through the trainer's own methods: the
     /// activated copy is refreshed row by row.
-    pub model: Model,
+    pub model: RawBillboards,
     /// Activated copy the rasterizer reads (kept in sync row by row).
-    pub activated: Billboards,
+    pub activated: ActivatedBillboards,
     adam: [AdamGroup; group::COUNT],
     grads: RenderGradients,
     config: TrainConfig,
@@ -412,14 +442,14 @@ impl Trainer {
     /// `clamp(mean alpha / mean shape, 1e-4, 1 − 1e-4)` (0.5 for a freshly initialised model) and
     /// its alpha logits are overwritten with `logit(o · shape)` so that the model alone renders
     /// what the trainer renders.
-    pub fn new(model: Model, config: TrainConfig) -> Self {
+    pub fn new(model: RawBillboards, config: TrainConfig) -> Self {
         let adam = adam_groups(model.len(), model.texture_size * model.texture_size);
         Self::with_adam(model, config, adam)
     }
 
     /// [`Trainer::new`] with given optimiser state (a checkpoint's), so that loading does not
     /// first allocate zero moments only to replace them.
-    pub(crate) fn with_adam(model: Model, config: TrainConfig, adam: [AdamGroup; group::COUNT]) -> Self {
+    pub(crate) fn with_adam(model: RawBillboards, config: TrainConfig, adam: [AdamGroup; group::COUNT]) -> Self {
         let n = model.len();
         let t = model.texture_size * model.texture_size;
         let alpha0: Vec<f32> = initial_alpha(model.texture_size)
@@ -433,7 +463,8 @@ impl Trainer {
             TextureMode::Full => Vec::new(),
             TextureMode::Gaussian => {
                 let mean_shape = shape.iter().map(|&x| x as f64).sum::<f64>() / t.max(1) as f64;
-                mean_alpha(&activated.textures, t)
+                activated
+                    .mean_alphas()
                     .iter()
                     .map(|&m| logit((m as f64 / mean_shape.max(1e-12)).clamp(1e-4, 1.0 - 1e-4) as f32))
                     .collect()
@@ -492,7 +523,7 @@ impl Trainer {
     /// [`TextureMode::Gaussian`] taken from the textures the renderer used (opacity × the fixed
     /// shape, clamped to `[1e-6, 1 − 1e-6]`; masked texels 0). In full-texture mode a copy of
     /// [`Trainer::model`].
-    pub fn export_model(&self) -> Model {
+    pub fn export_model(&self) -> RawBillboards {
         let mut model = self.model.clone();
         if self.config.texture_mode == TextureMode::Gaussian {
             let t = model.texture_size * model.texture_size;
@@ -507,13 +538,10 @@ impl Trainer {
         model
     }
 
-    /// Billboards whose mean alpha exceeds the relocation threshold 0.005.
+    /// Billboards whose mean alpha exceeds the relocation threshold
+    /// [`crate::model::DEAD_ALPHA`] (0.005), measured on the textures the renderer uses.
     pub fn alive_count(&self) -> usize {
-        let t = self.model.texture_size * self.model.texture_size;
-        mean_alpha(&self.activated.textures, t)
-            .iter()
-            .filter(|&&m| m > DEAD_OPACITY)
-            .count()
+        self.activated.alive_count()
     }
 
     fn next_view(&mut self, views: usize) -> usize {
@@ -585,7 +613,7 @@ impl Trainer {
         let cam = &view.camera;
         let settings = self.settings();
         let buffers = std::mem::take(&mut self.render_buffers);
-        let out = render_with(&self.activated.as_set(), cam, &settings, buffers);
+        let out = render_with(&self.activated.borrowed(), cam, &settings, buffers);
         let loss = TrainingLoss::default()
             .evaluate(&out.rgb, &view.rgb, cam.width as usize, cam.height as usize, 3)
             .expect("sizes validated above");
@@ -595,7 +623,7 @@ impl Trainer {
             alpha: None,
             depth: None,
         };
-        let touched = render_backward(&self.activated.as_set(), &out, &ig, &mut self.grads);
+        let touched = render_backward(&self.activated.borrowed(), &out, &ig, &mut self.grads);
         let texture_reg = if self.config.texture_reg_weight != 0.0 {
             texture_regulariser(
                 &self.activated.textures,
@@ -811,8 +839,7 @@ impl Trainer {
     /// of both the sources and the dead slots are zeroed (the reference zeroes only the sources;
     /// a dead slot's stale moments belong to the billboard that died there).
     pub fn relocate(&mut self) -> usize {
-        let t = self.model.texture_size * self.model.texture_size;
-        let plan = plan_relocation(&mean_alpha(&self.activated.textures, t), &mut self.rng);
+        let plan = plan_relocation(&self.activated.mean_alphas(), &mut self.rng);
         if plan.is_empty() {
             return 0;
         }
@@ -852,7 +879,7 @@ impl Trainer {
             .iter()
             .map(|v| {
                 let out = render_with(
-                    &self.activated.as_set(),
+                    &self.activated.borrowed(),
                     &v.camera,
                     &settings,
                     std::mem::take(&mut buffers),

@@ -1,7 +1,7 @@
 //! Regularisers of the training loss (the BBSplat spec, §5.4-5.5), as pure functions.
 //!
 //! Conventions: textures are *activated* values (sigmoid of the logits) laid out as in
-//! [`crate::raster::BillboardSet::textures`]: `T = TS²` RGBA texels `[r, g, b, alpha]` per
+//! [`crate::raster::ActivatedRef::textures`]: `T = TS²` RGBA texels `[r, g, b, alpha]` per
 //! billboard. Every function returns the value in f64 and *adds* its gradient with respect to the
 //! activated textures into a buffer of the same layout; [`chain_sigmoid`] carries an
 //! activated-space gradient (planar, as the model's logits) to the logits and applies the alpha
@@ -134,14 +134,6 @@ pub fn chain_sigmoid(activated: &[f32], d_activated: &[f32], mask: Option<&[bool
         let y = activated[k];
         d_logits[k] = if keep { d_activated[k] * y * (1.0 - y) } else { 0.0 };
     }
-}
-
-/// Mean alpha of each billboard over its `t` RGBA texels.
-pub fn mean_alpha(textures: &[[f32; 4]], t: usize) -> Vec<f32> {
-    textures
-        .chunks_exact(t.max(1))
-        .map(|row| (row.iter().map(|x| x[3] as f64).sum::<f64>() / t as f64) as f32)
-        .collect()
 }
 
 /// Gaussian-billboard alpha (texture mode [`super::TextureMode::Gaussian`]): texel `k` of billboard

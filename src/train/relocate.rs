@@ -1,7 +1,7 @@
 //! Relocation of dead billboards (the BBSplat spec, §6, "MCMC-style").
 //!
 //! A billboard is *dead* when its mean alpha over all `TS²` texels (masked texels count as 0) is
-//! at most [`DEAD_OPACITY`]. Each dead slot receives a copy of a source drawn, with replacement,
+//! at most [`DEAD_ALPHA`]. Each dead slot receives a copy of a source drawn, with replacement,
 //! from the alive billboards with probability proportional to their mean alpha. A source drawn
 //! `n` times ends up with `n + 1` identical copies (itself included), and every copy's alpha is
 //! split texel-wise: `a' = 1 − (1 − a)^{1/(n+1)}`, so that compositing the `n + 1` copies on top
@@ -16,12 +16,11 @@
 //!
 //! The optimiser-state side (zeroing moments) is done by the trainer.
 
-use crate::model::Model;
+#[cfg(doc)]
+use crate::model::DEAD_ALPHA;
+use crate::model::{RawBillboards, is_alive};
 use crate::raster::SH_FLOATS;
 use crate::rng::Rng;
-
-/// Mean alpha at or below which a billboard is dead (reference `dead_opacity`).
-pub const DEAD_OPACITY: f32 = 0.005;
 
 /// Relocated alpha logits are clamped to `[−LOGIT_CLAMP, LOGIT_CLAMP]` (alpha within
 /// `[9.4e-14, 1 − 9.4e-14]` in f64).
@@ -51,7 +50,7 @@ impl RelocationPlan {
 /// Returns an empty plan (and draws nothing) when no billboard is dead or none is alive.
 pub fn plan_relocation(mean_alpha: &[f32], rng: &mut Rng) -> RelocationPlan {
     // A NaN mean alpha counts as dead (it is not above the threshold).
-    let is_alive = |i: usize| mean_alpha[i] > DEAD_OPACITY;
+    let is_alive = |i: usize| is_alive(mean_alpha[i]);
     let dead: Vec<usize> = (0..mean_alpha.len()).filter(|&i| !is_alive(i)).collect();
     let alive: Vec<usize> = (0..mean_alpha.len()).filter(|&i| is_alive(i)).collect();
     if dead.is_empty() || alive.is_empty() {
@@ -95,7 +94,7 @@ pub fn split_alpha_logit(x: f32, copies: u32) -> f32 {
 
 /// Applies `plan` to the raw parameters: splits the alpha logits of every source (texels inside
 /// `alpha_mask` only) and copies all parameters of the source into its dead slots.
-pub fn apply_relocation(model: &mut Model, plan: &RelocationPlan) {
+pub fn apply_relocation(model: &mut RawBillboards, plan: &RelocationPlan) {
     let t = model.texture_size * model.texture_size;
     for &(s, n) in &plan.multiplicity {
         for k in 0..t {
@@ -111,7 +110,7 @@ pub fn apply_relocation(model: &mut Model, plan: &RelocationPlan) {
 }
 
 /// Copies every parameter of billboard `src` into billboard `dst`.
-pub fn copy_row(model: &mut Model, src: usize, dst: usize) {
+pub fn copy_row(model: &mut RawBillboards, src: usize, dst: usize) {
     let t = model.texture_size * model.texture_size;
     model.positions[dst] = model.positions[src];
     model.quaternions[dst] = model.quaternions[src];

@@ -6,13 +6,13 @@
 //!
 //! ```no_run
 //! use bbsplat::demo::{DemoConfig, generate};
-//! use bbsplat::model::Model;
+//! use bbsplat::model::RawBillboards;
 //! use bbsplat::train::{RunConfig, RunOutcome, StopSignal, TrainConfig, TrainEvent, TrainView, Trainer, run};
 //!
 //! let scene = generate(&DemoConfig::default());
 //! let train: Vec<TrainView> = scene.train.iter().map(TrainView::from_demo).collect();
 //! let test: Vec<TrainView> = scene.test.iter().map(TrainView::from_demo).collect();
-//! let model = Model::from_points(&scene.points, &scene.colours, 8, 0);
+//! let model = RawBillboards::from_points(&scene.points, &scene.colours, 8, 0);
 //! let config = TrainConfig { iterations: 300, ..TrainConfig::default() };
 //! let mut trainer = Trainer::new(model, config);
 //! let settings = RunConfig { output: Some("out".into()), ..RunConfig::default() };
@@ -67,7 +67,7 @@ use super::{CheckpointError, NonFinite, ParamGroup, StepLog, TrainError, TrainVi
 use crate::eval::{EvalView, evaluate_views};
 use crate::loss::LossError;
 use crate::model_file::{ModelFileError, ModelMeta, load_model, save_model};
-use crate::raster::{BillboardSet, RenderSettings};
+use crate::raster::{ActivatedRef, RenderSettings};
 use crate::report::{CurvePoint, RecordedSettings, SUMMARY_VERSION, SummaryFile, TrainSummary, peak_rss_bytes};
 use crate::stages::composite::ClampGradient;
 use std::path::{Path, PathBuf};
@@ -337,7 +337,7 @@ fn evenly_spaced<T>(items: &[T], at_most: usize) -> Vec<&T> {
 
 /// Mean PSNR, SSIM and render milliseconds of `set` over `views`.
 fn evaluate(
-    set: &BillboardSet<'_>,
+    set: &ActivatedRef<'_>,
     views: &[&TrainView],
     settings: &RenderSettings,
 ) -> Result<(f64, f64, f64), LossError> {
@@ -526,7 +526,7 @@ pub fn run(
             && step < iterations
             && !eval_subset.is_empty()
         {
-            let (psnr, ssim, _) = evaluate(&trainer.activated.as_set(), &eval_subset, &eval_settings)?;
+            let (psnr, ssim, _) = evaluate(&trainer.activated.borrowed(), &eval_subset, &eval_settings)?;
             curve.push(CurvePoint {
                 step,
                 seconds: train_seconds,
@@ -565,8 +565,8 @@ pub fn run(
         (f64::NAN, f64::NAN, f64::NAN)
     } else {
         let set = match &saved {
-            Some(b) => b.as_set(),
-            None => trainer.activated.as_set(),
+            Some(b) => b.borrowed(),
+            None => trainer.activated.borrowed(),
         };
         evaluate(&set, &all_test, &eval_settings)?
     };

@@ -6,7 +6,7 @@
 //! each row does exactly the arithmetic of the serial per-row loop, in the same order, so the
 //! result is bit-identical for any thread count. The row's gradient is zeroed after use.
 
-use super::adam::{AdamGroup, AdamParams};
+use super::adam::{AdamGroup, AdamParams, update_row};
 use crate::model::sigmoid;
 use rayon::prelude::*;
 use std::ops::Range;
@@ -121,7 +121,7 @@ pub fn step_texture_group(
                     }
                 }
                 let x = &mut logits[span.clone()];
-                adam_update(&mut m[span.clone()], &mut v[span], x, &d_logit, lr, hp, t);
+                update_row(&mut m[span.clone()], &mut v[span], x, &d_logit, lr, hp, t);
                 for (ci, ch) in channels.clone().enumerate() {
                     for k in 0..texels {
                         y[k][ch] = if keep(k) { sigmoid(x[ci * texels + k]) } else { 0.0 };
@@ -129,21 +129,6 @@ pub fn step_texture_group(
                 }
             }
         });
-}
-
-/// The Adam update of one row, the same arithmetic as [`AdamGroup::step_row`].
-#[inline]
-fn adam_update(m: &mut [f32], v: &mut [f32], params: &mut [f32], grads: &[f32], lr: f32, hp: &AdamParams, t: u64) {
-    let t = t.min(i32::MAX as u64) as i32;
-    let bc1 = 1.0 - hp.beta1.powi(t);
-    let bc2_sqrt = (1.0 - hp.beta2.powi(t)).sqrt();
-    let step_size = lr / bc1;
-    for k in 0..params.len() {
-        let g = grads[k];
-        m[k] = hp.beta1 * m[k] + (1.0 - hp.beta1) * g;
-        v[k] = hp.beta2 * v[k] + (1.0 - hp.beta2) * g * g;
-        params[k] -= step_size * m[k] / (v[k].sqrt() / bc2_sqrt + hp.eps);
-    }
 }
 
 #[cfg(test)]

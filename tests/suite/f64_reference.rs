@@ -12,7 +12,7 @@ mod gradients;
 mod renderer;
 mod scenes;
 
-use bbsplat::billboards::Billboards;
+use bbsplat::billboards::ActivatedBillboards;
 use bbsplat::camera::Camera;
 use bbsplat::raster::{RenderOutput, RenderSettings, render};
 use renderer::{Cam64, Image64, Scene64, Thresholds, render64};
@@ -50,8 +50,8 @@ fn image_errors(got: &RenderOutput, want: &Image64) -> ImageErrors {
 }
 
 /// The crate's render and the f64 reference (crate thresholds) of the same inputs.
-fn both(b: &Billboards, cam: &Camera, settings: &RenderSettings) -> (RenderOutput, Image64) {
-    let out = render(&b.as_set(), cam, settings);
+fn both(b: &ActivatedBillboards, cam: &Camera, settings: &RenderSettings) -> (RenderOutput, Image64) {
+    let out = render(&b.borrowed(), cam, settings);
     let th = Thresholds::crate_values(&settings.composite);
     let (img, _) = render64(&Scene64::of(b, settings), &Cam64::of(cam), &th, false);
     (out, img)

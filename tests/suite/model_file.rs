@@ -2,7 +2,7 @@
 //!
 //! Run with `--nocapture` to see the bytes-per-billboard report.
 
-use bbsplat::model::Model;
+use bbsplat::model::RawBillboards;
 use bbsplat::model_file::{
     ALPHA_FILE, COLOUR_FILE, META_FILE, ModelFileError, ModelMeta, PLY_FILE, load_model, save_model,
 };
@@ -21,18 +21,18 @@ fn scratch(name: &str) -> PathBuf {
     dir
 }
 
-fn fresh_model(n: usize, ts: usize, seed: u64) -> Model {
+fn fresh_model(n: usize, ts: usize, seed: u64) -> RawBillboards {
     let mut rng = Rng::new(seed);
     let pts: Vec<Vec3> = (0..n)
         .map(|_| Vec3::new(rng.range(-2.0, 2.0), rng.range(-2.0, 2.0), rng.range(-2.0, 2.0)))
         .collect();
     let colours: Vec<[f32; 3]> = (0..n).map(|_| [rng.uniform(), rng.uniform(), rng.uniform()]).collect();
-    Model::from_points(&pts, &colours, ts, seed)
+    RawBillboards::from_points(&pts, &colours, ts, seed)
 }
 
 /// A model with every parameter random ("trained-like": no structure for deflate to exploit
 /// beyond the 8-bit quantisation), including saturated logits.
-fn random_model(n: usize, ts: usize, seed: u64) -> Model {
+fn random_model(n: usize, ts: usize, seed: u64) -> RawBillboards {
     let mut m = fresh_model(n, ts, seed);
     let mut rng = Rng::new(seed ^ 0x5eed);
     for q in &mut m.quaternions {
@@ -69,7 +69,7 @@ fn assert_only(dir: &Path, names: &[&str]) {
     assert_eq!(found, want, "contents of {}", dir.display());
 }
 
-fn check_round_trip(m: &Model, what: &str, dir: &Path) {
+fn check_round_trip(m: &RawBillboards, what: &str, dir: &Path) {
     let meta = ModelMeta::for_model(m, 3, [0.25, 0.5, 1.0]);
     let path = dir.join("model");
     let bytes = save_model(&path, m, &meta).unwrap();
@@ -206,7 +206,12 @@ fn replacing_is_atomic_and_leaves_no_temporary_folder() {
 }
 
 /// Writes a valid model to `dir/name`, applies `edit` to `file` inside, and loads it.
-fn load_edited(dir: &Path, name: &str, file: &str, edit: impl FnOnce(&mut Vec<u8>)) -> Result<Model, ModelFileError> {
+fn load_edited(
+    dir: &Path,
+    name: &str,
+    file: &str,
+    edit: impl FnOnce(&mut Vec<u8>),
+) -> Result<RawBillboards, ModelFileError> {
     let m = fresh_model(20, 16, 3);
     let path = dir.join(name);
     save_model(&path, &m, &ModelMeta::for_model(&m, 3, [0.0; 3])).unwrap();

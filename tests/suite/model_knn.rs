@@ -2,22 +2,11 @@
 //! and does not depend on the number of threads.
 
 use bbsplat::init::knn::{mean_sq_dist_3nn, mean_sq_dist_3nn_brute};
-use bbsplat::model::Model;
+use bbsplat::model::RawBillboards;
 use bbsplat::rng::Rng;
 use glam::Vec3;
 
-fn cloud(n: usize, seed: u64, scale: [f32; 3]) -> Vec<Vec3> {
-    let mut rng = Rng::new(seed);
-    (0..n)
-        .map(|_| {
-            Vec3::new(
-                rng.range(-scale[0], scale[0]),
-                rng.range(-scale[1], scale[1]),
-                rng.range(-scale[2], scale[2]),
-            )
-        })
-        .collect()
-}
+use bbsplat::strategies::box_cloud as cloud;
 
 fn check(points: &[Vec3], what: &str) {
     let tree = mean_sq_dist_3nn(points);
@@ -145,13 +134,13 @@ fn result_is_independent_of_thread_count() {
 #[test]
 fn from_points_uses_the_tree_statistic() {
     let pts = cloud(500, 13, [1.0, 1.0, 1.0]);
-    let m = Model::from_points(&pts, &vec![[0.3; 3]; pts.len()], 16, 5);
+    let m = RawBillboards::from_points(&pts, &vec![[0.3; 3]; pts.len()], 16, 5);
     let d = mean_sq_dist_3nn_brute(&pts);
     for (i, &di) in d.iter().enumerate() {
         assert_eq!(m.log_scales[i].x, di.max(1e-7).sqrt().ln(), "point {i}");
         assert_eq!(m.log_scales[i].x, m.log_scales[i].y);
     }
     // A single point gets the 1e-7 floor.
-    let one = Model::from_points(&[Vec3::ONE], &[[0.5; 3]], 16, 0);
+    let one = RawBillboards::from_points(&[Vec3::ONE], &[[0.5; 3]], 16, 0);
     assert_eq!(one.log_scales[0].x, 1e-7f32.sqrt().ln());
 }

@@ -1,7 +1,7 @@
 //! Rasterizer proofs: tiled = brute-force reference, whole-image finite differences for every
 //! parameter group, invariances, determinism across thread counts, and named hard cases.
 
-use bbsplat::billboards::{Billboards, RandomSceneConfig, random_scene, random_scene_camera};
+use bbsplat::billboards::{ActivatedBillboards, RandomSceneConfig, random_scene, random_scene_camera};
 use bbsplat::camera::Camera;
 use bbsplat::gradcheck::{GradTolerance, compare, directional_derivative, random_weights};
 use bbsplat::raster::backward::ImageGradients;
@@ -33,7 +33,15 @@ fn smooth_settings(background: Vec3) -> RenderSettings {
     }
 }
 
-fn small_scene(n: usize, w: u32, h: u32, ts: usize, footprint: f32, alpha: (f32, f32), seed: u64) -> Billboards {
+fn small_scene(
+    n: usize,
+    w: u32,
+    h: u32,
+    ts: usize,
+    footprint: f32,
+    alpha: (f32, f32),
+    seed: u64,
+) -> ActivatedBillboards {
     random_scene(&RandomSceneConfig {
         billboards: n,
         width: w,
@@ -63,8 +71,8 @@ proptest! {
         let scene = small_scene(n, w, h, ts, footprint, (0.0, 1.0), seed);
         let cam = random_scene_camera(w, h);
         let s = settings(if white { Vec3::ONE } else { Vec3::new(0.1, 0.2, 0.3) });
-        let tiled = render(&scene.as_set(), &cam, &s);
-        let reference = render_reference(&scene.as_set(), &cam, &s);
+        let tiled = render(&scene.borrowed(), &cam, &s);
+        let reference = render_reference(&scene.borrowed(), &cam, &s);
         // Same operations in the same order per pixel; the only difference is how products like
         // c·α·T associate inside the compositing stage: a few f32 ulps.
         prop_assert!(max_abs_diff(&tiled.rgb, &reference.rgb) < 1e-5, "rgb differs (seed {seed})");
@@ -114,7 +122,7 @@ enum Group {
     Colour,
 }
 
-fn flatten(b: &Billboards, g: Group) -> Vec<f32> {
+fn flatten(b: &ActivatedBillboards, g: Group) -> Vec<f32> {
     match g {
         Group::Positions => b.positions.iter().flat_map(|p| p.to_array()).collect(),
         Group::LogScales => b.log_scales.iter().flat_map(|p| p.to_array()).collect(),
@@ -125,7 +133,7 @@ fn flatten(b: &Billboards, g: Group) -> Vec<f32> {
     }
 }
 
-fn unflatten(b: &mut Billboards, g: Group, x: &[f32]) {
+fn unflatten(b: &mut ActivatedBillboards, g: Group, x: &[f32]) {
     match g {
         Group::Positions => b.positions = x.chunks(3).map(Vec3::from_slice).collect(),
         Group::LogScales => b.log_scales = x.chunks(2).map(Vec2::from_slice).collect(),
@@ -152,8 +160,8 @@ fn analytic(g: &RenderGradients, group: Group) -> Vec<f64> {
     v.into_iter().map(f64::from).collect()
 }
 
-fn gradients(scene: &Billboards, cam: &Camera, s: &RenderSettings, loss: &WeightedLoss) -> RenderGradients {
-    let out = render(&scene.as_set(), cam, s);
+fn gradients(scene: &ActivatedBillboards, cam: &Camera, s: &RenderSettings, loss: &WeightedLoss) -> RenderGradients {
+    let out = render(&scene.borrowed(), cam, s);
     let mut g = RenderGradients::zeros(scene.len(), scene.texture_size);
     let (rgb, alpha, depth) = (
         WeightedLoss::f32s(&loss.rgb),
@@ -165,14 +173,21 @@ fn gradients(scene: &Billboards, cam: &Camera, s: &RenderSettings, loss: &Weight
         alpha: Some(&alpha),
         depth: Some(&depth),
     };
-    render_backward(&scene.as_set(), &out, &ig, &mut g);
+    render_backward(&scene.borrowed(), &out, &ig, &mut g);
     g
 }
 
 /// Checks one parameter group: every element by central differences when the group is small,
 /// otherwise 48 sampled elements plus 4 random directions over the whole group. The measured
 /// errors are printed (`--nocapture` shows them), then asserted.
-fn check_group(scene: &Billboards, cam: &Camera, s: &RenderSettings, group: Group, seed: u64, tol: &GradTolerance) {
+fn check_group(
+    scene: &ActivatedBillboards,
+    cam: &Camera,
+    s: &RenderSettings,
+    group: Group,
+    seed: u64,
+    tol: &GradTolerance,
+) {
     let report = group_report(scene, cam, s, group, seed, tol, 1.0);
     eprintln!(
         "measure {group:?} seed {seed}: worst_ratio {:.3e} rel_l2 {:.3e} direction_error {:.3e} cosine_gap {:.3e} bias {:.3e}",
@@ -206,7 +221,7 @@ impl GroupReport {
 /// The FD comparison of [`check_group`], with the analytic gradient multiplied by `scale`
 /// (1 for the real check; the catch tests pass 1.01).
 fn group_report(
-    scene: &Billboards,
+    scene: &ActivatedBillboards,
     cam: &Camera,
     s: &RenderSettings,
     group: Group,
@@ -221,7 +236,7 @@ fn group_report(
     let eval = |p: &[f32]| {
         let mut b = scene.clone();
         unflatten(&mut b, group, p);
-        loss.value(&render(&b.as_set(), cam, s))
+        loss.value(&render(&b.borrowed(), cam, s))
     };
     let mut rng = Rng::new(seed ^ 0x5eed);
     let indices: Vec<usize> = if x.len() <= 96 {
@@ -266,7 +281,7 @@ fn outputs(out: &RenderOutput) -> Vec<f32> {
 /// backward pass, and the two are compared with tight tolerances. The band must stay a small
 /// fraction of the outputs the parameter moves (asserted).
 fn check_group_banded(
-    scene: &Billboards,
+    scene: &ActivatedBillboards,
     cam: &Camera,
     s: &RenderSettings,
     group: Group,
@@ -286,7 +301,7 @@ fn check_group_banded(
 /// The comparison of [`check_group_banded`] and the band's fraction of the moved outputs, with
 /// the analytic gradient multiplied by `scale` (1 for the real check; the catch tests pass 1.01).
 fn banded_report(
-    scene: &Billboards,
+    scene: &ActivatedBillboards,
     cam: &Camera,
     s: &RenderSettings,
     group: Group,
@@ -300,9 +315,9 @@ fn banded_report(
     let render_at = |p: &[f32]| {
         let mut b = scene.clone();
         unflatten(&mut b, group, p);
-        outputs(&render(&b.as_set(), cam, s))
+        outputs(&render(&b.borrowed(), cam, s))
     };
-    let base = render(&scene.as_set(), cam, s);
+    let base = render(&scene.borrowed(), cam, s);
     let n_pix = cam.pixel_count();
     let h = 1e-3f64;
     let (mut analytic_v, mut numeric_v) = (Vec::new(), Vec::new());
@@ -353,7 +368,7 @@ fn banded_report(
         );
         let mut g = RenderGradients::zeros(scene.len(), scene.texture_size);
         render_backward(
-            &scene.as_set(),
+            &scene.borrowed(),
             &base,
             &ImageGradients {
                 rgb: &rgb,
@@ -396,12 +411,12 @@ fn image_tolerance() -> GradTolerance {
 /// [`check_group`]: measured worst 9.3e-6 over the same 64 seeds, bound 10×.
 const DIRECTION_TOLERANCE: f64 = 9.3e-5;
 
-fn fd_scene(seed: u64) -> (Billboards, Camera) {
+fn fd_scene(seed: u64) -> (ActivatedBillboards, Camera) {
     fd_scene_with_footprint(seed, 14.0)
 }
 
 /// [`fd_scene`] with billboards about `footprint` pixels wide.
-fn fd_scene_with_footprint(seed: u64, footprint: f32) -> (Billboards, Camera) {
+fn fd_scene_with_footprint(seed: u64, footprint: f32) -> (ActivatedBillboards, Camera) {
     let mut rng = Rng::new(seed);
     let n = 3 + rng.below(10) as usize;
     let w = 24 + rng.below(24) as u32;
@@ -523,7 +538,7 @@ fn fd_textures_of_billboards_inside_one_tile() {
     for seed in 0..seeds {
         let (scene, cam) = fd_scene_with_footprint(seed, 4.0);
         let s = smooth_settings(Vec3::new(0.3, 0.5, 0.7));
-        let bins = render(&scene.as_set(), &cam, &s).state.bins;
+        let bins = render(&scene.borrowed(), &cam, &s).state.bins;
         single += bins.billboard_offsets.windows(2).filter(|w| w[1] - w[0] == 1).count();
         for group in [Group::Alpha, Group::Colour] {
             check_group(&scene, &cam, &s, group, seed, &image_tolerance());
@@ -548,7 +563,7 @@ fn fd_background() {
             let eval = |bg: f32| {
                 let mut s2 = s;
                 s2.background[c] = bg;
-                loss.value(&render(&scene.as_set(), &cam, &s2))
+                loss.value(&render(&scene.borrowed(), &cam, &s2))
             };
             let h = 1e-2;
             let num = (eval(s.background[c] + h) - eval(s.background[c] - h)) / (2.0 * h as f64);
@@ -589,7 +604,7 @@ fn whole_image_checks_catch_a_one_percent_error() {
     }
 }
 
-fn culled_billboards(ts: usize, seed: u64) -> Billboards {
+fn culled_billboards(ts: usize, seed: u64) -> ActivatedBillboards {
     let mut extra = small_scene(6, 32, 32, ts, 8.0, (0.2, 0.8), seed);
     extra.positions[0].z = -3.0; // behind the camera
     extra.positions[1].z = 0.1; // in front of the camera but before the near plane
@@ -605,10 +620,10 @@ fn culled_billboards_change_no_bit() {
     let scene = small_scene(20, 40, 36, 16, 10.0, (0.0, 1.0), 11);
     let cam = random_scene_camera(40, 36);
     let s = settings(Vec3::new(0.2, 0.4, 0.6));
-    let base = render(&scene.as_set(), &cam, &s);
+    let base = render(&scene.borrowed(), &cam, &s);
     let extra = culled_billboards(16, 12);
     for combined in [scene.concat(&extra), extra.concat(&scene)] {
-        let out = render(&combined.as_set(), &cam, &s);
+        let out = render(&combined.borrowed(), &cam, &s);
         assert_eq!(out.rgb, base.rgb);
         assert_eq!(out.alpha, base.alpha);
         assert_eq!(out.depth, base.depth);
@@ -620,7 +635,7 @@ fn hidden_billboard_gets_exactly_zero_gradient() {
     let ts = 8;
     let t = ts * ts;
     let cam = random_scene_camera(32, 32);
-    let mut scene = Billboards::empty(ts);
+    let mut scene = ActivatedBillboards::empty(ts);
     // Three large opaque walls facing the camera, then a small billboard behind them.
     for (k, z) in [2.0f32, 2.5, 3.0].into_iter().enumerate() {
         scene.positions.push(Vec3::new(0.0, 0.0, z));
@@ -637,7 +652,7 @@ fn hidden_billboard_gets_exactly_zero_gradient() {
     let s = settings(Vec3::ONE);
     let loss = WeightedLoss::new(cam.pixel_count(), 5);
     let g = gradients(&scene, &cam, &s, &loss);
-    let out = render(&scene.as_set(), &cam, &s);
+    let out = render(&scene.borrowed(), &cam, &s);
     assert!(out.visible[3], "the hidden billboard is on screen");
     assert_eq!(out.impact[3], 0.0);
     assert_eq!(g.positions[3], Vec3::ZERO);
@@ -649,18 +664,18 @@ fn hidden_billboard_gets_exactly_zero_gradient() {
 }
 
 fn render_and_backward(
-    scene: &Billboards,
+    scene: &ActivatedBillboards,
     cam: &Camera,
     s: &RenderSettings,
 ) -> (RenderOutput, RenderGradients, Vec<u32>) {
-    let out = render(&scene.as_set(), cam, s);
+    let out = render(&scene.borrowed(), cam, s);
     let (g, touched) = backward_of(scene, cam, &out);
     (out, g, touched)
 }
 
 /// The backward pass of `out` under the fixed random per-pixel weighted loss (seed 77) on rgb
 /// and alpha: the gradients and the touched billboards.
-fn backward_of(scene: &Billboards, cam: &Camera, out: &RenderOutput) -> (RenderGradients, Vec<u32>) {
+fn backward_of(scene: &ActivatedBillboards, cam: &Camera, out: &RenderOutput) -> (RenderGradients, Vec<u32>) {
     let mut g = RenderGradients::zeros(scene.len(), scene.texture_size);
     let touched = add_weighted_backward(scene, cam, out, 77, &mut g);
     (g, touched)
@@ -669,7 +684,7 @@ fn backward_of(scene: &Billboards, cam: &Camera, out: &RenderOutput) -> (RenderG
 /// Adds into `g` the backward pass of `out` under the random per-pixel weighted loss of `seed`
 /// on rgb and alpha; returns the touched billboards.
 fn add_weighted_backward(
-    scene: &Billboards,
+    scene: &ActivatedBillboards,
     cam: &Camera,
     out: &RenderOutput,
     seed: u64,
@@ -682,7 +697,7 @@ fn add_weighted_backward(
         alpha: Some(&alpha),
         depth: None,
     };
-    render_backward(&scene.as_set(), out, &ig, g)
+    render_backward(&scene.borrowed(), out, &ig, g)
 }
 
 /// `f` run in a rayon pool of `threads` threads.
@@ -728,7 +743,7 @@ fn two_views_accumulate_deterministically() {
         ..cam1
     };
     let s = settings(Vec3::splat(0.5));
-    let bins = render(&scene.as_set(), &cam1, &s).state.bins;
+    let bins = render(&scene.borrowed(), &cam1, &s).state.bins;
     let single = bins.billboard_offsets.windows(2).filter(|w| w[1] - w[0] == 1).count();
     let multi = bins.billboard_offsets.windows(2).filter(|w| w[1] - w[0] > 1).count();
     assert!(
@@ -739,7 +754,7 @@ fn two_views_accumulate_deterministically() {
     let backward = |cams: &[&Camera]| {
         let mut g = RenderGradients::zeros(scene.len(), scene.texture_size);
         for &cam in cams {
-            add_weighted_backward(&scene, cam, &render(&scene.as_set(), cam, &s), 5, &mut g);
+            add_weighted_backward(&scene, cam, &render(&scene.borrowed(), cam, &s), 5, &mut g);
         }
         g
     };
@@ -807,7 +822,7 @@ fn recycled_buffers_change_no_bit() {
         let cam = random_scene_camera(w, h);
         let s = settings(Vec3::splat(0.25));
         let (fresh, g_fresh, t_fresh) = render_and_backward(&scene, &cam, &s);
-        let recycled = render_with(&scene.as_set(), &cam, &s, buffers);
+        let recycled = render_with(&scene.borrowed(), &cam, &s, buffers);
         assert_eq!(render_bits(&recycled), render_bits(&fresh), "case seed {seed}");
         assert_eq!(
             backward_of(&scene, &cam, &recycled),
@@ -834,7 +849,7 @@ fn assert_finite(out: &RenderOutput, g: &RenderGradients) {
     assert!(g.background.is_finite());
 }
 
-fn one_billboard(position: Vec3, quaternion: [f32; 4], log_scale: f32, ts: usize) -> Billboards {
+fn one_billboard(position: Vec3, quaternion: [f32; 4], log_scale: f32, ts: usize) -> ActivatedBillboards {
     let mut b = small_scene(1, 8, 8, ts, 4.0, (0.3, 0.9), 1);
     b.positions[0] = position;
     b.quaternions[0] = quaternion;
@@ -842,7 +857,7 @@ fn one_billboard(position: Vec3, quaternion: [f32; 4], log_scale: f32, ts: usize
     b
 }
 
-fn hard_case(scene: &Billboards, w: u32, h: u32) -> (RenderOutput, RenderGradients) {
+fn hard_case(scene: &ActivatedBillboards, w: u32, h: u32) -> (RenderOutput, RenderGradients) {
     let cam = random_scene_camera(w, h);
     let (out, g, _) = render_and_backward(scene, &cam, &settings(Vec3::splat(0.5)));
     assert_finite(&out, &g);
@@ -915,7 +930,7 @@ fn hard_case_tiny_and_non_square_images() {
 
 #[test]
 fn hard_case_empty_scene() {
-    let scene = Billboards::empty(16);
+    let scene = ActivatedBillboards::empty(16);
     let (out, g) = hard_case(&scene, 20, 10);
     assert!(out.rgb.iter().all(|&c| c == 0.5));
     // Every pixel sees the background: its gradient is the sum of the rgb weights.
@@ -952,7 +967,7 @@ fn clearing_the_reported_rows_restores_zero_gradients() {
 fn backward_refuses_overlapping_tile_ranges() {
     let scene = small_scene(200, 64, 48, 8, 10.0, (0.2, 0.9), 3);
     let cam = random_scene_camera(64, 48);
-    let mut out = render(&scene.as_set(), &cam, &settings(Vec3::ZERO));
+    let mut out = render(&scene.borrowed(), &cam, &settings(Vec3::ZERO));
     let offsets = &mut out.state.bins.tile_offsets;
     assert!(offsets[2] > 0, "the scene puts entries in the first tiles");
     offsets[1] = offsets[2]; // tile 0 now overlaps tile 1's entries
@@ -964,7 +979,7 @@ fn backward_refuses_overlapping_tile_ranges() {
         alpha: None,
         depth: None,
     };
-    render_backward(&scene.as_set(), &out, &grads_in, &mut g);
+    render_backward(&scene.borrowed(), &out, &grads_in, &mut g);
 }
 
 /// Texture-gradient rows that do not match the billboard set (here sized for 4×4 textures
@@ -974,7 +989,7 @@ fn backward_refuses_overlapping_tile_ranges() {
 fn backward_refuses_texture_gradients_of_another_size() {
     let scene = small_scene(200, 64, 48, 8, 10.0, (0.2, 0.9), 3);
     let cam = random_scene_camera(64, 48);
-    let out = render(&scene.as_set(), &cam, &settings(Vec3::ZERO));
+    let out = render(&scene.borrowed(), &cam, &settings(Vec3::ZERO));
     let mut g = RenderGradients::zeros(scene.len(), 4);
     add_weighted_backward(&scene, &cam, &out, 1, &mut g);
 }
@@ -991,7 +1006,7 @@ fn non_finite_parameters_never_render_as_plausible_values() {
     let scene = small_scene(12, 32, 32, 8, 10.0, (0.3, 0.8), 5);
     let cam = random_scene_camera(32, 32);
     let s = settings(Vec3::splat(0.2));
-    let clean = render(&scene.as_set(), &cam, &s);
+    let clean = render(&scene.borrowed(), &cam, &s);
     assert_eq!((clean.stats.non_finite_billboards, clean.stats.nan_alpha_pairs), (0, 0));
     assert!(clean.rgb.iter().all(|x| x.is_finite()));
     // The billboard with the largest impact: certainly on screen.
@@ -1000,19 +1015,25 @@ fn non_finite_parameters_never_render_as_plausible_values() {
         .unwrap();
     assert!(clean.impact[b] > 1.0);
     for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
-        type Edit = Box<dyn Fn(&mut Billboards)>;
+        type Edit = Box<dyn Fn(&mut ActivatedBillboards)>;
         let edits: [(&str, Edit); 3] = [
-            ("position", Box::new(move |m: &mut Billboards| m.positions[b].y = bad)),
-            ("log-scale", Box::new(move |m: &mut Billboards| m.log_scales[b].x = bad)),
+            (
+                "position",
+                Box::new(move |m: &mut ActivatedBillboards| m.positions[b].y = bad),
+            ),
+            (
+                "log-scale",
+                Box::new(move |m: &mut ActivatedBillboards| m.log_scales[b].x = bad),
+            ),
             (
                 "quaternion",
-                Box::new(move |m: &mut Billboards| m.quaternions[b][2] = bad),
+                Box::new(move |m: &mut ActivatedBillboards| m.quaternions[b][2] = bad),
             ),
         ];
         for (what, edit) in &edits {
             let mut m = scene.clone();
             edit(&mut m);
-            let out = render(&m.as_set(), &cam, &s);
+            let out = render(&m.borrowed(), &cam, &s);
             assert_eq!(out.stats.non_finite_billboards, 1, "{what} = {bad}");
             assert!(!out.visible[b] && out.impact[b] == 0.0, "{what} = {bad}");
             assert!(out.rgb.iter().all(|x| x.is_finite()), "{what} = {bad}");
@@ -1021,16 +1042,16 @@ fn non_finite_parameters_never_render_as_plausible_values() {
     let t = scene.texture_size * scene.texture_size;
     let mut m = scene.clone();
     m.sh[b * 48] = f32::NAN;
-    assert!(render(&m.as_set(), &cam, &s).rgb.iter().any(|x| x.is_nan()), "NaN SH");
+    assert!(render(&m.borrowed(), &cam, &s).rgb.iter().any(|x| x.is_nan()), "NaN SH");
     let mut m = scene.clone();
     m.textures[b * t..(b + 1) * t].iter_mut().for_each(|x| x[0] = f32::NAN);
     assert!(
-        render(&m.as_set(), &cam, &s).rgb.iter().any(|x| x.is_nan()),
+        render(&m.borrowed(), &cam, &s).rgb.iter().any(|x| x.is_nan()),
         "NaN colour texels"
     );
     let mut m = scene.clone();
     m.textures[b * t..(b + 1) * t].iter_mut().for_each(|x| x[3] = f32::NAN);
-    let out = render(&m.as_set(), &cam, &s);
+    let out = render(&m.borrowed(), &cam, &s);
     assert!(
         out.stats.nan_alpha_pairs > 0 && out.impact[b] == 0.0,
         "NaN alpha texels"
@@ -1040,7 +1061,7 @@ fn non_finite_parameters_never_render_as_plausible_values() {
     let mut g = RenderGradients::zeros(m.len(), m.texture_size);
     let d_rgb = vec![1.0; out.rgb.len()];
     let touched = render_backward(
-        &m.as_set(),
+        &m.borrowed(),
         &out,
         &ImageGradients {
             rgb: &d_rgb,

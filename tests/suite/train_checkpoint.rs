@@ -3,11 +3,12 @@
 //! typed errors of `Trainer::step`.
 
 use bbsplat::demo::{DemoConfig, generate};
-use bbsplat::model::Model;
+use bbsplat::model::RawBillboards;
+use bbsplat::scene::split::camera_extent;
 use bbsplat::train::checkpoint::{MAGIC, OLDEST_VERSION, VERSION};
 use bbsplat::train::{
     AdamMode, CheckpointError, ClampGradient, LearningRateScales, TextureMode, TrainConfig, TrainError, TrainView,
-    Trainer, scene_extent,
+    Trainer,
 };
 use glam::Vec3;
 use std::path::PathBuf;
@@ -28,7 +29,7 @@ fn setup(adam: AdamMode, texture_mode: TextureMode) -> (Trainer, Vec<TrainView>)
             rgb: v.rgb.clone(),
         })
         .collect();
-    let mut model = Model::from_points(&scene.points, &scene.colours, 4, 8);
+    let mut model = RawBillboards::from_points(&scene.points, &scene.colours, 4, 8);
     // A few dead billboards so that relocation (and its RNG draws) happens inside the run.
     for d in [3, 40, 77] {
         for k in 0..16 {
@@ -41,7 +42,7 @@ fn setup(adam: AdamMode, texture_mode: TextureMode) -> (Trainer, Vec<TrainView>)
         iterations: 128,
         seed: 8,
         background: Vec3::from_array(scene.background),
-        extent: scene_extent(&cams),
+        extent: camera_extent(&cams),
         relocate_every: 3,
         adam,
         texture_mode,

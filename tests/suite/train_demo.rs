@@ -1,8 +1,9 @@
 //! The trainer improves held-out PSNR on a tiny demo scene within seconds, deterministically.
 
 use bbsplat::demo::{DemoConfig, generate};
-use bbsplat::model::Model;
-use bbsplat::train::{AdamMode, LearningRateScales, TextureMode, TrainConfig, TrainView, Trainer, scene_extent};
+use bbsplat::model::RawBillboards;
+use bbsplat::scene::split::camera_extent;
+use bbsplat::train::{AdamMode, LearningRateScales, TextureMode, TrainConfig, TrainView, Trainer};
 use glam::Vec3;
 use std::time::Instant;
 
@@ -30,7 +31,7 @@ fn run(
     tweak: impl Fn(TrainConfig) -> TrainConfig,
 ) -> (f64, f64, Vec<f64>, Trainer) {
     let scene = generate(demo);
-    let model = Model::from_points(&scene.points, &scene.colours, texture_size, demo.seed);
+    let model = RawBillboards::from_points(&scene.points, &scene.colours, texture_size, demo.seed);
     let views = |v: &[bbsplat::demo::DemoView]| -> Vec<TrainView> {
         v.iter()
             .map(|v| TrainView {
@@ -46,7 +47,7 @@ fn run(
         sh_degree: 3,
         background: Vec3::from_array(scene.background),
         seed: demo.seed,
-        extent: scene_extent(&cams),
+        extent: camera_extent(&cams),
         ..TrainConfig::default()
     };
     let mut trainer = Trainer::new(model, tweak(config));

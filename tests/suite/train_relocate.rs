@@ -1,7 +1,7 @@
 //! Relocation of dead billboards: known dead rows are refilled by copies of alive ones whose
 //! split alphas composite back to the source's alpha; optimiser moments are reset; deterministic.
 
-use bbsplat::model::{Model, sigmoid};
+use bbsplat::model::{RawBillboards, sigmoid};
 use bbsplat::raster::SH_FLOATS;
 use bbsplat::train::{TextureMode, TrainConfig, Trainer, group};
 use glam::Vec3;
@@ -14,7 +14,7 @@ const DEAD: [usize; 3] = [2, 5, 7];
 fn synthetic(seed: u64, mode: TextureMode) -> Trainer {
     let points: Vec<Vec3> = (0..12).map(|i| Vec3::new(i as f32, 0.1 * i as f32, 0.0)).collect();
     let colours: Vec<[f32; 3]> = (0..12).map(|i| [0.05 * i as f32, 0.5, 0.9]).collect();
-    let mut model = Model::from_points(&points, &colours, TS, seed);
+    let mut model = RawBillboards::from_points(&points, &colours, TS, seed);
     for i in 0..12 {
         for k in 0..T {
             model.alpha_logits[i * T + k] = if DEAD.contains(&i) {
@@ -160,7 +160,7 @@ fn relocation_resets_the_moments_of_sources_and_dead_slots_only() {
             rgb: v.rgb.clone(),
         })
         .collect();
-    let model = Model::from_points(&scene.points, &scene.colours, TS, 4);
+    let model = RawBillboards::from_points(&scene.points, &scene.colours, TS, 4);
     let config = TrainConfig {
         iterations: 1000,
         relocate: false,

@@ -3,11 +3,12 @@
 //! with a typed error and the last good checkpoint on disk, and the clamp-gradient setting.
 
 use bbsplat::demo::{DemoConfig, generate};
-use bbsplat::model::{Model, logit};
+use bbsplat::model::{RawBillboards, logit};
+use bbsplat::scene::split::camera_extent;
 use bbsplat::train::run::{CHECKPOINT_FILE, MODEL_DIR, SUMMARY_FILE};
 use bbsplat::train::{
     ClampGradient, NonFinite, ParamGroup, RunConfig, RunError, RunOutcome, StopReason, StopSignal, TrainConfig,
-    TrainError, TrainEvent, TrainView, Trainer, run, scene_extent,
+    TrainError, TrainEvent, TrainView, Trainer, run,
 };
 use glam::Vec3;
 use std::path::PathBuf;
@@ -30,13 +31,13 @@ fn setup(iterations: usize, tweak: impl Fn(TrainConfig) -> TrainConfig) -> Setup
     });
     let train: Vec<TrainView> = scene.train.iter().map(TrainView::from_demo).collect();
     let test: Vec<TrainView> = scene.test.iter().map(TrainView::from_demo).collect();
-    let model = Model::from_points(&scene.points, &scene.colours, 4, 4);
+    let model = RawBillboards::from_points(&scene.points, &scene.colours, 4, 4);
     let cameras: Vec<_> = train.iter().map(|v| v.camera).collect();
     let config = TrainConfig {
         iterations,
         seed: 4,
         background: Vec3::from_array(scene.background),
-        extent: scene_extent(&cameras),
+        extent: camera_extent(&cameras),
         ..TrainConfig::default()
     };
     Setup {
@@ -550,7 +551,7 @@ fn measure_non_finite_check_cost() {
     let keep = bbsplat::init::fps::farthest_point_sampling(&scene.points, v[1]).unwrap();
     let points: Vec<Vec3> = keep.iter().map(|&i| scene.points[i]).collect();
     let colours: Vec<[f32; 3]> = keep.iter().map(|&i| scene.colours[i]).collect();
-    let model = Model::from_points(&points, &colours, 16, 0);
+    let model = RawBillboards::from_points(&points, &colours, 16, 0);
     let train: Vec<TrainView> = scene.train.iter().map(TrainView::from_demo).collect();
     let cameras: Vec<_> = train.iter().map(|v| v.camera).collect();
     let mut trainer = Trainer::new(
@@ -558,7 +559,7 @@ fn measure_non_finite_check_cost() {
         TrainConfig {
             iterations: 1000,
             background: Vec3::from_array(scene.background),
-            extent: scene_extent(&cameras),
+            extent: camera_extent(&cameras),
             ..TrainConfig::default()
         },
     );

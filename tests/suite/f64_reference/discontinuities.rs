@@ -25,7 +25,7 @@
 
 use super::gradients::{Group, Loss, analytic, get, set};
 use super::renderer::{Cam64, Fate, Scene64, Thresholds, Trace, render64};
-use bbsplat::billboards::Billboards;
+use bbsplat::billboards::ActivatedBillboards;
 use bbsplat::camera::Camera;
 use bbsplat::raster::{RenderSettings, render};
 use glam::{Mat3, Vec2, Vec3};
@@ -37,7 +37,7 @@ const SAME: f64 = 1e-6;
 
 /// A tiny scene and the pixel of interest.
 struct Tiny {
-    b: Billboards,
+    b: ActivatedBillboards,
     cam: Camera,
     settings: RenderSettings,
     pixel: usize,
@@ -136,7 +136,7 @@ const CENTRE_PIXEL: usize = 4 * 9 + 4;
 /// Appends a face-on billboard (identity rotation) at `(x, y, z)` with half sides 1, TS 3 and
 /// the given texels (`[r, g, b, alpha]`, row-major), SH giving colour (0.3, 0.5, 0.7) at degree
 /// 0.
-fn push_face_on(b: &mut Billboards, pos: Vec3, texels: [[f32; 4]; 9]) {
+fn push_face_on(b: &mut ActivatedBillboards, pos: Vec3, texels: [[f32; 4]; 9]) {
     b.positions.push(pos);
     b.quaternions.push([1.0, 0.0, 0.0, 0.0]);
     b.log_scales.push(Vec2::ZERO);
@@ -172,7 +172,7 @@ fn texel_index(b: usize, k: usize, ch: usize) -> usize {
 /// clamps only `a > 0.99`, so at equality its gradient is the **left** derivative.
 #[test]
 fn alpha_clamp_gives_the_left_derivative() {
-    let mut b = Billboards::empty(3);
+    let mut b = ActivatedBillboards::empty(3);
     push_face_on(&mut b, Vec3::new(0.0, 0.0, 2.0), flat_alpha(0.99));
     let t = Tiny {
         b,
@@ -200,7 +200,7 @@ fn alpha_clamp_gives_the_left_derivative() {
 /// derivative.
 #[test]
 fn alpha_cut_off_gives_the_right_derivative() {
-    let mut b = Billboards::empty(3);
+    let mut b = ActivatedBillboards::empty(3);
     push_face_on(&mut b, Vec3::new(0.0, 0.0, 2.0), flat_alpha(1.0 / 255.0));
     let t = Tiny {
         b,
@@ -214,7 +214,7 @@ fn alpha_cut_off_gives_the_right_derivative() {
         (t.th().min_alpha, Fate::Blend),
         "not exactly at the cut-off"
     );
-    let out = render(&t.b.as_set(), &t.cam, &t.settings);
+    let out = render(&t.b.borrowed(), &t.cam, &t.settings);
     assert!(out.alpha[CENTRE_PIXEL] > 0.0, "the crate must blend at equality");
     let s = t.sides(Group::Textures, texel_index(0, 4, 3), 1e-6);
     assert!(s.left.abs() > 1e3 * s.right.abs(), "the left side must jump: {s:?}");
@@ -229,7 +229,7 @@ fn alpha_cut_off_gives_the_right_derivative() {
 #[test]
 fn transmittance_stop_gives_the_left_derivative() {
     let alphas = [0.5f32, 1.0 - 225_280.0 / 16_777_216.0, 1.0 - 249_889.0 / 16_777_216.0];
-    let mut b = Billboards::empty(3);
+    let mut b = ActivatedBillboards::empty(3);
     for (k, a) in alphas.iter().enumerate() {
         push_face_on(&mut b, Vec3::new(0.0, 0.0, 2.0 + k as f32), flat_alpha(*a));
     }
@@ -249,7 +249,7 @@ fn transmittance_stop_gives_the_left_derivative() {
     // In f32: the same products, exact.
     let t2 = (1.0f32 - alphas[0]) * (1.0 - alphas[1]);
     assert_eq!(t2 * (1.0 - alphas[2]), 1e-4f32);
-    let out = render(&t.b.as_set(), &t.cam, &t.settings);
+    let out = render(&t.b.borrowed(), &t.cam, &t.settings);
     assert!(out.impact[2] > 0.0, "the crate must blend the third layer at equality");
     let s = t.sides(Group::Textures, texel_index(2, 4, 3), 1e-7);
     assert!(s.right.abs() > 1e3 * s.left.abs(), "the right side must jump: {s:?}");
@@ -265,7 +265,7 @@ fn transmittance_stop_gives_the_left_derivative() {
 #[test]
 fn near_plane_on_the_hit_gives_the_far_side() {
     let d = 0.2f32;
-    let mut b = Billboards::empty(4);
+    let mut b = ActivatedBillboards::empty(4);
     b.positions.push(Vec3::new(0.0, d, 0.25));
     b.quaternions.push([0.5, -0.5, -0.5, -0.5]);
     b.log_scales.push(Vec2::ZERO);
@@ -294,7 +294,7 @@ fn near_plane_on_the_hit_gives_the_far_side() {
         (t.th().near, Fate::Blend),
         "not exactly at the near plane"
     );
-    let out = render(&t.b.as_set(), &t.cam, &t.settings);
+    let out = render(&t.b.borrowed(), &t.cam, &t.settings);
     assert!(out.alpha[0] > 0.0, "the crate must accept the hit at equality");
     assert_eq!(
         out.depth[0],
@@ -311,7 +311,7 @@ fn near_plane_on_the_hit_gives_the_far_side() {
 /// side, where the billboard stays culled; the far side makes it appear (a jump).
 #[test]
 fn near_plane_on_the_centre_gives_the_near_side() {
-    let mut b = Billboards::empty(3);
+    let mut b = ActivatedBillboards::empty(3);
     push_face_on(&mut b, Vec3::new(0.0, 0.0, 0.2), flat_alpha(0.6));
     b.log_scales[0] = Vec2::splat(0.05f32.ln());
     let t = Tiny {
@@ -325,7 +325,7 @@ fn near_plane_on_the_centre_gives_the_near_side() {
         !trace.visible[0] && trace.centre_depth[0] == t.th().near,
         "not exactly at the near plane"
     );
-    let out = render(&t.b.as_set(), &t.cam, &t.settings);
+    let out = render(&t.b.borrowed(), &t.cam, &t.settings);
     assert!(!out.visible[0], "the crate must cull at equality");
     let s = t.sides(Group::Positions, 2, 1e-7);
     assert_eq!(s.left, 0.0);
@@ -347,7 +347,7 @@ fn texel_centre_lines_give_the_right_derivative_in_u() {
         let a = [0.2f32, 0.6, 0.3][col] * [0.9f32, 1.0, 0.7][row];
         [0.2 + 0.2 * col as f32, 0.7 - 0.3 * row as f32, 0.4, a]
     };
-    let mut b = Billboards::empty(3);
+    let mut b = ActivatedBillboards::empty(3);
     push_face_on(&mut b, Vec3::new(0.0, 0.0, 2.0), std::array::from_fn(texels));
     let mut t = Tiny {
         b,
@@ -375,7 +375,7 @@ fn texel_centre_lines_give_the_right_derivative_in_u() {
 /// and so is the crate's (it skips the pair).
 #[test]
 fn support_border_gives_zero_on_both_sides() {
-    let mut b = Billboards::empty(3);
+    let mut b = ActivatedBillboards::empty(3);
     push_face_on(&mut b, Vec3::new(2.0, 0.0, 2.0), flat_alpha(0.8));
     let t = Tiny {
         b,

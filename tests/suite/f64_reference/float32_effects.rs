@@ -7,7 +7,7 @@ use super::forward::rotation_with_normal;
 use super::renderer::{Cam64, Fate, Scene64, Thresholds, render64};
 use super::scenes::{Placer, Spec, camera, push_random, scene};
 use super::{both, rel_l2};
-use bbsplat::billboards::Billboards;
+use bbsplat::billboards::ActivatedBillboards;
 use bbsplat::camera::Camera;
 use bbsplat::raster::{RenderSettings, render};
 use bbsplat::rng::Rng;
@@ -51,9 +51,9 @@ fn oblique_plane_near_the_near_plane() {
         let centre = [0.0, height / psi.cos(), 500.0];
         let (pos, q) = placer.place(centre, rotation_with_normal(n, 0.3));
         let mut rng = Rng::new(40 + k);
-        let mut b = Billboards::empty(4);
+        let mut b = ActivatedBillboards::empty(4);
         push_random(&mut b, pos, q, Vec2::splat(700f32.ln()), (0.3, 0.9), &mut rng);
-        let out = render(&b.as_set(), &cam, &settings);
+        let out = render(&b.borrowed(), &cam, &settings);
         let s64 = Scene64::of(&b, &settings);
         let (img, trace) = render64(&s64, &Cam64::of(&cam), &th, true);
         let trace = trace.expect("traced");
@@ -120,7 +120,7 @@ fn sh_view_direction_far_from_the_origin() {
         for c in &mut b.sh {
             *c = rng.range(-0.5, 0.5);
         }
-        let out = render(&b.as_set(), &cam, &s);
+        let out = render(&b.borrowed(), &cam, &s);
         let th = Thresholds::crate_values(&s.composite);
         let (img, trace) = render64(&Scene64::of(&b, &s), &Cam64::of(&cam), &th, true);
         let trace = trace.expect("traced");
@@ -170,7 +170,7 @@ fn two_layers_at_the_clamp() {
         width: 3,
         height: 3,
     };
-    let mut b = Billboards::empty(2);
+    let mut b = ActivatedBillboards::empty(2);
     let colours = [[0.2f32, 0.4, 0.6], [0.9, 0.1, 0.5]];
     for (k, c) in colours.iter().enumerate() {
         b.positions.push(Vec3::new(0.0, 0.0, 2.0 + k as f32));
@@ -238,7 +238,7 @@ fn two_interpolated_layers_at_the_clamp() {
         width: 8,
         height: 8,
     };
-    let mut b = Billboards::empty(5);
+    let mut b = ActivatedBillboards::empty(5);
     for k in 0..2 {
         b.positions
             .push(Vec3::new(0.013 * k as f32, -0.021 * k as f32, 2.0 + k as f32));

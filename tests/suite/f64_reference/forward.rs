@@ -7,7 +7,7 @@
 use super::renderer::{Cam64, Scene64, V3, cross, dot, rotation_columns};
 use super::scenes::{Facing, Placer, Spec, axis_angle, camera, push_random, qmul, scene};
 use super::{ImageErrors, both, image_errors};
-use bbsplat::billboards::Billboards;
+use bbsplat::billboards::ActivatedBillboards;
 use bbsplat::camera::Camera;
 use bbsplat::raster::RenderSettings;
 use bbsplat::rng::Rng;
@@ -15,7 +15,7 @@ use bbsplat::stages::composite::CompositeParams;
 use glam::{Mat3, Vec2, Vec3};
 
 /// Renders with both renderers, prints the errors and returns them.
-fn errors_of(name: &str, b: &Billboards, cam: &Camera, s: &RenderSettings) -> ImageErrors {
+fn errors_of(name: &str, b: &ActivatedBillboards, cam: &Camera, s: &RenderSettings) -> ImageErrors {
     let (out, img) = both(b, cam, s);
     let e = image_errors(&out, &img);
     eprintln!(
@@ -92,7 +92,7 @@ fn hard_case_grazing_planes() {
     let cam = camera(Q_CAM, EYE, 48.0, w, h);
     let placer = Placer::new(&cam, Q_CAM, EYE);
     let mut rng = Rng::new(7);
-    let mut b = Billboards::empty(8);
+    let mut b = ActivatedBillboards::empty(8);
     let margins_deg: [f64; 8] = [10.0, 5.0, 2.0, 1.0, 0.5, 0.1, 0.01, 0.001];
     for (k, m) in margins_deg.iter().enumerate() {
         for rep in 0..3 {
@@ -143,7 +143,7 @@ fn hard_case_edge_on_and_floor() {
         height: h,
     };
     let mut rng = Rng::new(11);
-    let mut b = Billboards::empty(4);
+    let mut b = ActivatedBillboards::empty(4);
     // Normal (0, 1, 0), t_u = (0, 0, 1), t_v = (1, 0, 0): exactly representable.
     let floor_q = [0.5, -0.5, -0.5, -0.5];
     push_random(
@@ -211,7 +211,7 @@ fn hard_case_crossing_the_camera_plane() {
     let cam = camera(Q_CAM, EYE, 36.0, w, h);
     let placer = Placer::new(&cam, Q_CAM, EYE);
     let mut rng = Rng::new(13);
-    let mut b = Billboards::empty(6);
+    let mut b = ActivatedBillboards::empty(6);
     for k in 0..10 {
         let z = 0.6 + 0.19 * k as f64;
         let p = [(rng.uniform_f64() - 0.5) * z, (rng.uniform_f64() - 0.5) * z, z];

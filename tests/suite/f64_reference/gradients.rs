@@ -18,7 +18,7 @@
 
 use super::renderer::{Cam64, Fate, PairTrace, Scene64, Thresholds, Trace, render64};
 use super::scenes::{Facing, Spec, scene};
-use bbsplat::billboards::Billboards;
+use bbsplat::billboards::ActivatedBillboards;
 use bbsplat::camera::Camera;
 use bbsplat::raster::backward::ImageGradients;
 use bbsplat::raster::{RenderGradients, RenderSettings, render, render_backward};
@@ -117,15 +117,15 @@ impl Loss {
     }
 
     /// The crate's gradients of this loss.
-    pub fn crate_gradients(&self, b: &Billboards, cam: &Camera, s: &RenderSettings) -> RenderGradients {
-        let out = render(&b.as_set(), cam, s);
+    pub fn crate_gradients(&self, b: &ActivatedBillboards, cam: &Camera, s: &RenderSettings) -> RenderGradients {
+        let out = render(&b.borrowed(), cam, s);
         let mut g = RenderGradients::zeros(b.len(), b.texture_size);
         let ig = ImageGradients {
             rgb: &self.rgb,
             alpha: Some(&self.alpha),
             depth: Some(&self.depth),
         };
-        render_backward(&b.as_set(), &out, &ig, &mut g);
+        render_backward(&b.borrowed(), &out, &ig, &mut g);
         g
     }
 }

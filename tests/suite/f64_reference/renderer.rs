@@ -21,7 +21,7 @@
 //! centre, `max(Σ + 0.5, 0)`. Colour = texture rgb + SH colour. Compositing over all billboards
 //! sorted by centre view depth (ties by index), with the thresholds of [`Thresholds`].
 
-use bbsplat::billboards::Billboards;
+use bbsplat::billboards::ActivatedBillboards;
 use bbsplat::camera::Camera;
 use bbsplat::raster::RenderSettings;
 use bbsplat::stages::composite::CompositeParams;
@@ -111,7 +111,7 @@ pub struct Scene64 {
 
 impl Scene64 {
     /// Exact f64 copy of an f32 billboard set and its settings.
-    pub fn of(b: &Billboards, settings: &RenderSettings) -> Self {
+    pub fn of(b: &ActivatedBillboards, settings: &RenderSettings) -> Self {
         Self {
             pos: b.positions.iter().map(|p| p.to_array().map(f64::from)).collect(),
             quat: b.quaternions.iter().map(|q| q.map(f64::from)).collect(),

@@ -2,7 +2,7 @@
 //! in its view, built with this module's own f64 geometry (no crate helper).
 
 use super::renderer::{V3, rotation_columns};
-use bbsplat::billboards::Billboards;
+use bbsplat::billboards::ActivatedBillboards;
 use bbsplat::camera::Camera;
 use bbsplat::raster::RenderSettings;
 use bbsplat::rng::Rng;
@@ -110,7 +110,7 @@ pub fn spec_camera(spec: &Spec) -> Camera {
 
 /// Random billboards in the view of [`spec_camera`] and the render settings (training
 /// thresholds, a seeded background, the spec's SH degree).
-pub fn scene(spec: &Spec) -> (Billboards, Camera, RenderSettings) {
+pub fn scene(spec: &Spec) -> (ActivatedBillboards, Camera, RenderSettings) {
     let cam = spec_camera(spec);
     let mut rng = Rng::new(spec.seed);
     let r = cam.rotation.to_cols_array_2d(); // r[col][row]
@@ -119,7 +119,7 @@ pub fn scene(spec: &Spec) -> (Billboards, Camera, RenderSettings) {
     let q_cam = normalise([0.9, 0.15, -0.3, 0.2]);
     let q_cam_inv = [q_cam[0], -q_cam[1], -q_cam[2], -q_cam[3]];
     let ts = spec.ts;
-    let mut b = Billboards::empty(ts);
+    let mut b = ActivatedBillboards::empty(ts);
     for _ in 0..spec.n {
         let x = rng.uniform_f64() * spec.width as f64;
         let y = rng.uniform_f64() * spec.height as f64;
@@ -208,7 +208,14 @@ impl Placer {
 }
 
 /// Appends one billboard with seeded random SH and textures (alpha texels in `alpha`).
-pub fn push_random(b: &mut Billboards, pos: Vec3, q: [f32; 4], log_scales: Vec2, alpha: (f32, f32), rng: &mut Rng) {
+pub fn push_random(
+    b: &mut ActivatedBillboards,
+    pos: Vec3,
+    q: [f32; 4],
+    log_scales: Vec2,
+    alpha: (f32, f32),
+    rng: &mut Rng,
+) {
     b.positions.push(pos);
     b.quaternions.push(q);
     b.log_scales.push(log_scales);
