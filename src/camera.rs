@@ -155,8 +155,14 @@ impl Camera {
     /// ```
     #[inline]
     pub fn view_offset(&self, position: Vec3) -> Vec3 {
-        let centre = -(self.rotation.as_dmat3().transpose() * self.translation.as_dvec3());
-        (position.as_dvec3() - centre).as_vec3()
+        offset_from(self.centre_f64(), position)
+    }
+
+    /// The camera centre `−Rᵀt` in f64 (what [`Camera::view_offset`] subtracts); a caller with
+    /// many positions takes it once and calls [`offset_from`].
+    #[inline]
+    pub fn centre_f64(&self) -> glam::DVec3 {
+        -(self.rotation.as_dmat3().transpose() * self.translation.as_dvec3())
     }
 
     /// Projects a world point to continuous pixel coordinates; `None` when the point is not in
@@ -193,6 +199,13 @@ impl Camera {
             ..*self
         }
     }
+}
+
+/// `position − centre` in f64, rounded once: [`Camera::view_offset`] with the f64 centre
+/// ([`Camera::centre_f64`]) taken once for many positions.
+#[inline]
+pub fn offset_from(centre: glam::DVec3, position: Vec3) -> Vec3 {
+    (position.as_dvec3() - centre).as_vec3()
 }
 
 #[cfg(test)]

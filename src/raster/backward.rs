@@ -21,6 +21,7 @@ use super::forward::{
 };
 use super::preprocess::Prepared;
 use super::{ActivatedRef, SH_FLOATS};
+use crate::camera::offset_from;
 use crate::stages::bilinear::BilinearTaps;
 use crate::stages::composite::{Blend, CompositeBackState, Step, classify};
 use crate::stages::ray_plane::{intersect_vjp_with, pixel_ray};
@@ -578,6 +579,7 @@ pub fn render_backward(
         grads.background += tg.background;
     }
     let camera = &state.camera;
+    let centre = camera.centre_f64();
     let degree = state.settings.sh_degree;
     // The records of the entries of billboard `b`, in tile order.
     let entry_records = |b: usize| {
@@ -678,7 +680,7 @@ pub fn render_backward(
                 let d_pos_sh = sh_colour_vjp_clamped(
                     degree,
                     set.sh_of(b),
-                    camera.view_offset(set.positions[b]),
+                    offset_from(centre, set.positions[b]),
                     prepared.sh_clamped,
                     d_rgb,
                     d_sh,

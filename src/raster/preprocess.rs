@@ -1,7 +1,7 @@
 //! Per-billboard preprocessing: transform, normal, depth, SH colour and a tight screen box.
 
 use super::{ActivatedRef, RenderSettings};
-use crate::camera::Camera;
+use crate::camera::{Camera, offset_from};
 use crate::memory::resize_for_overwrite;
 use crate::stages::ray_plane::ViewPlane;
 use crate::stages::sh::{ShColour, sh_colour, sh_colour_batch};
@@ -130,6 +130,7 @@ pub fn preprocess_into(
     prepared: &mut Vec<Option<Prepared>>,
 ) {
     let degree = settings.sh_degree;
+    let centre = camera.centre_f64();
     let half_side = support_half_side(set.texture_size);
     resize_for_overwrite(prepared, set.len(), None)
         .par_chunks_mut(PREPROCESS_CHUNK)
@@ -169,7 +170,7 @@ pub fn preprocess_into(
                 let colours = sh_colour_batch(
                     degree,
                     index.map(|i| set.sh_of(i)),
-                    index.map(|i| camera.view_offset(set.positions[i])),
+                    index.map(|i| offset_from(centre, set.positions[i])),
                 );
                 for (&k, colour) in group.iter().zip(colours) {
                     if let Some(p) = out[k].as_mut() {
@@ -184,7 +185,7 @@ pub fn preprocess_into(
                         sh_colour(
                             degree,
                             set.sh_of(first + k),
-                            camera.view_offset(set.positions[first + k]),
+                            offset_from(centre, set.positions[first + k]),
                         ),
                     );
                 }
