@@ -2,7 +2,7 @@
 //! (1 and 3 channels) and their VJP, compositing per entry (forward and backward), SH
 //! evaluation (degrees 0-3) and its VJP.
 //!
-//! `cargo bench --bench appearance -- --warm-up-time 1 --measurement-time 3`
+//! `cargo bench --features bench --bench appearance -- --warm-up-time 1 --measurement-time 3`
 //!
 //! Inputs come from a ring of pre-generated random values (seeded), so that the branch
 //! predictor does not see the same case every iteration.

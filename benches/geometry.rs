@@ -1,6 +1,6 @@
 //! Benchmarks of the geometry stages (ns per call).
 //!
-//! `cargo bench --bench geometry -- --warm-up-time 1 --measurement-time 3`
+//! `cargo bench --features bench --bench geometry -- --warm-up-time 1 --measurement-time 3`
 //!
 //! Per-billboard stages are timed over a batch of 64 different billboards, per-pixel stages over
 //! a 16×16 tile of pixel centres, so each iteration sees varied inputs; criterion's throughput

@@ -1,7 +1,7 @@
 //! Initialisation benches: farthest point sampling, the Fibonacci sphere and the 3-NN scale
 //! statistic (k-d tree and brute force).
 //!
-//! `cargo bench --bench init -- --warm-up-time 1 --measurement-time 3`
+//! `cargo bench --features bench --bench init -- --warm-up-time 1 --measurement-time 3`
 
 use bbsplat::init::fibonacci::{fibonacci_sphere, sky_radius};
 use bbsplat::init::fps::{farthest_point_sampling, farthest_point_sampling_dense};

@@ -1,6 +1,6 @@
 //! Loss benches at the training resolution (400×400 RGB).
 //!
-//! `cargo bench --bench loss -- --warm-up-time 1 --measurement-time 3`
+//! `cargo bench --features bench --bench loss -- --warm-up-time 1 --measurement-time 3`
 
 use bbsplat::loss::l1::l1;
 use bbsplat::loss::psnr::psnr;

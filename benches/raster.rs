@@ -3,7 +3,7 @@
 //! render's storage between calls (`render_with`, as the trainer does); `fwd_bwd_fresh/256/50000`
 //! allocates it afresh every call (`render`).
 //!
-//! `cargo bench --bench raster` (all), or e.g. `cargo bench --bench raster -- 'fwd_bwd/256/50000'`.
+//! `cargo bench --features bench --bench raster` (all), or e.g. `cargo bench --features bench --bench raster -- 'fwd_bwd/256/50000'`.
 use bbsplat::billboards::{RandomSceneConfig, random_scene, random_scene_camera};
 use bbsplat::raster::backward::ImageGradients;
 use bbsplat::raster::{RenderBuffers, RenderGradients, RenderSettings, render, render_backward, render_with};

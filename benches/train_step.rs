@@ -1,7 +1,7 @@
 //! One whole training step (render, loss, backward, Adam, re-activation) on the demo scene, and
 //! the row-sparse Adam update on its own (the one stage no other bench covers).
 //!
-//! `cargo bench --bench train_step` (all), or e.g. `cargo bench --bench train_step -- 'step/96px'`.
+//! `cargo bench --features bench --bench train_step` (all), or e.g. `cargo bench --features bench --bench train_step -- 'step/96px'`.
 //!
 //! The step's cost depends on the schedule: textures train only from 1/64 of the run on and the
 //! SH degree rises every 1/32. Each timed batch of `iters` steps therefore starts from a fresh

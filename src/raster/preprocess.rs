@@ -121,7 +121,7 @@ pub fn preprocess(set: &ActivatedRef<'_>, camera: &Camera, settings: &RenderSett
 /// on the benchmark scene, depending on the host's phase, `docs/perf-log.md`), then the SH colours
 /// of those that
 /// survived, [`SH_BATCH`] at a time ([`sh_colour_batch`], whose interleaved dependency chains
-/// take 21.8 ns a colour against 36.5 ns one at a time, `cargo bench --bench appearance --
+/// take 21.8 ns a colour against 36.5 ns one at a time, `cargo bench --features bench --bench appearance --
 /// eval`). Every record equals [`prepare_one`]'s bit for bit (tested).
 pub fn preprocess_into(
     set: &ActivatedRef<'_>,
