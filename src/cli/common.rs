@@ -3,7 +3,7 @@
 use anyhow::{Context, Result};
 use bbsplat::scene::{Background, LoadOptions, Scene, View};
 use clap::{Args, ValueEnum};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Background colour flag.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -102,13 +102,10 @@ pub fn write_png_atomic(path: &Path, rgb: &[f32], width: u32, height: u32) -> Re
     Ok(())
 }
 
-/// Writes `text` to `path` through a temporary name in the same folder.
+/// Writes `text` to `path` atomically ([`bbsplat::train::checkpoint::write_atomic`]: a temporary
+/// file in the same folder, flushed to disk, renamed over `path`).
 pub fn write_text_atomic(path: &Path, text: &str) -> Result<()> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
-    std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))?;
+    bbsplat::train::checkpoint::write_atomic(path, text.as_bytes())?;
     Ok(())
 }
 

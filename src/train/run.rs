@@ -354,20 +354,14 @@ fn evaluate(
     Ok((report.mean_psnr, report.mean_ssim, report.mean_render_ms))
 }
 
-/// Writes `text` to `path` through a temporary name in the same folder.
+/// Writes `text` to `path` with [`crate::train::checkpoint::write_atomic`] (a temporary file in
+/// the same folder, flushed to disk, renamed over `path`; removed on error), its I/O errors
+/// reported as this run's.
 fn write_text_atomic(path: &Path, text: &str) -> Result<(), RunError> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
-    let io = |action| {
-        move |source| RunError::Io {
-            path: path.to_path_buf(),
-            action,
-            source,
-        }
-    };
-    std::fs::write(&tmp, text).map_err(io("writing"))?;
-    std::fs::rename(&tmp, path).map_err(io("renaming the temporary file"))
+    crate::train::checkpoint::write_atomic(path, text.as_bytes()).map_err(|e| match e {
+        CheckpointError::Io { path, action, source } => RunError::Io { path, action, source },
+        other => RunError::Checkpoint(other),
+    })
 }
 
 /// The name of the clamp gradient in the summary.

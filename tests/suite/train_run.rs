@@ -518,6 +518,39 @@ fn the_summary_records_the_clamp_gradient() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// A summary that cannot be written (a folder stands where `summary.json` goes) is a typed I/O
+/// error naming the file and the step that failed, and no temporary file is left behind.
+#[test]
+fn an_unwritable_summary_is_an_io_error_naming_the_file() {
+    let Setup {
+        mut trainer,
+        train,
+        test,
+    } = setup(2, |c| c);
+    let dir = temp_dir("summary-blocked");
+    std::fs::create_dir_all(dir.join(SUMMARY_FILE)).unwrap();
+    let config = RunConfig {
+        output: Some(dir.clone()),
+        ..RunConfig::default()
+    };
+    let err = run(&mut trainer, &train, &test, &config, &StopSignal::new(), |_| {}).unwrap_err();
+    match &err {
+        RunError::Io { path, action, .. } => {
+            assert_eq!(path, &dir.join(SUMMARY_FILE), "{err}");
+            assert_eq!(*action, "renaming the temporary file", "{err}");
+        }
+        other => panic!("expected an I/O error, got {other:?}"),
+    }
+    assert!(err.to_string().contains(SUMMARY_FILE), "{err}");
+    let leftovers: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains(".tmp"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 #[test]
 fn no_training_views_is_a_typed_error() {
     let Setup { mut trainer, test, .. } = setup(2, |c| c);
