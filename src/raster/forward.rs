@@ -183,14 +183,6 @@ fn shade_pixel(
     }
 }
 
-/// Billboards of `set` with a non-finite position, log-scale or quaternion component.
-fn count_non_finite(set: &ActivatedRef<'_>) -> u64 {
-    (set.positions, set.log_scales, set.quaternions)
-        .into_par_iter()
-        .filter(|(p, s, q)| !(p.is_finite() && s.is_finite() && q.iter().all(|x| x.is_finite())))
-        .count() as u64
-}
-
 /// Hints the CPU to fetch the cache line holding `data[i]` (no effect on results).
 #[inline(always)]
 pub(crate) fn prefetch<T>(data: &[T], i: usize) {
@@ -619,7 +611,7 @@ pub fn render_with(
     } = buffers;
     let (w, h) = (camera.width, camera.height);
     let n_pix = camera.pixel_count();
-    preprocess_into(set, camera, settings, &mut prepared);
+    let non_finite_billboards = preprocess_into(set, camera, settings, &mut prepared);
     bin_into(&prepared, w, h, &mut bins, &mut spare.bin_scratch);
     let n_tiles = bins.tile_count();
     let half_side = crate::stages::splat_transform::support_half_side(set.texture_size);
@@ -777,7 +769,7 @@ pub fn render_with(
             tile_entries: bins.entries.len() as u64,
             evaluated_pairs,
             blended_pairs: u64::from(blended_count),
-            non_finite_billboards: count_non_finite(set),
+            non_finite_billboards,
             nan_alpha_pairs,
         },
         state: ForwardState {

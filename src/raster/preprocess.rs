@@ -115,6 +115,9 @@ pub fn preprocess(set: &ActivatedRef<'_>, camera: &Camera, settings: &RenderSett
 }
 
 /// [`preprocess`] into `prepared`, reusing its storage (its old values are all replaced).
+/// Returns the number of billboards with a non-finite position, log-scale or quaternion
+/// component (all of them culled; counted among the culled ones only, so the check costs nothing
+/// for the billboards that are kept).
 ///
 /// Each task takes [`PREPROCESS_CHUNK`] billboards: first their geometry, the splat frames four
 /// at a time ([`splat_frames_x4`], in vector lanes: 6-17 % less time for the whole preprocess
@@ -128,16 +131,17 @@ pub fn preprocess_into(
     camera: &Camera,
     settings: &RenderSettings,
     prepared: &mut Vec<Option<Prepared>>,
-) {
+) -> u64 {
     let degree = settings.sh_degree;
     let centre = camera.centre_f64();
     let half_side = support_half_side(set.texture_size);
     resize_for_overwrite(prepared, set.len(), None)
         .par_chunks_mut(PREPROCESS_CHUNK)
         .enumerate()
-        .for_each_init(Vec::new, |live: &mut Vec<usize>, (c, out)| {
+        .map_init(Vec::new, |live: &mut Vec<usize>, (c, out)| {
             let first = c * PREPROCESS_CHUNK;
             live.clear();
+            let mut non_finite = 0u64;
             let whole = out.len() / 4 * 4;
             for (g, group) in out[..whole].chunks_exact_mut(4).enumerate() {
                 let i0 = first + 4 * g;
@@ -155,6 +159,8 @@ pub fn preprocess_into(
                         .map(|r| with_plane(r, set, i0 + l, camera));
                     if slot.is_some() {
                         live.push(4 * g + l);
+                    } else {
+                        non_finite += u64::from(has_non_finite_geometry(set, i0 + l));
                     }
                 }
             }
@@ -162,6 +168,8 @@ pub fn preprocess_into(
                 out[k] = prepare_geometry(set, first + k, camera);
                 if out[k].is_some() {
                     live.push(k);
+                } else {
+                    non_finite += u64::from(has_non_finite_geometry(set, first + k));
                 }
             }
             let mut groups = live.chunks_exact(SH_BATCH);
@@ -190,7 +198,15 @@ pub fn preprocess_into(
                     );
                 }
             }
-        });
+            non_finite
+        })
+        .sum()
+}
+
+/// Billboard `i` of `set` has a non-finite position, log-scale or quaternion component.
+#[inline]
+fn has_non_finite_geometry(set: &ActivatedRef<'_>, i: usize) -> bool {
+    !(set.positions[i].is_finite() && set.log_scales[i].is_finite() && set.quaternions[i].iter().all(|x| x.is_finite()))
 }
 
 #[cfg(test)]

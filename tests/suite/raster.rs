@@ -1039,6 +1039,11 @@ fn non_finite_parameters_never_render_as_plausible_values() {
             assert!(out.rgb.iter().all(|x| x.is_finite()), "{what} = {bad}");
         }
     }
+    // A billboard past the last group of four of a preprocess chunk (the scalar path).
+    let mut odd = small_scene(13, 32, 32, 8, 10.0, (0.3, 0.8), 5);
+    odd.quaternions[12][0] = f32::NAN;
+    odd.positions[3].x = f32::INFINITY;
+    assert_eq!(render(&odd.borrowed(), &cam, &s).stats.non_finite_billboards, 2);
     let t = scene.texture_size * scene.texture_size;
     let mut m = scene.clone();
     m.sh[b * 48] = f32::NAN;
