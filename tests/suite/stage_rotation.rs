@@ -4,12 +4,10 @@
 //! --nocapture measure` (worst case over 40 seeds × 256 cases per property); the numbers are in
 //! `docs/numerics-geometry.md` and next to each constant.
 
-use approx::abs_diff_eq;
 use bbsplat::gradcheck::{GradReport, GradTolerance, StepRule, check_vjp};
 use bbsplat::stages::rotation::{QUAT_NORM_SQ_MIN, quat_to_rotation, quat_to_rotation_vjp};
 use bbsplat::strategies::{quaternion, seeded_config, unit_quaternion};
 use glam::Mat3;
-use nalgebra::{Matrix3, Quaternion, UnitQuaternion};
 use proptest::prelude::*;
 use proptest::strategy::ValueTree;
 use proptest::test_runner::{RngSeed, TestRunner};
@@ -118,15 +116,36 @@ proptest! {
     }
 
     #[test]
-    fn matches_nalgebra_f64(q in wide_quaternion()) {
-        // Independent convention check: nalgebra's Quaternion::new(w, i, j, k), in f64.
-        let nq = UnitQuaternion::from_quaternion(Quaternion::new(q[0] as f64, q[1] as f64, q[2] as f64, q[3] as f64));
-        let m = nq.to_rotation_matrix();
+    fn matches_hamilton_product_f64(q in wide_quaternion()) {
+        // Independent convention check from the definition, in f64: column j of R is the basis
+        // vector e_j rotated as the vector part of q·e_j·q̄ / |q|², with q = (w, x, y, z) and the
+        // Hamilton product (no closed-form matrix involved). Elementwise |ours − it| ≤ 1e-6.
+        let qd = q.map(|c| c as f64);
+        let norm_sq: f64 = qd.iter().map(|c| c * c).sum();
+        let conj = [qd[0], -qd[1], -qd[2], -qd[3]];
         let r = quat_to_rotation(q);
-        // Elementwise |ours − nalgebra| ≤ 1e-6 (approx's comparison on nalgebra matrices).
-        let ours = Matrix3::from_fn(|i, j| r.col(j)[i] as f64);
-        prop_assert!(abs_diff_eq!(ours, *m.matrix(), epsilon = 1e-6), "R = {ours} vs {}", m.matrix());
+        for j in 0..3 {
+            let mut e = [0.0f64; 4];
+            e[j + 1] = 1.0;
+            let rotated = hamilton(hamilton(qd, e), conj);
+            prop_assert!(rotated[0].abs() <= 1e-9 * norm_sq, "scalar part {}", rotated[0]);
+            for i in 0..3 {
+                let expected = rotated[i + 1] / norm_sq;
+                let ours = r.col(j)[i] as f64;
+                prop_assert!((ours - expected).abs() <= 1e-6, "R[{i}][{j}] = {ours} vs {expected} for q = {q:?}");
+            }
+        }
     }
+}
+
+/// Hamilton product of quaternions stored as (w, x, y, z).
+fn hamilton(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+    [
+        a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+        a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+        a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+        a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0],
+    ]
 }
 
 /// Fraction of `cases` random quaternions for which `backward` fails the FD check.
