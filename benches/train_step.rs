@@ -1,5 +1,8 @@
-//! One whole training step (render, loss, backward, Adam, re-activation) on the demo scene, and
-//! the row-sparse Adam update on its own (the one stage no other bench covers).
+//! One whole training step (render, loss, backward, regularisers, Adam, re-activation) on the
+//! demo scene (`step/96px/3000`, `step/192px/10000`) and on the trained-like scene of
+//! `bbsplat::billboards::trained_like` (`step/trained/400/10000`: the object preset, whose
+//! per-pixel work matches a trained lego state at 400×400; `docs/benchmarks.md`), and the
+//! row-sparse Adam update on its own (the one stage no other bench covers).
 //!
 //! `cargo bench --features bench --bench train_step` (all), or e.g. `cargo bench --features bench --bench train_step -- 'step/96px'`.
 //!
@@ -7,9 +10,11 @@
 //! SH degree rises every 1/32. Each timed batch of `iters` steps therefore starts from a fresh
 //! trainer on a run of `16·iters + 64` steps and first runs, untimed, the steps up to 3/32 of the
 //! run, so every timed step has textures on and SH degree 3 (as in most of a real run).
+use bbsplat::billboards::{TrainedLikeConfig, random_scene_camera, trained_like_scene};
 use bbsplat::demo::{DemoConfig, generate};
 use bbsplat::init::fps::farthest_point_sampling;
 use bbsplat::model::RawBillboards;
+use bbsplat::raster::{RenderSettings, render};
 use bbsplat::scene::split::camera_extent;
 use bbsplat::train::adam::{AdamGroup, AdamParams};
 use bbsplat::train::{TrainConfig, TrainView, Trainer};
@@ -60,15 +65,52 @@ fn demo_setup(resolution: u32, billboards: usize) -> Setup {
     Setup { model, views, config }
 }
 
+/// The trained-like object scene (`billboards` billboards, 400×400) as a model to train, with one
+/// view: its camera, and as target the render of the same preset drawn with another seed (so the
+/// loss and every gradient are far from zero, as early in a run). The world extent is the
+/// object's distance from the camera.
+fn trained_like_setup(size: u32, billboards: usize) -> Setup {
+    let config = TrainedLikeConfig::object(billboards, size, size);
+    let scene = trained_like_scene(&config);
+    let target_scene = trained_like_scene(&TrainedLikeConfig { seed: 1, ..config });
+    let camera = random_scene_camera(size, size);
+    let settings = RenderSettings {
+        background: Vec3::ONE,
+        ..RenderSettings::default()
+    };
+    let target = render(&target_scene.borrowed(), &camera, &settings).rgb;
+    let views = vec![TrainView {
+        camera,
+        rgb: target.iter().map(|v| v.clamp(0.0, 1.0)).collect(),
+    }];
+    let config = TrainConfig {
+        iterations: 0,
+        sh_degree: 3,
+        background: Vec3::ONE,
+        seed: 0,
+        extent: bbsplat::billboards::trained_like::OBJECT_DEPTH,
+        ..TrainConfig::default()
+    };
+    Setup {
+        model: RawBillboards::from_activated(&scene),
+        views,
+        config,
+    }
+}
+
 fn train_step(c: &mut Criterion) {
     let mut group = c.benchmark_group("step");
     group
         .sample_size(10)
         .warm_up_time(Duration::from_secs(2))
         .measurement_time(Duration::from_secs(8));
-    for (resolution, billboards) in [(96u32, 3_000usize), (192, 10_000)] {
-        let setup = demo_setup(resolution, billboards);
-        group.bench_function(BenchmarkId::new(format!("{resolution}px"), billboards), |b| {
+    let setups = [
+        (format!("96px/{}", 3_000), demo_setup(96, 3_000)),
+        (format!("192px/{}", 10_000), demo_setup(192, 10_000)),
+        (format!("trained/400/{}", 10_000), trained_like_setup(400, 10_000)),
+    ];
+    for (name, setup) in &setups {
+        group.bench_function(name.as_str(), |b| {
             b.iter_custom(|iters| {
                 let iters = iters as usize;
                 let config = TrainConfig {

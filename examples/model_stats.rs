@@ -5,20 +5,20 @@
 //! harness for rasterizer changes (the printed checksum covers the images and every gradient).
 //!
 //! ```text
-//! cargo run --release --example model_stats -- MODEL SCENE_DIR [white|black] [VIEWS] [REPEATS]
+//! cargo run --release --example model_stats -- MODEL SCENE_DIR [white|black] [VIEWS] [REPEATS] [DOWNSCALE]
 //! ```
 //!
 //! `MODEL` is a model folder written by `bbsplat train` or a checkpoint file
 //! (`checkpoint.bin`, e.g. from `--stop-after`). The background defaults to the one stored in
 //! the model; `VIEWS` (default 5) test views are rendered `REPEATS` times each (default 1), after
-//! one warm-up render. The backward pass is fed the gradient of `½‖render − image‖²`. Times are
+//! one warm-up render, at the dataset's resolution divided by `DOWNSCALE` (default 1). The backward pass is fed the gradient of `½‖render − image‖²`. Times are
 //! wall clock and process CPU time (all threads, without the time spent waiting for a core:
 //! the steadier figure on a shared machine).
 use bbsplat::billboards::planar_textures;
 use bbsplat::model::RawBillboards;
 use bbsplat::model_file::load_model;
 use bbsplat::raster::backward::ImageGradients;
-use bbsplat::raster::{RenderGradients, RenderSettings, render, render_backward};
+use bbsplat::raster::{RenderGradients, RenderSettings, WorkloadStats, render, render_backward};
 use bbsplat::report::process_cpu_ms;
 use bbsplat::scene::{Background, LoadOptions, load};
 use bbsplat::train::Trainer;
@@ -46,7 +46,7 @@ fn load_any(path: &Path) -> Result<(RawBillboards, u32, [f32; 3]), Box<dyn std::
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     if args.len() < 3 {
-        return Err("usage: model_stats MODEL SCENE_DIR [white|black] [VIEWS] [REPEATS]".into());
+        return Err("usage: model_stats MODEL SCENE_DIR [white|black] [VIEWS] [REPEATS] [DOWNSCALE]".into());
     }
     let (model, sh_degree, stored_background) = load_any(Path::new(&args[1]))?;
     let background = match args.get(3).map(String::as_str) {
@@ -57,8 +57,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let views: usize = args.get(4).map(|s| s.parse()).transpose()?.unwrap_or(5);
     let repeats: usize = args.get(5).map(|s| s.parse()).transpose()?.unwrap_or(1).max(1);
+    let downscale: u32 = args.get(6).map(|s| s.parse()).transpose()?.unwrap_or(1).max(1);
     let options = LoadOptions {
         background,
+        downscale,
         ..LoadOptions::default()
     };
     let scene = load(Path::new(&args[2]), &options)?;
@@ -88,6 +90,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("|---|--:|--:|--:|--:|--:|--:|--:|--:|");
     let mut grads = RenderGradients::zeros(set.len(), set.texture_size);
     let mut hasher = DefaultHasher::new();
+    let mut workload = Vec::new();
     let (mut sum_fwd, mut sum_both, mut count) = (0.0, 0.0, 0usize);
     let (mut sum_fwd_cpu, mut sum_both_cpu) = (0.0, 0.0);
     for view in test.iter().take(views) {
@@ -126,6 +129,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 grads.clear_row(b as usize);
             }
             stats = Some(out.stats);
+            if workload.len() == count {
+                workload.push(WorkloadStats::of(&set, &out));
+            }
         }
         let stats = stats.expect("at least one repeat");
         let (fwd_ms, both_ms) = (fwd_ms / repeats as f64, both_ms / repeats as f64);
@@ -158,5 +164,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         sum_both_cpu / n,
         hasher.finish()
     );
+    println!("\nWorkload (mean over the views; `bbsplat::raster::WorkloadStats`):\n");
+    println!("{}", WorkloadStats::table_header());
+    println!("{}", WorkloadStats::mean(&workload).table_row(&args[1]));
     Ok(())
 }

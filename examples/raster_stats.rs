@@ -1,27 +1,52 @@
-//! Work statistics and phase timings of the rasterizer on the standard benchmark scene.
+//! Work statistics and phase timings of the rasterizer on the standard benchmark scene, or on a
+//! trained-like scene (`bbsplat::billboards::trained_like`).
 //!
 //! `cargo run --release --example raster_stats -- 256 50000`
+//!
+//! `raster_stats object 400 10000 ...` (or `capture`) uses the trained-like scene of that preset
+//! instead of the random benchmark scene, with the same modes below, and prints its workload
+//! statistics (`bbsplat::raster::WorkloadStats`).
 //!
 //! `raster_stats 256 50000 loop 20` only runs 20 forward+backward calls after one warm-up and
 //! prints their mean (a steady harness for `perf record` and `valgrind`), recycling the render's
 //! storage with `render_with` as the trainer does; `loopfresh` the same with fresh storage every
 //! call (`render`); `loopf` the forward alone.
-use bbsplat::billboards::{RandomSceneConfig, planar_textures, random_scene, random_scene_camera};
+use bbsplat::billboards::{
+    RandomSceneConfig, TrainedLikeConfig, planar_textures, random_scene, random_scene_camera, trained_like_scene,
+};
 use bbsplat::raster::backward::ImageGradients;
 use bbsplat::raster::binning::bin;
 use bbsplat::raster::preprocess::preprocess;
-use bbsplat::raster::{RenderBuffers, RenderGradients, RenderSettings, render, render_backward, render_with};
+use bbsplat::raster::{
+    RenderBuffers, RenderGradients, RenderSettings, WorkloadStats, render, render_backward, render_with,
+};
 use bbsplat::report::process_cpu_ms as cpu_ms;
 use std::time::Instant;
 
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
+    let mut args: Vec<String> = std::env::args().collect();
+    let preset = args.get(1).filter(|a| *a == "object" || *a == "capture").cloned();
+    if preset.is_some() {
+        args.remove(1);
+    }
     let size: u32 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(256);
     let n: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(50_000);
-    let scene = random_scene(&RandomSceneConfig::benchmark(n, size, size));
+    let scene = match preset.as_deref() {
+        Some("object") => trained_like_scene(&TrainedLikeConfig::object(n, size, size)),
+        Some(_) => trained_like_scene(&TrainedLikeConfig::capture(n, size, size)),
+        None => random_scene(&RandomSceneConfig::benchmark(n, size, size)),
+    };
     let cam = random_scene_camera(size, size);
     let settings = RenderSettings::default();
     let set = scene.borrowed();
+    if let Some(name) = &preset {
+        let out = render(&set, &cam, &settings);
+        println!("{}", WorkloadStats::table_header());
+        println!(
+            "{}",
+            WorkloadStats::of(&set, &out).table_row(&format!("{name} {size}²/{n}"))
+        );
+    }
     if args.get(3).map(String::as_str) == Some("loopf") {
         let calls: usize = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(20);
         let mut out = render(&set, &cam, &settings);

@@ -117,6 +117,13 @@ pub fn logit(p: f32) -> f32 {
     (p / (1.0 - p)).ln()
 }
 
+/// [`logit`] of an activated value clamped to `[1e-6, 1 − 1e-6]` first, so that 0 and 1 map to
+/// finite logits (±13.8).
+#[inline]
+pub fn clamped_logit(p: f32) -> f32 {
+    logit(p.clamp(1e-6, 1.0 - 1e-6))
+}
+
 /// `1 / (1 + e^{−x})`.
 #[inline]
 pub fn sigmoid(x: f32) -> f32 {
@@ -227,6 +234,32 @@ impl RawBillboards {
             model.alpha_logits.extend_from_slice(&alpha_row);
         }
         model
+    }
+
+    /// The raw form of activated billboards (e.g. a generated scene to train on): texture logits
+    /// by [`clamped_logit`], no texel masked, geometry and SH copied. `activate` of the result
+    /// gives back the textures within the clamp (values in `[1e-6, 1 − 1e-6]` exactly up to
+    /// float rounding).
+    pub fn from_activated(b: &ActivatedBillboards) -> Self {
+        let t = b.texture_size * b.texture_size;
+        let mut alpha_logits = crate::memory::with_capacity(b.textures.len());
+        let mut colour_logits = crate::memory::with_capacity(3 * b.textures.len());
+        for row in b.textures.chunks_exact(t.max(1)) {
+            alpha_logits.extend(row.iter().map(|texel| clamped_logit(texel[3])));
+            for c in 0..3 {
+                colour_logits.extend(row.iter().map(|texel| clamped_logit(texel[c])));
+            }
+        }
+        RawBillboards {
+            positions: b.positions.clone(),
+            quaternions: b.quaternions.clone(),
+            log_scales: b.log_scales.clone(),
+            sh: b.sh.clone(),
+            alpha_logits,
+            colour_logits,
+            alpha_mask: vec![true; t],
+            texture_size: b.texture_size,
+        }
     }
 
     /// Activated textures and geometry in the layout of the rasterizer: the planar alpha and

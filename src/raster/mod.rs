@@ -24,12 +24,14 @@ pub mod binning;
 pub mod forward;
 pub mod preprocess;
 pub mod reference;
+pub mod workload;
 
 use crate::stages::composite::CompositeParams;
 use glam::{Vec2, Vec3};
 
 pub use backward::{RenderGradients, render_backward};
 pub use forward::{ForwardState, RenderBuffers, RenderOutput, RenderStats, render, render_with};
+pub use workload::WorkloadStats;
 
 /// Side of a square screen tile in pixels.
 pub const TILE_SIZE: u32 = 16;

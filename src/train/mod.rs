@@ -38,7 +38,7 @@ use crate::billboards::ActivatedBillboards;
 use crate::camera::Camera;
 use crate::loss::TrainingLoss;
 use crate::loss::psnr::psnr_u8;
-use crate::model::{RawBillboards, initial_alpha, logit, sigmoid};
+use crate::model::{RawBillboards, clamped_logit, initial_alpha, logit, sigmoid};
 use crate::raster::backward::ImageGradients;
 use crate::raster::{RenderBuffers, RenderGradients, RenderSettings, SH_FLOATS, render_backward, render_with};
 use crate::rng::Rng;
@@ -529,7 +529,7 @@ impl Trainer {
             let t = model.texture_size * model.texture_size;
             for (i, texel) in self.activated.textures.iter().enumerate() {
                 model.alpha_logits[i] = if model.alpha_mask[i % t] {
-                    logit(texel[3].clamp(1e-6, 1.0 - 1e-6))
+                    clamped_logit(texel[3])
                 } else {
                     0.0
                 };

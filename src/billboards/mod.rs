@@ -12,6 +12,10 @@
 //! Raw → activated is one way (`activate`); where the raw form is needed back from activated
 //! values, the caller takes the `logit` (e.g. `Trainer::export_model` in Gaussian mode).
 
+pub mod trained_like;
+
+pub use trained_like::{TrainedLikeConfig, trained_like_scene};
+
 use crate::camera::Camera;
 #[cfg(doc)]
 use crate::model::RawBillboards;
