@@ -7,8 +7,8 @@
 //!
 //! The scene is seen by [`super::random_scene_camera`] (at the origin looking along +z,
 //! `fx = fy = width`). Centres fill a ball (or a thick shell) at depth [`OBJECT_DEPTH`] whose disk on screen covers
-//! the requested fraction of the image (an object on an empty background, like lego), or with a
-//! coverage of 1 or more, a slab filling the whole view (a capture, like beer_colmap).
+//! the requested fraction of the image (an object on an empty background, like lego), and, for a
+//! capture like beer_colmap, a share of them in a slab filling the whole view.
 
 use super::{ActivatedBillboards, random_scene_camera};
 use crate::raster::SH_FLOATS;
@@ -30,16 +30,24 @@ pub struct TrainedLikeConfig {
     pub height: u32,
     /// Texture side.
     pub texture_size: usize,
-    /// Fraction of the image covered by the object's disk; 1 or more fills the view with a slab
-    /// of centres at depths `OBJECT_DEPTH · [0.6, 1.4]`.
+    /// Fraction of the image covered by the object's disk.
     pub coverage: f32,
+    /// Fraction of the billboards in the object; the others fill the whole view as a slab of
+    /// centres at depths `OBJECT_DEPTH · [0.6, 1.4]` (a captured background).
+    pub object_fraction: f32,
     /// Inner radius of the shell of centres, as a fraction of the object's radius (0: a full
     /// ball; trained billboards gather near surfaces).
     pub shell_inner: f32,
+    /// How far billboards turn away from facing the camera: the quaternion is
+    /// `(1, t·g₁, t·g₂, tan(φ/2))` normalised, `g` standard normal, `φ` uniform (a random spin
+    /// about the view axis), `t` this value. 0 faces the camera; large values approach uniformly
+    /// random rotations. Trained billboards tend to face the cameras that trained them.
+    pub tilt: f32,
     /// Median side, in pixels, of a billboard seen face-on (log-normal).
     pub median_side_px: f32,
-    /// Standard deviation of the log of the side.
-    pub side_log_sigma: f32,
+    /// Standard deviations of the log of the side below and above the median (a split normal:
+    /// trained states have a long tail of small billboards and a short one of large ones).
+    pub side_log_sigma: (f32, f32),
     /// The peak alpha of a billboard's blob is uniform in this range.
     pub alpha_peak: (f32, f32),
     /// Alpha outside the blob, uniform in this range per billboard and clamped at 0: trained
@@ -58,30 +66,43 @@ impl TrainedLikeConfig {
     /// the same whatever `n`.
     pub fn object(n: usize, width: u32, height: u32) -> Self {
         let scale = width as f32 / 400.0 * (10_000.0 / n.max(1) as f32).sqrt();
+        let median_side_px = 15.0 * scale;
+        // The object covers a third of the image, its billboards included: its centres fill a
+        // disk smaller by 1.9 median sides (measured: billboards reach that far beyond it).
+        let area = (width * height) as f32;
+        let covered_radius = (0.33 * area / std::f32::consts::PI).sqrt();
+        let radius = (covered_radius - 1.9 * median_side_px).max(0.25 * covered_radius);
         Self {
             billboards: n,
             width,
             height,
             texture_size: 16,
-            coverage: 0.3,
-            shell_inner: 0.7,
-            median_side_px: 12.0 * scale,
-            side_log_sigma: 0.65,
-            alpha_peak: (0.2, 0.9),
-            alpha_floor: (-0.04, 0.04),
+            coverage: std::f32::consts::PI * radius * radius / area,
+            object_fraction: 1.0,
+            shell_inner: 0.3,
+            tilt: 1.0,
+            median_side_px,
+            side_log_sigma: (1.2, 0.6),
+            alpha_peak: (0.15, 0.8),
+            alpha_floor: (-0.03, 0.05),
             blob_radius: (0.5, 1.2),
             seed: 0,
         }
     }
 
     /// A capture filling the whole view, like a trained beer_colmap state: `n` billboards at
-    /// `width × height`, TS = 16, sizes scaled as in [`TrainedLikeConfig::object`].
+    /// `width × height`, TS = 16, sizes scaled as in [`TrainedLikeConfig::object`]; a quarter of
+    /// them in a foreground object.
     pub fn capture(n: usize, width: u32, height: u32) -> Self {
         let scale = width as f32 / 400.0 * (10_000.0 / n.max(1) as f32).sqrt();
         Self {
-            coverage: 1.0,
-            median_side_px: 5.0 * scale,
-            side_log_sigma: 1.1,
+            coverage: 0.4,
+            object_fraction: 0.25,
+            shell_inner: 0.7,
+            tilt: 0.3,
+            median_side_px: 4.5 * scale,
+            side_log_sigma: (1.3, 1.2),
+            alpha_peak: (0.1, 0.7),
             ..Self::object(n, width, height)
         }
     }
@@ -99,7 +120,7 @@ pub fn trained_like_scene(config: &TrainedLikeConfig) -> ActivatedBillboards {
     let radius_px = (config.coverage * w * h / std::f32::consts::PI).sqrt();
     let radius = radius_px * OBJECT_DEPTH / cam.fx;
     for _ in 0..config.billboards {
-        let position = if config.coverage >= 1.0 {
+        let position = if rng.uniform() >= config.object_fraction {
             let (x, y) = (rng.range(0.0, w), rng.range(0.0, h));
             let z = OBJECT_DEPTH * rng.range(0.6, 1.4);
             Vec3::new((x - cam.cx) / cam.fx * z, (y - cam.cy) / cam.fy * z, z)
@@ -111,10 +132,17 @@ pub fn trained_like_scene(config: &TrainedLikeConfig) -> ActivatedBillboards {
             Vec3::new(0.0, 0.0, OBJECT_DEPTH) + d * r
         };
         b.positions.push(position);
+        let spin = (rng.range(-0.5, 0.5) * std::f32::consts::PI).tan();
         b.quaternions
-            .push([rng.normal(), rng.normal(), rng.normal(), rng.normal()]);
+            .push([1.0, config.tilt * rng.normal(), config.tilt * rng.normal(), spin]);
         // Side in pixels ≈ 2·s·fx/z  ⇒  s = side·z / (2 fx).
-        let side_px = config.median_side_px * (config.side_log_sigma * rng.normal()).exp();
+        let g = rng.normal();
+        let sigma = if g < 0.0 {
+            config.side_log_sigma.0
+        } else {
+            config.side_log_sigma.1
+        };
+        let side_px = config.median_side_px * (sigma * g).exp();
         let s = (side_px * position.z / (2.0 * cam.fx)).max(1e-6);
         let jitter = Vec2::new(rng.range(-0.2, 0.2), rng.range(-0.2, 0.2));
         b.log_scales.push(Vec2::splat(s.ln()) + jitter);

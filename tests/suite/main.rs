@@ -3,6 +3,7 @@
 
 #![allow(clippy::needless_range_loop)]
 
+mod bench_scene;
 #[cfg(feature = "cli")]
 mod cli;
 mod f64_reference;
