@@ -49,7 +49,8 @@ fn mismatches(stats: &WorkloadStats, target: &Target, compare_sizes: bool) -> Ve
     // Within 20 % of `want`, or within 0.02 for alpha bins under 5 % (`absolute`).
     let mut check_with = |name: &str, got: f64, want: f64, absolute: bool| {
         let tolerance = if absolute { 0.02 } else { 0.2 * want.abs() };
-        if !((got - want).abs() <= tolerance) {
+        let within = (got - want).abs() <= tolerance; // false for NaN
+        if !within {
             out.push(format!("{name}: {got:.3} vs {want:.3}"));
         }
     };
