@@ -116,7 +116,7 @@ struct PixelOut {
 /// that its composite is `Σ α·T`), view depth of the hit (1) and the facing normal (3).
 const FORWARD_FEATURES: usize = 8;
 
-/// Composites one pixel of a tile over its candidates (see [`TileCandidates`]) with the
+/// Composites one pixel of a tile over its sampled candidates (see [`TileSamples`]) with the
 /// compositing stage ([`CompositeState`]: the clamp, skip and stop decisions and the weighted
 /// sums are the stage's own code, the code its property tests prove); adds `α·T` of each
 /// blended entry to `impact` and appends its slot to `blended_slots`. `own` is the pixel's
@@ -124,12 +124,11 @@ const FORWARD_FEATURES: usize = 8;
 #[inline]
 #[allow(clippy::too_many_arguments)]
 fn shade_pixel(
-    set: &ActivatedRef<'_>,
     settings: &RenderSettings,
     prepared: &[Option<Prepared>],
     list: &[u32],
     own: &[u32],
-    candidates: &[Candidate],
+    candidates: &[SampledCandidate],
     impact: &mut [f32],
     blended_slots: &mut Vec<u32>,
 ) -> PixelOut {
@@ -142,8 +141,7 @@ fn shade_pixel(
     for cand in candidates {
         let k = cand.slot as usize;
         let b = list[k] as usize;
-        // All four channels in one go: the texels' lines are fetched for alpha anyway.
-        let [r, g, bl, a] = cand.taps.sample_rgba(set.texture_of(b));
+        let [r, g, bl, a] = cand.rgba;
         let blend = match state.step(a, params) {
             Step::Skip => {
                 nan_alpha += u32::from(a.is_nan());
@@ -245,7 +243,8 @@ pub(crate) struct Candidate {
     pub(crate) taps: BilinearTaps,
 }
 
-/// The candidates of a run of pixels of a tile, computed before they are composited so that
+/// The candidates of a run of pixels of a tile (the backward pass's walk; the forward pass samples
+/// entry by entry, [`TileSamples`]), computed before they are used so that
 /// the texels they read can be prefetched: the texture reads are scattered over the whole texture
 /// arrays (one random cache line per tap row and channel), and issuing them up front lets the
 /// misses overlap instead of stalling the compositing loop one at a time. A run is cut once it
@@ -335,6 +334,121 @@ impl TileCandidates {
     pub(crate) fn of(&self, q: usize) -> &[Candidate] {
         let r = q - self.first;
         &self.items[self.offsets[r] as usize..self.offsets[r + 1] as usize]
+    }
+}
+
+/// One (pixel, entry) pair of a tile whose ray hits the billboard's texture support, sampled:
+/// the entry's slot in the tile list, the view depth of the hit and the bilinear RGBA sample.
+#[derive(Clone, Copy)]
+pub(crate) struct SampledCandidate {
+    slot: u32,
+    depth: f32,
+    rgba: [f32; 4],
+}
+
+/// The sampled candidates of every pixel of a tile, computed entry by entry: each billboard's
+/// record, plane and texture are loaded once for all the pixels of its span (its texels stay in
+/// L1 while its pixels are sampled), instead of once per pixel as a pixel-by-pixel walk over 10-60
+/// billboards would. Per pixel the candidates come out in tile-list (depth) order, since the
+/// entries are visited in that order. Same arithmetic per pair as [`TileCandidates`] followed by
+/// [`BilinearTaps::sample_rgba`], so the forward pass's outputs are unchanged bit for bit.
+/// The candidates of tile-local pixel `q` are `items[offsets[q]..ends[q]]`.
+#[derive(Default)]
+pub(crate) struct TileSamples {
+    rays: Vec<Vec3>,
+    ends: Vec<u32>,
+    items: Vec<SampledCandidate>,
+    /// Candidates whose texels are being prefetched: (item, billboard, taps), sampled in runs of
+    /// [`CANDIDATE_CHUNK`] (see [`TileCandidates`] for why the reads are issued ahead).
+    pending: Vec<(u32, u32, BilinearTaps)>,
+}
+
+impl TileSamples {
+    /// Samples every (pixel, entry) pair of the tile `(i0, j0, i1, j1)` whose pixel lies in the
+    /// entry's span, into room reserved per pixel by `lists` (one slot per pair of its list).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn build(
+        &mut self,
+        camera: &Camera,
+        set: &ActivatedRef<'_>,
+        prepared: &[Option<Prepared>],
+        list: &[u32],
+        (i0, j0, i1, j1): (u32, u32, u32, u32),
+        spans: &[EntrySpans],
+        lists: &PixelLists,
+    ) {
+        let ts = set.texture_size;
+        let tw = (i1 - i0) as usize;
+        let n = tw * (j1 - j0) as usize;
+        self.rays.clear();
+        for j in j0..j1 {
+            for i in i0..i1 {
+                self.rays.push(pixel_ray(camera, i as f32 + 0.5, j as f32 + 0.5));
+            }
+        }
+        self.ends.clear();
+        self.ends.extend_from_slice(&lists.offsets[..n]);
+        let pairs = lists.offsets[n] as usize;
+        resize_for_overwrite(
+            &mut self.items,
+            pairs,
+            SampledCandidate {
+                slot: 0,
+                depth: 0.0,
+                rgba: [0.0; 4],
+            },
+        );
+        for (k, (span, &b)) in spans.iter().zip(list).enumerate() {
+            if let Some(&ahead) = list.get(k + 4) {
+                prefetch_record(&prepared[ahead as usize]);
+            }
+            let Some(p) = prepared[b as usize].as_ref() else {
+                continue;
+            };
+            let plane = p.view_plane();
+            let texture = set.texture_of(b as usize);
+            for y in span.rows[0]..=span.rows[1] {
+                let [x0, x1] = span.cols[y as usize];
+                let py = (j0 + u32::from(y)) as f32 + 0.5;
+                for x in x0..=x1 {
+                    let q = y as usize * tw + x as usize;
+                    let px = (i0 + u32::from(x)) as f32 + 0.5;
+                    let ray = self.rays[q];
+                    let Some(hit) = intersect_with(&p.transform, px, py, |_, _| plane.depth(ray)) else {
+                        continue;
+                    };
+                    let Some(taps) = bilinear::taps(hit.u, hit.v, ts) else {
+                        continue;
+                    };
+                    prefetch_taps(texture.as_ptr(), &taps);
+                    let end = &mut self.ends[q];
+                    self.items[*end as usize] = SampledCandidate {
+                        slot: k as u32,
+                        depth: hit.depth,
+                        rgba: [0.0; 4],
+                    };
+                    self.pending.push((*end, b, taps));
+                    *end += 1;
+                }
+            }
+            if self.pending.len() >= CANDIDATE_CHUNK {
+                self.sample_pending(set);
+            }
+        }
+        self.sample_pending(set);
+    }
+
+    /// Samples the pending candidates (their texels were prefetched when they were found).
+    fn sample_pending(&mut self, set: &ActivatedRef<'_>) {
+        for (item, b, taps) in self.pending.drain(..) {
+            self.items[item as usize].rgba = taps.sample_rgba(set.texture_of(b as usize));
+        }
+    }
+
+    /// The sampled candidates of tile-local pixel `q`, front to back.
+    #[inline]
+    pub(crate) fn of(&self, lists: &PixelLists, q: usize) -> &[SampledCandidate] {
+        &self.items[lists.offsets[q] as usize..self.ends[q] as usize]
     }
 }
 
@@ -471,7 +585,7 @@ impl PixelLists {
 struct TileScratch {
     spans: Vec<EntrySpans>,
     lists: PixelLists,
-    candidates: TileCandidates,
+    samples: TileSamples,
 }
 
 /// Splits `data` into consecutive mutable chunks of the given lengths.
@@ -630,33 +744,22 @@ pub fn render_with(
                 let rect @ (i0, j0, i1, j1) = tile_pixels(&bins, t, w, h);
                 let tw = (i1 - i0) as usize;
                 let n_q = tw * (j1 - j0) as usize;
-                let TileScratch {
-                    spans,
-                    lists,
-                    candidates,
-                } = scratch;
+                let TileScratch { spans, lists, samples } = scratch;
                 local_spans(&prepared, list, (i0, j0), half_side, spans);
                 lists.build(spans, tw, (j1 - j0) as usize);
-                let lists = &*lists;
-                let own = |q: usize| lists.of(q);
+                samples.build(camera, set, &prepared, list, rect, spans, lists);
                 pixels.clear();
                 blended_slots.clear();
-                let mut first = 0;
-                while first < n_q {
-                    let end = candidates.build(camera, set, &prepared, list, rect, first, own, |_, _| {});
-                    for q in first..end {
-                        pixels.push(shade_pixel(
-                            set,
-                            settings,
-                            &prepared,
-                            list,
-                            own(q),
-                            candidates.of(q),
-                            impact,
-                            blended_slots,
-                        ));
-                    }
-                    first = end;
+                for q in 0..n_q {
+                    pixels.push(shade_pixel(
+                        settings,
+                        &prepared,
+                        list,
+                        lists.of(q),
+                        samples.of(lists, q),
+                        impact,
+                        blended_slots,
+                    ));
                 }
             },
         );
