@@ -28,10 +28,12 @@ pub mod adam;
 pub mod checkpoint;
 pub mod error;
 pub mod finite;
+pub mod footprint;
 pub mod regularise;
 pub mod relocate;
 pub mod resolution;
 pub mod run;
+pub mod run_record;
 pub mod texture_step;
 
 use crate::billboards::ActivatedBillboards;
@@ -420,6 +422,8 @@ pub struct Trainer {
     opacity_logits: Vec<f32>,
     /// The storage of the last step's render, recycled by the next (values never carried over).
     render_buffers: RenderBuffers,
+    /// The run's arguments and dataset, saved in the checkpoint ([`run_record`]).
+    record: run_record::RunRecord,
 }
 
 fn adam_groups(n: usize, t: usize) -> [AdamGroup; group::COUNT] {
@@ -483,6 +487,7 @@ impl Trainer {
             shape,
             opacity_logits,
             render_buffers: RenderBuffers::default(),
+            record: run_record::RunRecord::default(),
         };
         if config.texture_mode == TextureMode::Gaussian {
             for b in 0..n {
@@ -490,6 +495,17 @@ impl Trainer {
             }
         }
         trainer
+    }
+
+    /// The run record saved with the checkpoint ([`run_record`]; empty unless set, or loaded
+    /// from a checkpoint of format version 3 or older).
+    pub fn run_record(&self) -> &run_record::RunRecord {
+        &self.record
+    }
+
+    /// Sets the run record saved with every later checkpoint.
+    pub fn set_run_record(&mut self, record: run_record::RunRecord) {
+        self.record = record;
     }
 
     /// Steps done so far.

@@ -5,6 +5,8 @@
 
 #[cfg(feature = "cli")]
 mod cli;
+#[cfg(feature = "cli")]
+mod cli_reliability;
 mod f64_reference;
 mod init_fibonacci;
 mod init_fps;

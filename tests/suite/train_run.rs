@@ -102,7 +102,7 @@ fn a_run_reports_its_events_in_order_and_equals_stepping_by_hand() {
             expected.push(format!("eval@{s}/1"));
         }
     }
-    expected.extend(["model".into(), "ckpt@12".into(), "finished".into()]);
+    expected.extend(["ckpt@12".into(), "model".into(), "finished".into()]);
     assert_eq!(events, expected);
 
     for _ in 0..12 {
@@ -623,4 +623,167 @@ fn measure_non_finite_check_cost() {
         rayon::current_num_threads(),
         100.0 * (grad_ms + param_ms) / step_ms
     );
+}
+
+/// A stop request raised while an intermediate evaluation is due abandons the evaluation (no
+/// `Evaluation` event, no curve point) and stops at once with a checkpoint of that step.
+#[test]
+fn a_stop_request_during_an_evaluation_abandons_it_and_saves_the_checkpoint() {
+    let Setup {
+        mut trainer,
+        train,
+        test,
+    } = setup(12, |c| c);
+    let dir = temp_dir("stop-eval");
+    let config = RunConfig {
+        eval_every: 5,
+        output: Some(dir.clone()),
+        ..RunConfig::default()
+    };
+    let stop = StopSignal::new();
+    let mut events = Vec::new();
+    let outcome = run(&mut trainer, &train, &test, &config, &stop, |e| {
+        // Raised after step 5's work, before its evaluation.
+        if matches!(e, TrainEvent::Step { log, .. } if log.step == 5) {
+            stop.request();
+        }
+        events.push(trace(e));
+    })
+    .unwrap();
+    assert!(
+        matches!(
+            outcome,
+            RunOutcome::Stopped {
+                step: 5,
+                reason: StopReason::Requested,
+                ..
+            }
+        ),
+        "{outcome:?}"
+    );
+    assert!(!events.iter().any(|e| e.starts_with("eval")), "{events:?}");
+    assert_eq!(
+        events[events.len() - 2..],
+        ["ckpt@5".to_string(), "stopped@5".to_string()]
+    );
+    assert_eq!(
+        Trainer::load_checkpoint(dir.join(CHECKPOINT_FILE))
+            .unwrap()
+            .step_index(),
+        5
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A stop request during the final phase (after the last step: save, re-load, final evaluation)
+/// ends the run as `Stopped` at the last step with the model and checkpoint saved and no
+/// summary; resuming from that checkpoint finishes with the files of an uninterrupted run.
+#[test]
+fn a_stop_request_in_the_final_phase_keeps_the_model_and_resumes_to_the_same_files() {
+    let dir_a = temp_dir("final-a");
+    let dir_b = temp_dir("final-b");
+    let config = |dir: &PathBuf| RunConfig {
+        eval_every: 0,
+        output: Some(dir.clone()),
+        ..RunConfig::default()
+    };
+    let Setup {
+        mut trainer,
+        train,
+        test,
+    } = setup(8, |c| c);
+    let plain = run(&mut trainer, &train, &test, &config(&dir_a), &StopSignal::new(), |_| {}).unwrap();
+    assert!(matches!(plain, RunOutcome::Finished(_)));
+
+    let Setup { mut trainer, .. } = setup(8, |c| c);
+    let stop = StopSignal::new();
+    let outcome = run(&mut trainer, &train, &test, &config(&dir_b), &stop, |e| {
+        if matches!(e, TrainEvent::ModelSaved { .. }) {
+            stop.request();
+        }
+    })
+    .unwrap();
+    assert!(
+        matches!(
+            outcome,
+            RunOutcome::Stopped {
+                step: 8,
+                reason: StopReason::Requested,
+                ..
+            }
+        ),
+        "{outcome:?}"
+    );
+    assert!(dir_b.join(MODEL_DIR).join("point_cloud.ply").exists());
+    assert!(
+        !dir_b.join(SUMMARY_FILE).exists(),
+        "no summary for an interrupted final evaluation"
+    );
+    let mut resumed = Trainer::load_checkpoint(dir_b.join(CHECKPOINT_FILE)).unwrap();
+    let finished = run(&mut resumed, &train, &test, &config(&dir_b), &StopSignal::new(), |_| {}).unwrap();
+    assert!(matches!(finished, RunOutcome::Finished(_)));
+    for file in [
+        CHECKPOINT_FILE,
+        "model/point_cloud.ply",
+        "model/texture_color.npz",
+        "model/texture_alpha.npz",
+    ] {
+        assert!(
+            std::fs::read(dir_a.join(file)).unwrap() == std::fs::read(dir_b.join(file)).unwrap(),
+            "{file} differs"
+        );
+    }
+    std::fs::remove_dir_all(&dir_a).ok();
+    std::fs::remove_dir_all(&dir_b).ok();
+}
+
+/// When the model cannot be saved after training (here `model` is a file), the trained state is
+/// already in the checkpoint and the error says where.
+#[test]
+fn a_model_that_cannot_be_saved_leaves_the_trained_state_in_the_checkpoint() {
+    let Setup {
+        mut trainer,
+        train,
+        test,
+    } = setup(6, |c| c);
+    let dir = temp_dir("model-taken");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join(MODEL_DIR), b"not a model").unwrap();
+    let config = RunConfig {
+        eval_every: 0,
+        output: Some(dir.clone()),
+        ..RunConfig::default()
+    };
+    let err = run(&mut trainer, &train, &test, &config, &StopSignal::new(), |_| {}).unwrap_err();
+    let RunError::ModelSave { checkpoint, .. } = &err else {
+        panic!("expected ModelSave, got {err:?}");
+    };
+    assert_eq!(checkpoint, &dir.join(CHECKPOINT_FILE));
+    assert!(err.to_string().contains("the trained state is saved in"), "{err}");
+    let saved = Trainer::load_checkpoint(checkpoint).unwrap();
+    assert_eq!(saved.step_index(), 6);
+    assert!(saved.checkpoint_bytes() == trainer.checkpoint_bytes());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Warnings given to the run and the run's own land in summary.json.
+#[test]
+fn every_warning_is_recorded_in_the_summary() {
+    let Setup { mut trainer, train, .. } = setup(3, |c| c);
+    let dir = temp_dir("warnings");
+    let config = RunConfig {
+        eval_every: 0,
+        output: Some(dir.clone()),
+        warnings: vec!["frame 7 skipped: image missing".into()],
+        ..RunConfig::default()
+    };
+    run(&mut trainer, &train, &[], &config, &StopSignal::new(), |_| {}).unwrap();
+    let text = std::fs::read_to_string(dir.join(SUMMARY_FILE)).unwrap();
+    // Without test views the PSNR is NaN (null in JSON): read the warnings alone.
+    let file: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let warnings: Vec<String> = serde_json::from_value(file["warnings"].clone()).unwrap();
+    assert_eq!(warnings.len(), 2, "{warnings:?}");
+    assert_eq!(warnings[0], "frame 7 skipped: image missing");
+    assert!(warnings[1].contains("no test views"), "{warnings:?}");
+    std::fs::remove_dir_all(&dir).ok();
 }
