@@ -131,7 +131,7 @@ pub fn run(
             )?;
             write_png_atomic(
                 &dir.join(format!("test_{i:03}_truth.png")),
-                &v.rgb,
+                &v.rgb.to_f32(),
                 v.camera.width,
                 v.camera.height,
             )?;

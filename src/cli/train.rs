@@ -352,10 +352,10 @@ pub fn run(args: TrainArgs) -> Result<()> {
             t
         }
     };
-    let train = TrainView::from_views(&scene.train);
-    let test = TrainView::from_views(&scene.test);
-    let scene_warnings = scene.warnings.clone();
-    drop(scene);
+    // The views' 8-bit images move into the training views (converted to floats per step).
+    let scene_warnings = scene.warnings;
+    let train: Vec<TrainView> = scene.train.into_iter().map(TrainView::from_owned_view).collect();
+    let test: Vec<TrainView> = scene.test.into_iter().map(TrainView::from_owned_view).collect();
     // From here on a signal stops the run with a checkpoint instead of ending the process.
     let stop = signals.arm();
     let bar = if args.quiet {

@@ -94,6 +94,11 @@ impl Image {
         &self.data
     }
 
+    /// The interleaved RGB bytes, taken out of the image.
+    pub fn into_bytes(self) -> Vec<u8> {
+        self.data
+    }
+
     /// The 8-bit RGB value of pixel `(x, y)` (column, row). Panics when out of range.
     pub fn pixel(&self, x: u32, y: u32) -> [u8; 3] {
         assert!(

@@ -368,7 +368,8 @@ fn evaluate(
         views.iter().take_while(|_| !stop.is_requested()).map(|v| EvalView {
             name: "",
             camera: &v.camera,
-            rgb: &v.rgb,
+            // An 8-bit view is converted for its evaluation only.
+            rgb: v.rgb.to_f32(),
         }),
         settings,
         |_, _| {},

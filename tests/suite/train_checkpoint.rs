@@ -26,7 +26,7 @@ fn setup(adam: AdamMode, texture_mode: TextureMode) -> (Trainer, Vec<TrainView>)
         .iter()
         .map(|v| TrainView {
             camera: v.camera,
-            rgb: v.rgb.clone(),
+            rgb: v.rgb.clone().into(),
         })
         .collect();
     let mut model = RawBillboards::from_points(&scene.points, &scene.colours, 4, 8);
@@ -384,11 +384,14 @@ fn bad_views_are_typed_errors_and_leave_the_trainer_unchanged() {
     let (mut tr, mut views) = setup(AdamMode::Dense, TextureMode::Full);
     let before = tr.checkpoint_bytes();
     assert_eq!(tr.step(&[]).unwrap_err(), TrainError::NoViews);
-    views[2].rgb.pop();
+    let whole = views[2].rgb.clone();
+    let mut short = whole.to_f32().into_owned();
+    short.pop();
+    views[2].rgb = short.into();
     let err = tr.step(&views).unwrap_err();
     assert!(matches!(err, TrainError::ImageSize { view: 2, .. }), "{err}");
     assert!(tr.checkpoint_bytes() == before, "a refused step changes nothing");
-    views[2].rgb.push(0.5);
+    views[2].rgb = whole;
     tr.step(&views).unwrap();
     // The stack now holds views 0..5 minus one; dropping views leaves stale indices.
     let err = tr.step(&views[..1]).unwrap_err();
@@ -425,6 +428,11 @@ fn the_run_record_is_checkpointed_and_version_3_reads_as_empty() {
     let brace = bad.len() - 9; // the record's closing brace, just before the checksum
     assert_eq!(bad[brace], b'}');
     bad[brace] = b'!';
-    let err = Trainer::from_checkpoint_bytes(&resealed(bad), &path).err().expect("must fail");
-    assert!(matches!(&err, CheckpointError::Inconsistent { what, .. } if what.contains("run record")), "{err}");
+    let err = Trainer::from_checkpoint_bytes(&resealed(bad), &path)
+        .err()
+        .expect("must fail");
+    assert!(
+        matches!(&err, CheckpointError::Inconsistent { what, .. } if what.contains("run record")),
+        "{err}"
+    );
 }

@@ -261,7 +261,9 @@ fn a_nan_pixel_stops_the_run_with_the_last_good_state_on_disk() {
         test,
     } = setup(40, |c| c);
     let clean_views = train.clone();
-    train[BAD].rgb[100] = f32::NAN;
+    let mut poisoned = train[BAD].rgb.to_f32().into_owned();
+    poisoned[100] = f32::NAN;
+    train[BAD].rgb = poisoned.into();
     let dir = temp_dir("nan-pixel");
     let config = RunConfig {
         eval_every: 0,
@@ -786,4 +788,59 @@ fn every_warning_is_recorded_in_the_summary() {
     assert_eq!(warnings[0], "frame 7 skipped: image missing");
     assert!(warnings[1].contains("no test views"), "{warnings:?}");
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Failure 10: views kept as 8-bit values (3 bytes a pixel, converted per step) train exactly as
+/// their float copies (`byte / 255`), bit for bit; a loaded scene view is kept as 8-bit.
+#[test]
+fn eight_bit_views_train_bit_for_bit_as_their_float_copies() {
+    use bbsplat::train::ViewPixels;
+    let Setup { train, test, .. } = setup(6, |c| c);
+    let quantise = |views: &[TrainView]| -> Vec<Vec<u8>> {
+        views
+            .iter()
+            .map(|v| {
+                v.rgb
+                    .to_f32()
+                    .iter()
+                    .map(|x| (x * 255.0).round().clamp(0.0, 255.0) as u8)
+                    .collect()
+            })
+            .collect()
+    };
+    let with = |bytes: &[Vec<u8>], views: &[TrainView], float: bool| -> Vec<TrainView> {
+        bytes
+            .iter()
+            .zip(views)
+            .map(|(b, v)| TrainView {
+                camera: v.camera,
+                rgb: if float {
+                    ViewPixels::F32(b.iter().map(|&x| x as f32 / 255.0).collect())
+                } else {
+                    ViewPixels::U8(b.clone())
+                },
+            })
+            .collect()
+    };
+    let (train_bytes, test_bytes) = (quantise(&train), quantise(&test));
+    let mut results = Vec::new();
+    for float in [false, true] {
+        let (tr, te) = (with(&train_bytes, &train, float), with(&test_bytes, &test, float));
+        assert_eq!(tr[0].rgb.bytes(), if float { 4 } else { 1 } * tr[0].rgb.len());
+        let Setup { mut trainer, .. } = setup(6, |c| c);
+        let config = RunConfig {
+            eval_every: 3,
+            ..RunConfig::default()
+        };
+        let outcome = run(&mut trainer, &tr, &te, &config, &StopSignal::new(), |_| {}).unwrap();
+        let RunOutcome::Finished(summary) = outcome else {
+            panic!()
+        };
+        results.push((
+            trainer.checkpoint_bytes(),
+            summary.test_psnr.to_bits(),
+            summary.curve[0].psnr.to_bits(),
+        ));
+    }
+    assert!(results[0] == results[1], "8-bit and float views differ");
 }
