@@ -208,6 +208,35 @@ pub struct TrainConfig {
     pub clamp_gradient: ClampGradient,
 }
 
+impl TrainConfig {
+    /// What is out of range in this configuration, or `None`: the texture-regulariser threshold
+    /// must be finite and ≥ 0, the regulariser weights, background and extent finite (the extent
+    /// positive), the SH degree ≤ 3. Checked by every [`Trainer::step`] (a bad setting would
+    /// otherwise panic or train on NaN). (Learning-rate multipliers are not: a huge one is a
+    /// legitimate way to diverge, caught by the non-finite checks of the step.)
+    pub fn problem(&self) -> Option<String> {
+        let t = self.impact_threshold;
+        if !(t.is_finite() && t >= 0.0) {
+            return Some(format!(
+                "impact_threshold (texture threshold) {t} is not a finite number ≥ 0"
+            ));
+        }
+        if !(self.texture_reg_weight.is_finite() && self.opacity_reg_weight.is_finite()) {
+            return Some("a regulariser weight is not finite".into());
+        }
+        if !(self.extent.is_finite() && self.extent > 0.0) {
+            return Some(format!("extent {} is not a finite number > 0", self.extent));
+        }
+        if !self.background.is_finite() {
+            return Some(format!("background {} is not finite", self.background));
+        }
+        if self.sh_degree > 3 {
+            return Some(format!("SH degree {} > 3", self.sh_degree));
+        }
+        None
+    }
+}
+
 /// Multipliers of the reference learning rates of [`learning_rates`], per parameter group; the
 /// schedules (decay, windows, freezes) are unchanged. [`LearningRateScales::REFERENCE`] (all 1)
 /// is the reference. Runs much shorter than the reference's 32 000 steps converge faster with
@@ -594,6 +623,9 @@ impl Trainer {
     }
 
     fn validate(&self, views: &[TrainView]) -> Result<(), TrainError> {
+        if let Some(problem) = self.config.problem() {
+            return Err(TrainError::InvalidConfig(problem));
+        }
         if views.is_empty() {
             return Err(TrainError::NoViews);
         }

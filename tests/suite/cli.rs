@@ -286,7 +286,7 @@ fn ctrl_c_saves_a_checkpoint_and_exits_cleanly() {
 
 /// Writes a tiny NeRF-synthetic scene: 6 train and 2 test views of a disc-shaped object on a ring
 /// of cameras, as RGBA PNGs (`alpha = true`) or RGB PNGs.
-fn write_tiny_blender_scene(dir: &std::path::Path, alpha: bool) {
+pub(crate) fn write_tiny_blender_scene(dir: &std::path::Path, alpha: bool) {
     let size = 24u32;
     for split in ["train", "test"] {
         std::fs::create_dir_all(dir.join(split)).unwrap();

@@ -5,7 +5,7 @@
 //! save leaves a complete model and checkpoint; damaged images and outlying cameras are refused
 //! or flagged, and every warning reaches summary.json.
 
-use super::cli::{export_demo, run_ok, temp, tiny_train_args};
+use super::cli::{export_demo, run_ok, temp, tiny_train_args, write_tiny_blender_scene};
 use bbsplat::model_file::load_model;
 use bbsplat::train::Trainer;
 use std::path::Path;
@@ -512,5 +512,59 @@ fn leftovers_of_killed_runs_are_removed_at_start() {
     std::fs::write(out.join(&alive), b"in progress").unwrap();
     run_ok(&tiny_train_args(data.to_str().unwrap(), out.to_str().unwrap(), &[]));
     assert_eq!(hidden_entries(&out), vec![alive]);
+    std::fs::remove_dir_all(&root).ok();
+}
+
+/// Failure 7: a signal before training starts (here during a long visual-hull initialisation)
+/// ends the process within a second with status 130, and no run is written.
+#[cfg(unix)]
+#[test]
+fn a_signal_before_training_starts_exits_at_once_without_writing_a_run() {
+    let root = temp("rel-loading");
+    let data = root.join("data");
+    write_tiny_blender_scene(&data, true);
+    let out = root.join("out");
+    let child = Command::new(env!("CARGO_BIN_EXE_bbsplat"))
+        .args([
+            "train",
+            data.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--iterations",
+            "10",
+        ])
+        .args([
+            "--billboards",
+            "100",
+            "--texture-size",
+            "4",
+            "--init",
+            "hull",
+            "--hull-resolution",
+            "512",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(400));
+    let sent = std::time::Instant::now();
+    assert!(
+        Command::new("kill")
+            .args(["-TERM", &child.id().to_string()])
+            .status()
+            .unwrap()
+            .success()
+    );
+    let output = child.wait_with_output().unwrap();
+    assert!(sent.elapsed().as_secs_f64() < 1.0, "stopped after {:?}", sent.elapsed());
+    let (err, printed) = (stderr(&output), String::from_utf8_lossy(&output.stdout));
+    assert!(
+        !printed.contains("views at"),
+        "training had started: the hull was carved in < 0.4 s\n{printed}"
+    );
+    assert_eq!(output.status.code(), Some(130), "{err}");
+    assert!(err.contains("before training started"), "{err}");
+    assert!(!out.join("checkpoint.bin").exists() && !out.join("model").exists());
     std::fs::remove_dir_all(&root).ok();
 }

@@ -844,3 +844,42 @@ fn eight_bit_views_train_bit_for_bit_as_their_float_copies() {
     }
     assert!(results[0] == results[1], "8-bit and float views differ");
 }
+
+/// Failure 3: a texture threshold that is negative, NaN or infinite (which panicked in worker
+/// threads, or wrote NaN into the model) is a typed error of the step, naming the setting; the
+/// trainer is unchanged.
+#[test]
+fn an_out_of_range_texture_threshold_is_a_typed_error() {
+    for bad in [-5.0f32, f32::NAN, f32::INFINITY] {
+        let Setup { mut trainer, train, .. } = setup(4, |c| TrainConfig {
+            impact_threshold: bad,
+            ..c
+        });
+        let before = trainer.checkpoint_bytes();
+        let err = trainer.step(&train).unwrap_err();
+        assert!(
+            matches!(&err, TrainError::InvalidConfig(what) if what.contains("texture threshold")),
+            "{bad}: {err}"
+        );
+        assert!(trainer.checkpoint_bytes() == before);
+        let err = run(
+            &mut trainer,
+            &train,
+            &[],
+            &RunConfig::default(),
+            &StopSignal::new(),
+            |_| {},
+        )
+        .unwrap_err();
+        assert!(
+            matches!(
+                err,
+                RunError::Step {
+                    source: TrainError::InvalidConfig(_),
+                    ..
+                }
+            ),
+            "{err}"
+        );
+    }
+}
