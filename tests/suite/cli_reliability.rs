@@ -568,3 +568,68 @@ fn a_signal_before_training_starts_exits_at_once_without_writing_a_run() {
     assert!(!out.join("checkpoint.bin").exists() && !out.join("model").exists());
     std::fs::remove_dir_all(&root).ok();
 }
+
+/// Failures 4-5: a file system without room for the estimated outputs is refused before
+/// training (`BBSPLAT_DISK_LIMIT` stands in for a nearly full disk).
+#[test]
+fn too_little_free_space_is_refused_before_training() {
+    let root = temp("rel-disk");
+    let data = export_demo(&root, 24, 100);
+    let out = root.join("out");
+    let output = Command::new(env!("CARGO_BIN_EXE_bbsplat"))
+        .args(tiny_train_args(data.to_str().unwrap(), out.to_str().unwrap(), &[]))
+        .env("RUST_BACKTRACE", "0")
+        .env("BBSPLAT_DISK_LIMIT", "1000")
+        .output()
+        .unwrap();
+    refused(&output, "free on its file system");
+    std::fs::remove_dir_all(&root).ok();
+}
+
+/// Failure 4: when writing fails after training started (here the checkpoint path is taken by a
+/// folder in the middle of the run), the trained state is saved elsewhere and the message says
+/// where; that checkpoint loads.
+#[cfg(unix)]
+#[test]
+fn a_write_failure_during_training_rescues_the_trained_state() {
+    use std::io::BufRead;
+    let root = temp("rel-rescue");
+    let data = export_demo(&root, 24, 100);
+    let out = root.join("out");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_bbsplat"))
+        .args(["train", data.to_str().unwrap(), "-o", out.to_str().unwrap()])
+        .args([
+            "--iterations",
+            "1000000",
+            "--billboards",
+            "120",
+            "--texture-size",
+            "4",
+            "--eval-every",
+            "0",
+        ])
+        .args(["--save-every", "20"])
+        .env("RUST_BACKTRACE", "0")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = std::io::BufReader::new(child.stdout.take().unwrap()).lines();
+    assert!(lines.any(|l| l.unwrap().contains("views at")));
+    std::thread::sleep(std::time::Duration::from_millis(200));
+    let ckpt = out.join("checkpoint.bin");
+    std::fs::remove_file(&ckpt).ok();
+    std::fs::create_dir(&ckpt).unwrap();
+    let output = child.wait_with_output().unwrap();
+    let err = stderr(&output);
+    assert!(!output.status.success(), "{err}");
+    let rescued = err
+        .split_whitespace()
+        .find(|w| w.contains("bbsplat-rescued-"))
+        .unwrap_or_else(|| panic!("no rescue named in: {err}"));
+    let rescued = Path::new(rescued.trim_end_matches([':', ')', ',']));
+    let trainer = Trainer::load_checkpoint(rescued).unwrap();
+    assert!(trainer.step_index() >= 20, "step {}", trainer.step_index());
+    std::fs::remove_file(rescued).ok();
+    std::fs::remove_dir_all(&root).ok();
+}
