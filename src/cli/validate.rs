@@ -6,9 +6,9 @@ use super::train::TrainArgs;
 use anyhow::Result;
 use bbsplat::memory::{available_bytes, human_bytes};
 
-/// Largest texture side a model folder can hold (`bbsplat.json`'s `texture_size` is read up to
-/// 1024, see docs/model-format.md): larger would train and then write an unloadable model.
-pub const MAX_TEXTURE_SIZE: usize = 1024;
+/// Largest texture side a model folder can hold
+/// ([`bbsplat::model_file::MAX_TEXTURE_SIZE`]): larger would train and then fail to save.
+pub use bbsplat::model_file::MAX_TEXTURE_SIZE;
 
 /// Largest `--hull-resolution` (1024³ voxels is already 1.1 G voxels, each projected into every
 /// view).

@@ -64,6 +64,9 @@ pub const META_FILE: &str = "bbsplat.json";
 pub const COLOUR_ARRAY: &str = "texture_color.npy";
 /// Array name inside [`ALPHA_FILE`].
 pub const ALPHA_ARRAY: &str = "texture_alpha.npy";
+/// Largest texture side a model folder holds (`save_model` refuses larger, `load_model` reads
+/// no larger).
+pub const MAX_TEXTURE_SIZE: usize = 1024;
 /// Value of the `format` field of [`META_FILE`].
 pub const FORMAT_NAME: &str = "bbsplat-model";
 /// Version of the folder layout written (and the only one read).
@@ -251,8 +254,10 @@ fn check_model(dir: &Path, model: &RawBillboards, meta: &ModelMeta) -> Result<()
             reason,
         })
     };
-    if ts == 0 {
-        return fail("texture size 0".into());
+    if ts == 0 || ts > MAX_TEXTURE_SIZE {
+        return fail(format!(
+            "texture size {ts} (a model folder holds 1 to {MAX_TEXTURE_SIZE}; the loader would refuse it)"
+        ));
     }
     let lengths = [
         ("quaternions", model.quaternions.len(), n),
@@ -633,8 +638,11 @@ fn parse_meta(path: &Path, bytes: &[u8]) -> Result<ModelMeta, ModelFileError> {
     }
     let file: MetaFile = serde_json::from_value(value).map_err(|e| bad(format!("bad field: {e}")))?;
     let meta = file.meta;
-    if meta.texture_size == 0 || meta.texture_size > 1024 {
-        return Err(bad(format!("texture_size {} (expected 1 to 1024)", meta.texture_size)));
+    if meta.texture_size == 0 || meta.texture_size > MAX_TEXTURE_SIZE {
+        return Err(bad(format!(
+            "texture_size {} (expected 1 to {MAX_TEXTURE_SIZE})",
+            meta.texture_size
+        )));
     }
     if meta.sh_degree > 3 {
         return Err(bad(format!("sh_degree {} (at most 3)", meta.sh_degree)));

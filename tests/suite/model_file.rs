@@ -495,3 +495,19 @@ fn non_finite_values_are_never_saved_and_refused_on_loading() {
     );
     fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Failure 4: a texture side above what the loader reads (1024) is refused by `save_model`
+/// before anything is written, instead of a model the loader then refuses.
+#[test]
+fn a_texture_larger_than_the_loader_reads_is_never_saved() {
+    let dir = scratch("ts-1025");
+    let m = fresh_model(1, bbsplat::model_file::MAX_TEXTURE_SIZE + 1, 2);
+    let meta = ModelMeta::for_model(&m, 3, [0.0; 3]);
+    let err = save_model(&dir.join("model"), &m, &meta).unwrap_err();
+    assert!(
+        matches!(&err, ModelFileError::InvalidModel { reason, .. } if reason.contains("1025")),
+        "{err}"
+    );
+    assert!(!dir.join("model").exists());
+    fs::remove_dir_all(&dir).unwrap();
+}
