@@ -150,6 +150,18 @@ fn same_file(a: &Path, b: &Path) -> bool {
 /// (atomic files), `.model.tmp-<pid>-<n>` / `.model.old-<pid>-<n>` (model folders).
 fn leftover_pid(name: &OsStr) -> Option<u32> {
     let name = name.to_str()?;
+    // Only this program's own temporaries: never another hidden file of the folder.
+    let ours = [
+        CHECKPOINT_FILE,
+        SUMMARY_FILE,
+        MODEL_DIR,
+        PROBE_FILE.trim_start_matches('.'),
+    ]
+    .iter()
+    .any(|f| name.strip_prefix('.').is_some_and(|n| n.starts_with(&format!("{f}."))));
+    if !ours {
+        return None;
+    }
     let rest = name.strip_prefix('.')?;
     let (_, tail) = rest
         .rsplit_once(".tmp.")

@@ -288,6 +288,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
                 t.config().iterations,
                 args.iterations
             );
+            preflight::free_space(&args.output, output_bytes(t.model.len(), t.model.texture_size))?;
             println!("resuming at step {} from {}", t.step_index(), path.display());
             t
         }

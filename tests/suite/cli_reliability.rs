@@ -498,7 +498,7 @@ fn an_outlying_camera_is_reported_and_left_out_of_the_extent() {
 }
 
 /// Failure 8: temporary files that earlier killed runs left in the output folder are removed at
-/// start (those of running processes are kept).
+/// start (those of running processes, and other hidden files, are kept).
 #[test]
 fn leftovers_of_killed_runs_are_removed_at_start() {
     let root = temp("rel-leftovers");
@@ -510,8 +510,12 @@ fn leftovers_of_killed_runs_are_removed_at_start() {
     std::fs::write(out.join(".summary.json.tmp.999999998.0"), b"half").unwrap();
     let alive = format!(".checkpoint.bin.tmp.{}.0", std::process::id());
     std::fs::write(out.join(&alive), b"in progress").unwrap();
+    let users = ".notes.tmp.999999999.0".to_string();
+    std::fs::write(out.join(&users), b"not ours").unwrap();
     run_ok(&tiny_train_args(data.to_str().unwrap(), out.to_str().unwrap(), &[]));
-    assert_eq!(hidden_entries(&out), vec![alive]);
+    let mut left = hidden_entries(&out);
+    left.sort();
+    assert_eq!(left, vec![alive, users]);
     std::fs::remove_dir_all(&root).ok();
 }
 
