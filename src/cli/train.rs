@@ -202,11 +202,17 @@ pub enum AdamModeArg {
 /// message saying where, or what could not be saved.
 fn rescue(trainer: &Trainer, error: &RunError, out: &std::path::Path) -> String {
     let named = match error {
-        RunError::ModelSave { .. } => true,
-        RunError::Step { checkpoint, .. } => checkpoint.is_some(),
-        _ => false,
+        RunError::ModelSave { checkpoint, .. } => Some(checkpoint.clone()),
+        RunError::Step { checkpoint, .. } => checkpoint.clone(),
+        _ => None,
     };
-    if named || trainer.step_index() == 0 {
+    if let Some(path) = named {
+        return format!(
+            " (once fixed, continue from the saved state with --resume {})",
+            path.display()
+        );
+    }
+    if trainer.step_index() == 0 {
         return String::new();
     }
     if trainer.non_finite_parameter().is_some() {
