@@ -50,7 +50,7 @@ fn demo_setup(resolution: u32, billboards: usize) -> Setup {
         .iter()
         .map(|v| TrainView {
             camera: v.camera,
-            rgb: v.rgb.clone(),
+            rgb: v.rgb.clone().into(),
         })
         .collect();
     let cameras: Vec<_> = views.iter().map(|v| v.camera).collect();

@@ -107,14 +107,14 @@ impl EvalReport {
 }
 
 /// A view to evaluate: its name, camera and ground-truth image (interleaved RGB in `[0, 1]`).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct EvalView<'a> {
     /// Name printed in the table.
     pub name: &'a str,
     /// The camera.
     pub camera: &'a Camera,
-    /// `width·height·3` values.
-    pub rgb: &'a [f32],
+    /// `width·height·3` values (borrowed, or converted from 8-bit ones for this view).
+    pub rgb: std::borrow::Cow<'a, [f32]>,
 }
 
 /// Renders every view and measures it; `on_render` sees each render (e.g. to save it).
@@ -136,7 +136,7 @@ pub fn evaluate_views<'a>(
         let rendered = render_with(set, view.camera, settings, std::mem::take(&mut buffers));
         let render_ms = start.elapsed().as_secs_f64() * 1e3;
         let (w, h) = (view.camera.width as usize, view.camera.height as usize);
-        let m = image_metrics(&rendered.rgb, view.rgb, w, h)?;
+        let m = image_metrics(&rendered.rgb, &view.rgb, w, h)?;
         on_render(&view, &rendered.rgb);
         buffers = rendered.into_buffers();
         out.push(ViewMetrics {
@@ -198,7 +198,7 @@ mod tests {
         let v = EvalView {
             name: "x",
             camera: &cam,
-            rgb: &short,
+            rgb: short.into(),
         };
         assert!(evaluate_views(&b.borrowed(), [v], &RenderSettings::default(), |_, _| {}).is_err());
     }

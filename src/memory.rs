@@ -87,6 +87,38 @@ pub(crate) fn refill<T: Clone>(v: &mut Vec<T>, len: usize, value: T) -> &mut [T]
     v
 }
 
+/// Memory the system can still give this process without swapping, in bytes: Linux's
+/// `MemAvailable` (`/proc/meminfo`), further bounded by the cgroup limit of the process when one
+/// is set (`/sys/fs/cgroup/memory.max` minus `memory.current`). `None` where neither can be read
+/// (other systems): callers then skip their memory checks.
+pub fn available_bytes() -> Option<u64> {
+    let meminfo = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let kib: u64 = meminfo
+        .lines()
+        .find_map(|l| l.strip_prefix("MemAvailable:"))?
+        .trim()
+        .trim_end_matches("kB")
+        .trim()
+        .parse()
+        .ok()?;
+    let mut available = kib.saturating_mul(1024);
+    let read = |f: &str| std::fs::read_to_string(f).ok()?.trim().parse::<u64>().ok();
+    if let (Some(max), Some(current)) = (read("/sys/fs/cgroup/memory.max"), read("/sys/fs/cgroup/memory.current")) {
+        available = available.min(max.saturating_sub(current));
+    }
+    Some(available)
+}
+
+/// A byte count for messages: `"41.0 GB"`, `"512 MB"` (decimal units).
+pub fn human_bytes(bytes: u64) -> String {
+    let b = bytes as f64;
+    if b >= 1e9 {
+        format!("{:.1} GB", b / 1e9)
+    } else {
+        format!("{:.0} MB", (b / 1e6).ceil())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -102,5 +134,14 @@ mod tests {
         assert!(w.iter().enumerate().all(|(i, &x)| x == i as u32));
         assert_eq!(filled(0, 1u8), Vec::<u8>::new());
         assert!(with_capacity::<f64>(0).is_empty());
+    }
+
+    #[test]
+    fn available_memory_is_positive_where_known_and_bytes_print_in_units() {
+        if let Some(b) = available_bytes() {
+            assert!(b > 0);
+        }
+        assert_eq!(human_bytes(41_000_000_000), "41.0 GB");
+        assert_eq!(human_bytes(511_200_000), "512 MB");
     }
 }

@@ -82,6 +82,11 @@ pub struct SummaryFile {
     /// Its settings.
     #[serde(flatten)]
     pub settings: RecordedSettings,
+    /// Every warning of the run, printed or not (`--quiet`): the scene's (skipped frames,
+    /// damaged images, outlying cameras) and the run's. Empty (or absent in older files) when
+    /// there were none.
+    #[serde(default)]
+    pub warnings: Vec<String>,
 }
 
 /// One evaluation during training.
@@ -175,6 +180,7 @@ mod tests {
             settings: RecordedSettings {
                 clamp_gradient: "straight-through".into(),
             },
+            warnings: vec!["a warning".into()],
         };
         let text = serde_json::to_string(&file).unwrap();
         assert!(text.contains(r#""clamp_gradient":"straight-through""#), "{text}");

@@ -38,6 +38,10 @@ pub struct SceneArgs {
     /// Without a test list, hold out every n-th view (0: none), as the reference's `--eval`.
     #[arg(long, default_value_t = 8)]
     pub test_every: usize,
+    /// Train on damaged images (a JPEG cut short, whose missing part decodes grey) with a
+    /// warning, instead of refusing them.
+    #[arg(long)]
+    pub allow_damaged_images: bool,
 }
 
 impl SceneArgs {
@@ -49,6 +53,7 @@ impl SceneArgs {
             max_width: self.max_width,
             test_every: self.test_every,
             print_warnings: !quiet,
+            allow_damaged_images: self.allow_damaged_images,
             ..LoadOptions::default()
         };
         bbsplat::scene::load(path, &options).with_context(|| format!("loading the scene {}", path.display()))
@@ -76,7 +81,7 @@ pub fn split_views(scene: &Scene, split: Split) -> &[View] {
 /// number of workers.
 pub fn start_threads(threads: Option<usize>) -> Result<usize> {
     if let Some(n) = threads {
-        anyhow::ensure!(n >= 1, "--threads must be at least 1");
+        super::validate::threads(Some(n))?;
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build_global()

@@ -7,6 +7,7 @@ use bbsplat::init::fps::farthest_point_sampling;
 use bbsplat::model::RawBillboards;
 use bbsplat::raster::{RenderSettings, render};
 use bbsplat::scene::split::camera_extent;
+use bbsplat::train::footprint::training_bytes;
 use bbsplat::train::{self, RunConfig, RunOutcome, StopSignal, TrainConfig, TrainEvent, TrainView, Trainer};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -25,8 +26,23 @@ pub fn run(
     output: Option<PathBuf>,
     export: Option<PathBuf>,
 ) -> Result<()> {
-    anyhow::ensure!(texture_size >= 2, "--texture-size must be at least 2");
-    anyhow::ensure!(resolution >= 8, "--resolution must be at least 8");
+    super::validate::demo_args(iterations, billboards, texture_size, resolution)?;
+    let defaults = DemoConfig::default();
+    let pixels = resolution as u64 * resolution as u64;
+    let views = (defaults.train_views + defaults.test_views) as u64;
+    // The demo's views are float images (12 bytes a pixel), traced with as much again.
+    let view_bytes = views.saturating_mul(pixels).saturating_mul(24);
+    let needed = if export.is_some() {
+        view_bytes
+    } else {
+        training_bytes(billboards, texture_size, 0, pixels).saturating_add(view_bytes)
+    };
+    super::validate::memory(
+        &format!(
+            "the demo at --resolution {resolution} with --billboards {billboards} at --texture-size {texture_size}"
+        ),
+        needed,
+    )?;
     let start = Instant::now();
     let scene = generate(&DemoConfig {
         resolution,
@@ -78,7 +94,7 @@ pub fn run(
     let settings = RunConfig {
         eval_every: 0,
         scene: "demo".into(),
-        command: std::env::args().collect(),
+        command: std::env::args_os().map(|a| a.to_string_lossy().into_owned()).collect(),
         ..RunConfig::default()
     };
     let outcome = train::run(&mut trainer, &train, &test, &settings, &StopSignal::new(), |event| {
@@ -115,7 +131,7 @@ pub fn run(
             )?;
             write_png_atomic(
                 &dir.join(format!("test_{i:03}_truth.png")),
-                &v.rgb,
+                &v.rgb.to_f32(),
                 v.camera.width,
                 v.camera.height,
             )?;

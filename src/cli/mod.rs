@@ -3,5 +3,9 @@
 
 pub mod common;
 pub mod demo;
+pub mod preflight;
 pub mod render;
+pub mod resume;
+pub mod signals;
 pub mod train;
+pub mod validate;

@@ -75,15 +75,15 @@ fn run_views(
         sh_degree: meta.sh_degree,
         ..RenderSettings::default()
     };
-    let truths: Vec<Vec<f32>> = views.iter().map(|v| v.image.to_f32_rgb()).collect();
     let mut failure = None;
     let mut index = 0;
     let report = evaluate_views(
         &activated.borrowed(),
-        views.iter().zip(&truths).map(|(v, rgb)| EvalView {
+        // Each view's float values are made for its evaluation only (not all views at once).
+        views.iter().map(|v| EvalView {
             name: &v.name,
             camera: &v.camera,
-            rgb,
+            rgb: std::borrow::Cow::Owned(v.image.to_f32_rgb()),
         }),
         &settings,
         |view, rendered| {
@@ -92,7 +92,7 @@ fn run_views(
                     index,
                     view.name,
                     rendered,
-                    view.rgb,
+                    &view.rgb,
                     view.camera.width,
                     view.camera.height,
                 )

@@ -1,14 +1,18 @@
 //! `bbsplat train <scene> -o <out>`: the main job.
 
 use super::common::{SceneArgs, start_threads};
+use super::signals::Signals;
+use super::{preflight, resume, validate};
 use anyhow::{Context, Result};
 use bbsplat::init::budget::{BudgetInputs, budget_for};
 use bbsplat::init::hull::HullConfig;
 use bbsplat::init::scene_init::{PointlessInit, init_model_with};
+use bbsplat::train::RunError;
+use bbsplat::train::footprint::{output_bytes, training_bytes};
 use bbsplat::train::resolution::ResolutionSchedule;
 use bbsplat::train::{
-    AdamMode, ClampGradient, LearningRateScales, RunConfig, RunOutcome, StopReason, StopSignal, TextureMode,
-    TrainConfig, TrainEvent, TrainView, Trainer,
+    AdamMode, ClampGradient, LearningRateScales, RunConfig, RunOutcome, StopReason, TextureMode, TrainConfig,
+    TrainEvent, TrainView, Trainer,
 };
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use clap::{Args, ValueEnum};
@@ -79,10 +83,16 @@ pub struct TrainArgs {
     /// long run be done in slices with `--resume`.
     #[arg(long)]
     pub stop_after: Option<usize>,
-    /// Continue from a checkpoint written by an earlier run (Ctrl-C or `--save-every`); the
-    /// scene and flags should be those of that run. Continuing is bit-identical to not stopping.
+    /// Continue from a checkpoint written by an earlier run (Ctrl-C, a signal, `--stop-after` or
+    /// `--save-every`) with the same scene and flags: a different dataset or a flag that changes
+    /// the model or the optimisation is refused. Continuing is bit-identical to not stopping.
     #[arg(long)]
     pub resume: Option<PathBuf>,
+    /// Replace the run the output folder already holds (without it, such a folder is refused
+    /// unless the run is continued with `--resume`). Its files are replaced one by one, each
+    /// atomically, as this run writes its own.
+    #[arg(long)]
+    pub overwrite: bool,
     /// Initialisation of scenes without SfM points: `random` points in the scene box (the
     /// reference), or `hull`: points on the visual hull carved from the images' alpha masks
     /// (RGBA images such as NeRF-synthetic; see docs/training.md).
@@ -186,28 +196,73 @@ pub enum AdamModeArg {
     Sparse,
 }
 
+/// After a failed run, makes sure the trained state is on disk: errors that already name a
+/// checkpoint need nothing; otherwise the trainer (when its parameters are finite) is written to
+/// `<out>/checkpoint.bin`, or to the temporary folder when that fails. Returns a note for the
+/// message saying where, or what could not be saved.
+fn rescue(trainer: &Trainer, error: &RunError, out: &std::path::Path) -> String {
+    let named = match error {
+        RunError::ModelSave { checkpoint, .. } => Some(checkpoint.clone()),
+        RunError::Step { checkpoint, .. } => checkpoint.clone(),
+        _ => None,
+    };
+    if let Some(path) = named {
+        return format!(
+            " (once fixed, continue from the saved state with --resume {})",
+            path.display()
+        );
+    }
+    if trainer.step_index() == 0 {
+        return String::new();
+    }
+    if trainer.non_finite_parameter().is_some() {
+        return " (the trainer's state is not finite and was not saved)".into();
+    }
+    let candidates = [
+        out.join(bbsplat::train::run::CHECKPOINT_FILE),
+        std::env::temp_dir().join(format!("bbsplat-rescued-{}.bin", std::process::id())),
+    ];
+    for path in candidates {
+        if trainer.save_checkpoint(&path).is_ok() {
+            return format!(
+                " (the trained state at step {} is saved in {}: continue with --resume {})",
+                trainer.step_index(),
+                path.display(),
+                path.display()
+            );
+        }
+    }
+    " (the trained state could not be saved anywhere)".into()
+}
+
 /// Runs `bbsplat train`: loads the scene, builds or resumes the trainer, and turns the events of
 /// [`bbsplat::train::run`] into the progress bar and printed lines; Ctrl-C raises its stop
 /// signal.
 pub fn run(args: TrainArgs) -> Result<()> {
-    anyhow::ensure!(args.texture_size >= 2, "--texture-size must be at least 2");
-    anyhow::ensure!(args.sh_degree <= 3, "--sh-degree must be 0, 1, 2 or 3");
-    anyhow::ensure!(args.iterations >= 1, "--iterations must be at least 1");
-    anyhow::ensure!(args.coarse_factor >= 1, "--coarse-factor must be at least 1");
-    anyhow::ensure!(
-        (0.0..=1.0).contains(&args.coarse_until),
-        "--coarse-until must be a fraction between 0 and 1"
-    );
-    let threads = start_threads(args.threads)?;
+    let signals = Signals::install()?;
     let start = Instant::now();
+    validate::train_args(&args)?;
+    if let Some(n) = args.billboards {
+        validate::memory(
+            &format!("--billboards {n} at --texture-size {}", args.texture_size),
+            training_bytes(n, args.texture_size, 0, 0),
+        )?;
+    }
+    if args.init == InitArg::Hull {
+        let r = args.hull_resolution as u64;
+        validate::memory(&format!("--hull-resolution {r}"), r.saturating_pow(3).saturating_mul(2))?;
+    }
+    preflight::output_folder(&args.output, args.resume.as_deref(), args.overwrite)?;
+    let threads = start_threads(args.threads)?;
     let scene = args.scene_args.load(&args.scene, args.quiet)?;
-    let train = TrainView::from_views(&scene.train);
     anyhow::ensure!(
-        !train.is_empty(),
+        !scene.train.is_empty(),
         "{}: the scene has no training view",
         args.scene.display()
     );
-    let test = TrainView::from_views(&scene.test);
+    let views = scene.train.iter().chain(&scene.test);
+    let view_pixels: u64 = views.clone().map(|v| v.camera.pixel_count() as u64).sum();
+    let largest_view = views.map(|v| v.camera.pixel_count() as u64).max().unwrap_or(0);
     let config = TrainConfig {
         iterations: args.iterations,
         sh_degree: args.sh_degree,
@@ -225,9 +280,13 @@ pub fn run(args: TrainArgs) -> Result<()> {
         clamp_gradient: args.clamp_gradient.into(),
         ..TrainConfig::default()
     };
+    let record = resume::record_of(&args, &scene);
     let mut trainer = match &args.resume {
         Some(path) => {
             let t = Trainer::load_checkpoint(path).with_context(|| format!("resuming from {}", path.display()))?;
+            if let Some(note) = resume::check(path, t.run_record(), &record)? {
+                eprintln!("{note}");
+            }
             anyhow::ensure!(
                 t.config().iterations == args.iterations,
                 "{}: the checkpoint is of a {}-step run, not --iterations {}",
@@ -235,6 +294,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
                 t.config().iterations,
                 args.iterations
             );
+            preflight::free_space(&args.output, output_bytes(t.model.len(), t.model.texture_size))?;
             println!("resuming at step {} from {}", t.step_index(), path.display());
             t
         }
@@ -252,6 +312,15 @@ pub fn run(args: TrainArgs) -> Result<()> {
                     b.billboards
                 }
             };
+            validate::memory(
+                &format!(
+                    "training {budget} billboards at --texture-size {} on {} views",
+                    args.texture_size,
+                    scene.train.len() + scene.test.len()
+                ),
+                training_bytes(budget, args.texture_size, view_pixels, largest_view),
+            )?;
+            preflight::free_space(&args.output, output_bytes(budget, args.texture_size))?;
             let pointless = match args.init {
                 InitArg::Random => PointlessInit::Random,
                 InitArg::Hull => PointlessInit::Hull(HullConfig {
@@ -285,16 +354,17 @@ pub fn run(args: TrainArgs) -> Result<()> {
                     init.sfm, init.sky, init.sky_radius, init.random,
                 );
             }
-            Trainer::new(model, config)
+            let mut t = Trainer::new(model, config);
+            t.set_run_record(record);
+            t
         }
     };
-    drop(scene);
-    // From here on Ctrl-C stops the run with a checkpoint instead of killing the process.
-    let stop = StopSignal::new();
-    {
-        let stop = stop.clone();
-        ctrlc::set_handler(move || stop.request()).context("installing the Ctrl-C handler")?;
-    }
+    // The views' 8-bit images move into the training views (converted to floats per step).
+    let scene_warnings = scene.warnings;
+    let train: Vec<TrainView> = scene.train.into_iter().map(TrainView::from_owned_view).collect();
+    let test: Vec<TrainView> = scene.test.into_iter().map(TrainView::from_owned_view).collect();
+    // From here on a signal stops the run with a checkpoint instead of ending the process.
+    let stop = signals.arm();
     let bar = if args.quiet {
         ProgressBar::hidden()
     } else {
@@ -316,7 +386,9 @@ pub fn run(args: TrainArgs) -> Result<()> {
             until: args.coarse_until,
         },
         scene: args.scene.display().to_string(),
-        command: std::env::args().collect(),
+        // Arguments as the OS gave them (a path need not be UTF-8).
+        command: std::env::args_os().map(|a| a.to_string_lossy().into_owned()).collect(),
+        warnings: scene_warnings,
     };
     let on_event = |event: &TrainEvent| match event {
         TrainEvent::Started {
@@ -387,7 +459,8 @@ pub fn run(args: TrainArgs) -> Result<()> {
         Ok(other) => anyhow::bail!("training ended unexpectedly: {other:?}"),
         Err(e) => {
             bar.abandon();
-            return Err(e).with_context(|| format!("training on {}", args.scene.display()));
+            let note = rescue(&trainer, &e, &args.output);
+            return Err(e).with_context(|| format!("training on {}{note}", args.scene.display()));
         }
     };
     println!(

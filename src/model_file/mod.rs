@@ -64,6 +64,9 @@ pub const META_FILE: &str = "bbsplat.json";
 pub const COLOUR_ARRAY: &str = "texture_color.npy";
 /// Array name inside [`ALPHA_FILE`].
 pub const ALPHA_ARRAY: &str = "texture_alpha.npy";
+/// Largest texture side a model folder holds (`save_model` refuses larger, `load_model` reads
+/// no larger).
+pub const MAX_TEXTURE_SIZE: usize = 1024;
 /// Value of the `format` field of [`META_FILE`].
 pub const FORMAT_NAME: &str = "bbsplat-model";
 /// Version of the folder layout written (and the only one read).
@@ -251,8 +254,10 @@ fn check_model(dir: &Path, model: &RawBillboards, meta: &ModelMeta) -> Result<()
             reason,
         })
     };
-    if ts == 0 {
-        return fail("texture size 0".into());
+    if ts == 0 || ts > MAX_TEXTURE_SIZE {
+        return fail(format!(
+            "texture size {ts} (a model folder holds 1 to {MAX_TEXTURE_SIZE}; the loader would refuse it)"
+        ));
     }
     let lengths = [
         ("quaternions", model.quaternions.len(), n),
@@ -283,7 +288,32 @@ fn check_model(dir: &Path, model: &RawBillboards, meta: &ModelMeta) -> Result<()
     if meta.sh_degree > 3 {
         return fail(format!("SH degree {} (at most 3)", meta.sh_degree));
     }
+    if let Some((billboard, field)) = first_non_finite(model) {
+        return fail(format!(
+            "billboard {billboard} has a non-finite {field} (NaN or infinite)"
+        ));
+    }
+    if !meta.background.iter().all(|c| c.is_finite()) {
+        return fail(format!("the background {:?} is not finite", meta.background));
+    }
     Ok(())
+}
+
+/// The first billboard holding a NaN or infinite parameter, and which one.
+fn first_non_finite(model: &RawBillboards) -> Option<(usize, &'static str)> {
+    let t = model.texture_size * model.texture_size;
+    (0..model.len()).find_map(|i| {
+        let finite = |xs: &[f32]| xs.iter().all(|x| x.is_finite());
+        let checks: [(&'static str, bool); 6] = [
+            ("position", model.positions[i].is_finite()),
+            ("rotation", finite(&model.quaternions[i])),
+            ("scale", model.log_scales[i].is_finite()),
+            ("SH coefficient", finite(&model.sh[i * SH_FLOATS..(i + 1) * SH_FLOATS])),
+            ("alpha texel", finite(&model.alpha_logits[i * t..(i + 1) * t])),
+            ("colour texel", finite(&model.colour_logits[3 * i * t..3 * (i + 1) * t])),
+        ];
+        checks.into_iter().find(|(_, ok)| !ok).map(|(field, _)| (i, field))
+    })
 }
 
 /// The encoded files of a model, in memory: `(name, bytes)`.
@@ -411,12 +441,22 @@ pub fn save_model(dir: &Path, model: &RawBillboards, meta: &ModelMeta) -> Result
             return Err(e);
         }
     };
+    crate::fault::point("model", "written");
     if !replacing {
         if let Err(e) = fs::rename(&tmp, dir) {
             let _ = fs::remove_dir_all(&tmp);
             return Err(io_err(dir)(e));
         }
+        crate::fault::point("model", "swapped");
+    } else if exchange(&tmp, dir).is_ok() {
+        // One atomic step: `dir` held the previous model until now and holds the new one from
+        // now on; `tmp` holds the previous one.
+        crate::fault::point("model", "swapped");
+        fs::remove_dir_all(&tmp).map_err(io_err(&tmp))?;
+        crate::fault::point("model", "cleaned");
     } else {
+        // No atomic exchange on this system or file system: two renames, with a moment in
+        // which `dir` does not exist.
         let old = sibling(dir, "old");
         if let Err(e) = fs::rename(dir, &old) {
             let _ = fs::remove_dir_all(&tmp);
@@ -428,10 +468,42 @@ pub fn save_model(dir: &Path, model: &RawBillboards, meta: &ModelMeta) -> Result
             let _ = fs::remove_dir_all(&tmp);
             return Err(io_err(dir)(e));
         }
+        crate::fault::point("model", "swapped");
         fs::remove_dir_all(&old).map_err(io_err(&old))?;
+        crate::fault::point("model", "cleaned");
     }
     sync_dir(dir.parent().unwrap_or(Path::new(".")));
     Ok(total)
+}
+
+/// Atomically exchanges the folders `a` and `b` (both exist): Linux `renameat2` with
+/// `RENAME_EXCHANGE`. Fails where the system or the file system does not support it.
+#[cfg(target_os = "linux")]
+fn exchange(a: &Path, b: &Path) -> std::io::Result<()> {
+    use std::os::unix::ffi::OsStrExt;
+    let c = |p: &Path| std::ffi::CString::new(p.as_os_str().as_bytes()).map_err(std::io::Error::other);
+    let (ca, cb) = (c(a)?, c(b)?);
+    // SAFETY: both pointers are NUL-terminated paths that outlive the call; renameat2 reads
+    // them and changes only the file system.
+    let r = unsafe {
+        libc::renameat2(
+            libc::AT_FDCWD,
+            ca.as_ptr(),
+            libc::AT_FDCWD,
+            cb.as_ptr(),
+            libc::RENAME_EXCHANGE,
+        )
+    };
+    if r == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn exchange(_a: &Path, _b: &Path) -> std::io::Result<()> {
+    Err(std::io::Error::from(std::io::ErrorKind::Unsupported))
 }
 
 /// Creates `tmp` and writes every file into it (each flushed to disk); returns the byte total.
@@ -485,6 +557,17 @@ pub fn load_model(dir: &Path) -> Result<(RawBillboards, ModelMeta), ModelFileErr
     let ply_path = dir.join(PLY_FILE);
     let rows = ply::parse(&ply_path, &read(&ply_path)?)?;
     let n = rows.len() / ply::PLY_FLOATS;
+    if let Some(k) = rows.iter().position(|x| !x.is_finite()) {
+        return Err(ModelFileError::Ply {
+            path: ply_path,
+            reason: format!(
+                "vertex {} holds a non-finite value ({}) in field {}: a model with NaN or infinite parameters is refused",
+                k / ply::PLY_FLOATS,
+                rows[k],
+                ply::property_names()[k % ply::PLY_FLOATS]
+            ),
+        });
+    }
     if n != meta.billboards {
         return Err(ModelFileError::CountMismatch {
             path: meta_path,
@@ -555,11 +638,17 @@ fn parse_meta(path: &Path, bytes: &[u8]) -> Result<ModelMeta, ModelFileError> {
     }
     let file: MetaFile = serde_json::from_value(value).map_err(|e| bad(format!("bad field: {e}")))?;
     let meta = file.meta;
-    if meta.texture_size == 0 || meta.texture_size > 1024 {
-        return Err(bad(format!("texture_size {} (expected 1 to 1024)", meta.texture_size)));
+    if meta.texture_size == 0 || meta.texture_size > MAX_TEXTURE_SIZE {
+        return Err(bad(format!(
+            "texture_size {} (expected 1 to {MAX_TEXTURE_SIZE})",
+            meta.texture_size
+        )));
     }
     if meta.sh_degree > 3 {
         return Err(bad(format!("sh_degree {} (at most 3)", meta.sh_degree)));
+    }
+    if !meta.background.iter().all(|c| c.is_finite()) {
+        return Err(bad(format!("background {:?} is not finite", meta.background)));
     }
     Ok(meta)
 }

@@ -78,7 +78,7 @@ fn root_of(model_dir: &Path) -> PathBuf {
     }
 }
 
-pub(crate) fn load(model_dir: &Path, options: &LoadOptions, _warnings: &mut Vec<String>) -> Result<Scene, SceneError> {
+pub(crate) fn load(model_dir: &Path, options: &LoadOptions, warnings: &mut Vec<String>) -> Result<Scene, SceneError> {
     let model = colmap::read_model(model_dir)?;
     let binary = model_kind(model_dir) == Some(true);
     let images_file = model_dir.join(if binary { "images.bin" } else { "images.txt" });
@@ -145,7 +145,7 @@ pub(crate) fn load(model_dir: &Path, options: &LoadOptions, _warnings: &mut Vec<
         });
     }
     sources.sort_by(|a, b| a.name.cmp(&b.name));
-    let views = views::load_all(sources, options)?;
+    let views = views::load_all(sources, options, warnings)?;
     let (train, test) = split::split_every(views, options.test_every);
     let points = PointCloud {
         positions: model

@@ -7,23 +7,60 @@ use super::Image;
 use super::error::{Location, SceneError};
 use std::path::Path;
 
+/// A decoded image, its alpha channel (if it has one) and the warning naming its damage (if
+/// accepted damaged).
+pub(crate) type Decoded = (Image, Option<Vec<u8>>, Option<String>);
+
 /// Decodes an image file into 8-bit RGB, compositing any alpha channel onto `background`
 /// (values in `[0, 1]`): `c = c_rgb·a + background·(1 − a)`, rounded to 8 bits, and returns the
 /// alpha channel (8 bits, row-major) of an image that has one. 16-bit images are reduced to 8
-/// bits. The format is guessed from the file contents.
+/// bits. The format is guessed from the file contents. A damaged image ([`jpeg_damage`]) is an
+/// error unless `allow_damaged`, when it is decoded and the third value is the warning naming
+/// it.
 pub(crate) fn decode_with_alpha(
     image_path: &Path,
     referenced_by: &Path,
     location: &Location,
     background: [f32; 3],
-) -> Result<(Image, Option<Vec<u8>>), SceneError> {
+    allow_damaged: bool,
+) -> Result<Decoded, SceneError> {
     let bytes = std::fs::read(image_path).map_err(|e| SceneError::io(image_path, e))?;
-    decode_bytes_with_alpha(&bytes, background).map_err(|message| SceneError::ImageDecode {
+    let error = |message| SceneError::ImageDecode {
         image: image_path.to_path_buf(),
         file: referenced_by.to_path_buf(),
         location: location.clone(),
         message,
-    })
+    };
+    let damage = jpeg_damage(&bytes);
+    if let Some(message) = &damage
+        && !allow_damaged
+    {
+        return Err(error(format!(
+            "{message} (refused: LoadOptions::allow_damaged_images, bbsplat's --allow-damaged-images, accepts it with a warning)"
+        )));
+    }
+    let (image, alpha) = decode_bytes_with_alpha(&bytes, background).map_err(error)?;
+    Ok((image, alpha, damage.map(|d| format!("{}: {d}", image_path.display()))))
+}
+
+/// Why a JPEG stream is incomplete, or `None` when it is whole (or not a JPEG). A JPEG whose
+/// file was cut short decodes without an error, its missing rows grey; such a stream has no end
+/// marker (`FF D9`) after the start of its last scan (`FF DA`). Neither marker can occur inside
+/// entropy-coded data (a `FF` data byte is followed by `00`), and an embedded thumbnail's end
+/// marker lies before the main image's scans, so the test is exact for truncation.
+pub(crate) fn jpeg_damage(bytes: &[u8]) -> Option<String> {
+    if !bytes.starts_with(&[0xFF, 0xD8]) {
+        return None;
+    }
+    let last = |marker: u8| bytes.windows(2).rposition(|w| w == [0xFF, marker]);
+    match (last(0xDA), last(0xD9)) {
+        (None, _) => Some("truncated JPEG: no image scan (start-of-scan marker)".into()),
+        (Some(scan), end) if end.is_none_or(|e| e < scan) => Some(format!(
+            "truncated JPEG: the file ends ({} bytes) inside its last scan, without an end-of-image marker; the missing part would be grey",
+            bytes.len()
+        )),
+        _ => None,
+    }
 }
 
 /// Decodes image bytes (PNG or JPEG); see [`decode_with_alpha`].

@@ -137,11 +137,11 @@ pub(crate) fn load_nerf_synthetic(
         let test_json = read_transforms(&test_file)?;
         let test_sources = sources_of(&test_file, &test_json, false, warnings)?;
         (
-            views::load_all(train_sources, options)?,
-            views::load_all(test_sources, options)?,
+            views::load_all(train_sources, options, warnings)?,
+            views::load_all(test_sources, options, warnings)?,
         )
     } else {
-        let views = sort_by_name(views::load_all(train_sources, options)?);
+        let views = sort_by_name(views::load_all(train_sources, options, warnings)?);
         split::split_every(views, options.test_every)
     };
     Ok(Scene {
@@ -194,7 +194,7 @@ pub(crate) fn load_transforms(
             }
         }
     };
-    let views = sort_by_name(views::load_all(sources, options)?);
+    let views = sort_by_name(views::load_all(sources, options, warnings)?);
     let (train, test) = split::split_every(views, options.test_every);
     Ok(Scene {
         name: scene_name(file),

@@ -94,6 +94,11 @@ impl Image {
         &self.data
     }
 
+    /// The interleaved RGB bytes, taken out of the image.
+    pub fn into_bytes(self) -> Vec<u8> {
+        self.data
+    }
+
     /// The 8-bit RGB value of pixel `(x, y)` (column, row). Panics when out of range.
     pub fn pixel(&self, x: u32, y: u32) -> [u8; 3] {
         assert!(
@@ -211,6 +216,9 @@ pub struct LoadOptions {
     /// Also print warnings (skipped frames, missing point clouds) to stderr; they are always
     /// collected in [`Scene::warnings`].
     pub print_warnings: bool,
+    /// Accept damaged images (a JPEG cut short, whose missing part decodes grey) with a warning
+    /// instead of refusing them with [`SceneError::ImageDecode`]. Default false.
+    pub allow_damaged_images: bool,
 }
 
 impl Default for LoadOptions {
@@ -224,6 +232,7 @@ impl Default for LoadOptions {
             undistort: UndistortMode::Crop,
             images_dir: None,
             print_warnings: true,
+            allow_damaged_images: false,
         }
     }
 }
@@ -247,7 +256,9 @@ pub struct Scene {
     pub points: Option<PointCloud>,
     /// Scene extent for learning-rate scaling: 1.1 × the largest distance of a training camera
     /// centre from the mean of the training camera centres (world units), as 3DGS. Points are
-    /// not used, so outlier points cannot inflate it. 1.1 when all centres coincide.
+    /// not used, so outlier points cannot inflate it, and cameras far from all others
+    /// ([`split::outlying_cameras`], reported in [`Scene::warnings`]) are left out. 1.1 when all
+    /// centres coincide.
     pub extent: f32,
     /// Warnings raised while loading (e.g. frames skipped because their image is missing).
     pub warnings: Vec<String>,
@@ -283,7 +294,26 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
             ),
         });
     }
-    scene.extent = split::camera_extent(scene.train.iter().map(|v| &v.camera));
+    // Poses far from all others are reported and left out of the extent (they would inflate the
+    // position learning rate and ruin the run).
+    let outliers = split::outlying_cameras(scene.train.iter().map(|v| &v.camera));
+    for o in &outliers {
+        warnings.push(format!(
+            "the camera of view {:?} lies {:.3} units from the median camera centre, {:.0} times the median distance ({:.3}): a misregistered pose? It is left out of the scene extent",
+            scene.train[o.index].name,
+            o.distance,
+            o.distance / o.median_distance,
+            o.median_distance
+        ));
+    }
+    scene.extent = split::camera_extent(
+        scene
+            .train
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !outliers.iter().any(|o| o.index == *i))
+            .map(|(_, v)| &v.camera),
+    );
     if options.print_warnings {
         for w in &warnings {
             eprintln!("warning: {w}");

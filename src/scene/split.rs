@@ -55,3 +55,71 @@ pub fn camera_extent<'a>(cameras: impl IntoIterator<Item = &'a Camera>) -> f32 {
     let radius = if radius > 1e-9 { radius } else { 1.0 };
     (1.1 * radius) as f32
 }
+
+/// A camera far from all others: see [`outlying_cameras`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OutlyingCamera {
+    /// Index of the camera in the list given.
+    pub index: usize,
+    /// Its centre's distance from the median camera centre, world units.
+    pub distance: f64,
+    /// The median of all centres' distances from the median centre.
+    pub median_distance: f64,
+}
+
+/// How many times the median distance a camera centre must lie from the median centre (the
+/// component-wise median of all centres) to be an outlier.
+pub const OUTLIER_FACTOR: f64 = 10.0;
+
+/// The cameras whose centre lies more than [`OUTLIER_FACTOR`] times the median distance from the
+/// median camera centre: a pose far from all others (typically a misregistered image), which
+/// would inflate [`camera_extent`] and with it the position learning rate. Medians ignore a
+/// minority of such poses. Needs at least 4 cameras and a positive median distance; otherwise
+/// none is an outlier.
+///
+/// ```
+/// use bbsplat::camera::Camera;
+/// use bbsplat::scene::split::outlying_cameras;
+/// use glam::Vec3;
+/// let mut eyes: Vec<Vec3> = (0..8).map(|k| Vec3::new((k as f32).cos(), 0.0, (k as f32).sin()) * 3.0).collect();
+/// eyes.push(Vec3::new(500.0, 0.0, 0.0));
+/// let cams: Vec<Camera> = eyes.iter().map(|&e| Camera::look_at(e, Vec3::ZERO, Vec3::Y, 50.0, 50.0, 8, 8)).collect();
+/// let out = outlying_cameras(&cams);
+/// assert_eq!(out.len(), 1);
+/// assert_eq!(out[0].index, 8);
+/// ```
+pub fn outlying_cameras<'a>(cameras: impl IntoIterator<Item = &'a Camera>) -> Vec<OutlyingCamera> {
+    let centres: Vec<DVec3> = cameras.into_iter().map(|c| c.centre().as_dvec3()).collect();
+    if centres.len() < 4 {
+        return Vec::new();
+    }
+    let median = |mut xs: Vec<f64>| {
+        xs.sort_by(f64::total_cmp);
+        let n = xs.len();
+        if n % 2 == 1 {
+            xs[n / 2]
+        } else {
+            0.5 * (xs[n / 2 - 1] + xs[n / 2])
+        }
+    };
+    let centre = DVec3::new(
+        median(centres.iter().map(|c| c.x).collect()),
+        median(centres.iter().map(|c| c.y).collect()),
+        median(centres.iter().map(|c| c.z).collect()),
+    );
+    let distances: Vec<f64> = centres.iter().map(|c| (*c - centre).length()).collect();
+    let median_distance = median(distances.clone());
+    if median_distance.is_nan() || median_distance <= 1e-9 {
+        return Vec::new();
+    }
+    distances
+        .iter()
+        .enumerate()
+        .filter(|(_, d)| d.is_nan() || **d > OUTLIER_FACTOR * median_distance)
+        .map(|(index, &distance)| OutlyingCamera {
+            index,
+            distance,
+            median_distance,
+        })
+        .collect()
+}

@@ -51,20 +51,39 @@ impl ViewSource {
     }
 }
 
-/// Loads every view in parallel; the first error in list order is returned.
-pub(crate) fn load_all(sources: Vec<ViewSource>, options: &LoadOptions) -> Result<Vec<View>, SceneError> {
+/// Loads every view in parallel; the first error in list order is returned. Warnings about
+/// damaged images accepted by [`LoadOptions::allow_damaged_images`] are added to `warnings`, in
+/// list order.
+pub(crate) fn load_all(
+    sources: Vec<ViewSource>,
+    options: &LoadOptions,
+    warnings: &mut Vec<String>,
+) -> Result<Vec<View>, SceneError> {
     for s in &sources {
         if !s.image_path.is_file() {
             return Err(s.missing());
         }
     }
-    let results: Vec<Result<View, SceneError>> = sources.into_par_iter().map(|s| load_view(s, options)).collect();
-    results.into_iter().collect()
+    let results: Vec<Result<(View, Option<String>), SceneError>> =
+        sources.into_par_iter().map(|s| load_view(s, options)).collect();
+    let mut views = Vec::with_capacity(results.len());
+    for r in results {
+        let (view, warning) = r?;
+        warnings.extend(warning);
+        views.push(view);
+    }
+    Ok(views)
 }
 
-fn load_view(s: ViewSource, options: &LoadOptions) -> Result<View, SceneError> {
+fn load_view(s: ViewSource, options: &LoadOptions) -> Result<(View, Option<String>), SceneError> {
     let background = options.background.rgb();
-    let (image, alpha) = image_io::decode_with_alpha(&s.image_path, &s.file, &s.location, background)?;
+    let (image, alpha, damage) = image_io::decode_with_alpha(
+        &s.image_path,
+        &s.file,
+        &s.location,
+        background,
+        options.allow_damaged_images,
+    )?;
     let (iw, ih) = (image.width(), image.height());
     let perr = |m: String| SceneError::parse(&s.file, s.location.clone(), m);
     let (intrinsics, cw, ch) = match &s.camera {
@@ -127,11 +146,12 @@ fn load_view(s: ViewSource, options: &LoadOptions) -> Result<View, SceneError> {
             plan.fx, plan.fy, plan.cx, plan.cy
         )));
     }
-    Ok(View {
+    let view = View {
         name: s.name,
         path: s.image_path,
         camera,
         image,
         coverage,
-    })
+    };
+    Ok((view, damage))
 }

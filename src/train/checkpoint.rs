@@ -1,13 +1,13 @@
 //! Training checkpoints: everything needed to continue a run bit for bit.
 //!
-//! # Format (version 3)
+//! # Format (version 4)
 //!
 //! Little-endian, no padding. `T = TS²`, `n` = number of billboards.
 //!
 //! | field | type | notes |
 //! |---|---|---|
 //! | magic | 8 bytes | `BBSPLCKP` |
-//! | version | u32 | 3 (versions 1 and 2 are still read, see [`OLDEST_VERSION`]) |
+//! | version | u32 | 4 (versions 1 to 3 are still read, see [`OLDEST_VERSION`]) |
 //! | file length | u64 | total bytes including the checksum |
 //! | iterations | u64 | [`TrainConfig::iterations`] |
 //! | sh_degree | u32 | ≤ 3 |
@@ -34,6 +34,9 @@
 //! | per group: row_len, rows, global step | 3 × u64 | rows = n |
 //! | per group: m, v | 2 × `rows·row_len` × f32 | |
 //! | per group: update counts | `rows` × u32 | |
+//! | **run record** (version 4) | | |
+//! | record length `r` | u64 | |
+//! | record | `r` bytes | UTF-8 JSON of [`RunRecord`]: the run's arguments and the dataset fingerprint; absent in versions 1-3 (read as empty) |
 //! | checksum | u64 | FNV-1a 64 of every preceding byte |
 //!
 //! Derived state is not stored: the activated textures (recomputed from the logits), the
@@ -46,6 +49,7 @@
 //! allocates more than the file's size.
 
 use super::adam::AdamGroup;
+use super::run_record::RunRecord;
 use super::{AdamMode, ClampGradient, LearningRateScales, TextureMode, TrainConfig, Trainer, adam_groups, group};
 use crate::model::RawBillboards;
 use crate::raster::SH_FLOATS;
@@ -58,11 +62,12 @@ use thiserror::Error;
 /// File magic.
 pub const MAGIC: [u8; 8] = *b"BBSPLCKP";
 /// Format version written (and the newest read).
-pub const VERSION: u32 = 3;
+pub const VERSION: u32 = 4;
 
 /// Oldest format version still read. Version 1 lacks the learning-rate multipliers, read as
 /// [`super::LearningRateScales::REFERENCE`]; versions 1 and 2 lack the clamp gradient, read as
-/// [`ClampGradient::Exact`] (the only one the trainer used before it became a setting).
+/// [`ClampGradient::Exact`] (the only one the trainer used before it became a setting);
+/// versions 1 to 3 lack the run record, read as empty ([`RunRecord::default`]).
 pub const OLDEST_VERSION: u32 = 1;
 
 /// What went wrong reading or writing a checkpoint; every variant names the file.
@@ -131,7 +136,7 @@ pub enum CheckpointError {
 const FNV_BASIS: u64 = 0xcbf2_9ce4_8422_2325;
 
 /// FNV-1a, 64 bit.
-fn fnv1a(data: &[u8]) -> u64 {
+pub(crate) fn fnv1a(data: &[u8]) -> u64 {
     fnv1a_update(FNV_BASIS, data)
 }
 
@@ -379,6 +384,10 @@ fn encode_into<S: Sink>(tr: &Trainer, len: u64, sink: &mut S) {
             w.u32(s);
         }
     }
+    // Run record (version 4).
+    let record = serde_json::to_vec(&tr.record).expect("the run record serialises");
+    w.u64(record.len() as u64);
+    w.0.put(&record);
 }
 
 fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
@@ -565,6 +574,14 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
             global_step,
         };
     }
+    let record = if version >= 4 {
+        let len = r.count(1, "run record length")?;
+        let bytes = r.take(len, "run record")?;
+        serde_json::from_slice::<RunRecord>(bytes)
+            .map_err(|e| r.inconsistent(format!("the run record is not valid: {e}")))?
+    } else {
+        RunRecord::default()
+    };
     if r.pos != body.len() {
         return Err(r.inconsistent(format!("{} unexpected bytes before the checksum", body.len() - r.pos)));
     }
@@ -586,6 +603,7 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
     trainer.order = order;
     trainer.rng = rng;
     trainer.step = step;
+    trainer.record = record;
     Ok(trainer)
 }
 
@@ -626,10 +644,15 @@ fn write_atomic_with(
     let tmp = dir.join(format!(".{name}.tmp.{}.{serial}", std::process::id()));
     let result = (|| {
         let mut f = std::fs::File::create(&tmp).map_err(io("creating the temporary file"))?;
+        crate::fault::point(&name, "created");
         write(&mut f).map_err(io("writing"))?;
+        crate::fault::point(&name, "written");
         f.sync_all().map_err(io("flushing to disk"))?;
+        crate::fault::point(&name, "synced");
         drop(f);
-        std::fs::rename(&tmp, path).map_err(io("renaming the temporary file"))
+        std::fs::rename(&tmp, path).map_err(io("renaming the temporary file"))?;
+        crate::fault::point(&name, "renamed");
+        Ok(())
     })();
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);

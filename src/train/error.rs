@@ -12,6 +12,10 @@ pub enum TrainError {
     /// The list of training views is empty.
     #[error("no training views: a training step needs at least one view")]
     NoViews,
+    /// A setting of the [`super::TrainConfig`] is out of its range (e.g. a negative or NaN
+    /// texture-regulariser threshold); nothing was done.
+    #[error("invalid training setting: {0}")]
+    InvalidConfig(String),
     /// A view's image does not hold `width · height · 3` values of its camera.
     #[error("training view {view}: image has {got} values but its {width}x{height} camera needs {expected}")]
     ImageSize {

@@ -28,11 +28,14 @@ pub mod adam;
 pub mod checkpoint;
 pub mod error;
 pub mod finite;
+pub mod footprint;
 pub mod regularise;
 pub mod relocate;
 pub mod resolution;
 pub mod run;
+pub mod run_record;
 pub mod texture_step;
+pub mod view_pixels;
 
 use crate::billboards::ActivatedBillboards;
 use crate::camera::Camera;
@@ -52,22 +55,32 @@ use regularise::{gaussian_opacity_grad, opacity_regulariser, texture_regulariser
 use relocate::{apply_relocation, plan_relocation, split_alpha_logit};
 pub use run::{RunConfig, RunError, RunOutcome, RunWarning, StopReason, StopSignal, TrainEvent, run};
 use serde::{Deserialize, Serialize};
+pub use view_pixels::ViewPixels;
 
-/// A posed image: camera and interleaved RGB values in `[0, 1]`.
+/// A posed image: camera and interleaved RGB values (8-bit or float, [`ViewPixels`]).
 #[derive(Clone, Debug)]
 pub struct TrainView {
     /// The camera.
     pub camera: Camera,
     /// `width · height · 3` values.
-    pub rgb: Vec<f32>,
+    pub rgb: ViewPixels,
 }
 
 impl TrainView {
-    /// The float copy of a loaded scene view (its background-composited image).
+    /// A loaded scene view (its background-composited image), kept as its 8-bit values.
     pub fn from_view(view: &crate::scene::View) -> Self {
         Self {
             camera: view.camera,
-            rgb: view.image.to_f32_rgb(),
+            rgb: ViewPixels::U8(view.image.as_bytes().to_vec()),
+        }
+    }
+
+    /// [`TrainView::from_view`] taking the view's image instead of copying it (the 8-bit
+    /// values move; nothing is allocated).
+    pub fn from_owned_view(view: crate::scene::View) -> Self {
+        Self {
+            camera: view.camera,
+            rgb: ViewPixels::U8(view.image.into_bytes()),
         }
     }
 
@@ -81,7 +94,7 @@ impl TrainView {
     pub fn from_demo(view: &crate::demo::DemoView) -> Self {
         Self {
             camera: view.camera,
-            rgb: view.rgb.clone(),
+            rgb: view.rgb.clone().into(),
         }
     }
 }
@@ -193,6 +206,35 @@ pub struct TrainConfig {
     /// reference rasterizer does, so that an alpha texel above the clamp still learns). Only the
     /// backward pass depends on it; renders are the same.
     pub clamp_gradient: ClampGradient,
+}
+
+impl TrainConfig {
+    /// What is out of range in this configuration, or `None`: the texture-regulariser threshold
+    /// must be finite and ≥ 0, the regulariser weights, background and extent finite (the extent
+    /// positive), the SH degree ≤ 3. Checked by every [`Trainer::step`] (a bad setting would
+    /// otherwise panic or train on NaN). (Learning-rate multipliers are not: a huge one is a
+    /// legitimate way to diverge, caught by the non-finite checks of the step.)
+    pub fn problem(&self) -> Option<String> {
+        let t = self.impact_threshold;
+        if !(t.is_finite() && t >= 0.0) {
+            return Some(format!(
+                "impact_threshold (texture threshold) {t} is not a finite number ≥ 0"
+            ));
+        }
+        if !(self.texture_reg_weight.is_finite() && self.opacity_reg_weight.is_finite()) {
+            return Some("a regulariser weight is not finite".into());
+        }
+        if !(self.extent.is_finite() && self.extent > 0.0) {
+            return Some(format!("extent {} is not a finite number > 0", self.extent));
+        }
+        if !self.background.is_finite() {
+            return Some(format!("background {} is not finite", self.background));
+        }
+        if self.sh_degree > 3 {
+            return Some(format!("SH degree {} > 3", self.sh_degree));
+        }
+        None
+    }
 }
 
 /// Multipliers of the reference learning rates of [`learning_rates`], per parameter group; the
@@ -420,6 +462,10 @@ pub struct Trainer {
     opacity_logits: Vec<f32>,
     /// The storage of the last step's render, recycled by the next (values never carried over).
     render_buffers: RenderBuffers,
+    /// The float values of the step's view when it is 8-bit (recycled from step to step).
+    target: Vec<f32>,
+    /// The run's arguments and dataset, saved in the checkpoint ([`run_record`]).
+    record: run_record::RunRecord,
 }
 
 fn adam_groups(n: usize, t: usize) -> [AdamGroup; group::COUNT] {
@@ -483,6 +529,8 @@ impl Trainer {
             shape,
             opacity_logits,
             render_buffers: RenderBuffers::default(),
+            target: Vec::new(),
+            record: run_record::RunRecord::default(),
         };
         if config.texture_mode == TextureMode::Gaussian {
             for b in 0..n {
@@ -490,6 +538,17 @@ impl Trainer {
             }
         }
         trainer
+    }
+
+    /// The run record saved with the checkpoint ([`run_record`]; empty unless set, or loaded
+    /// from a checkpoint of format version 3 or older).
+    pub fn run_record(&self) -> &run_record::RunRecord {
+        &self.record
+    }
+
+    /// Sets the run record saved with every later checkpoint.
+    pub fn set_run_record(&mut self, record: run_record::RunRecord) {
+        self.record = record;
     }
 
     /// Steps done so far.
@@ -564,6 +623,9 @@ impl Trainer {
     }
 
     fn validate(&self, views: &[TrainView]) -> Result<(), TrainError> {
+        if let Some(problem) = self.config.problem() {
+            return Err(TrainError::InvalidConfig(problem));
+        }
         if views.is_empty() {
             return Err(TrainError::NoViews);
         }
@@ -614,10 +676,14 @@ impl Trainer {
         let settings = self.settings();
         let buffers = std::mem::take(&mut self.render_buffers);
         let out = render_with(&self.activated.borrowed(), cam, &settings, buffers);
+        // An 8-bit view is converted to floats here, into a buffer recycled from step to step.
+        let mut target_buffer = std::mem::take(&mut self.target);
+        let target = view.rgb.as_f32(&mut target_buffer);
         let loss = TrainingLoss::default()
-            .evaluate(&out.rgb, &view.rgb, cam.width as usize, cam.height as usize, 3)
+            .evaluate(&out.rgb, target, cam.width as usize, cam.height as usize, 3)
             .expect("sizes validated above");
-        let psnr = crate::loss::psnr::psnr(&out.rgb, &view.rgb).unwrap_or(f64::NAN);
+        let psnr = crate::loss::psnr::psnr(&out.rgb, target).unwrap_or(f64::NAN);
+        self.target = target_buffer;
         let ig = ImageGradients {
             rgb: &loss.d_render,
             alpha: None,
@@ -884,7 +950,7 @@ impl Trainer {
                     &settings,
                     std::mem::take(&mut buffers),
                 );
-                let psnr = psnr_u8(&out.rgb, &v.rgb).unwrap_or(f64::NAN);
+                let psnr = psnr_u8(&out.rgb, &v.rgb.to_f32()).unwrap_or(f64::NAN);
                 buffers = out.into_buffers();
                 psnr
             })

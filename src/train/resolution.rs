@@ -51,10 +51,10 @@ impl ResolutionSchedule {
 /// use glam::Vec3;
 /// let camera = Camera::look_at(Vec3::new(0.0, 0.0, -3.0), Vec3::ZERO, Vec3::Y, 40.0, 40.0, 4, 2);
 /// let rgb: Vec<f32> = (0..4 * 2 * 3).map(|k| (k / 3) as f32).collect();
-/// let small = downscale_view(&TrainView { camera, rgb }, 2);
+/// let small = downscale_view(&TrainView { camera, rgb: rgb.into() }, 2);
 /// assert_eq!((small.camera.width, small.camera.height, small.camera.fx), (2, 1, 20.0));
 /// // Each output pixel is the mean of a 2×2 block: pixels (0, 1, 4, 5) → 2.5.
-/// assert_eq!(&small.rgb[..3], &[2.5, 2.5, 2.5]);
+/// assert_eq!(&small.rgb.to_f32()[..3], &[2.5, 2.5, 2.5]);
 /// ```
 pub fn downscale_view(view: &TrainView, factor: u32) -> TrainView {
     if factor <= 1 {
@@ -62,6 +62,9 @@ pub fn downscale_view(view: &TrainView, factor: u32) -> TrainView {
     }
     let camera = view.camera.scaled(1.0 / factor as f32);
     let (w, h) = (view.camera.width as usize, view.camera.height as usize);
-    let rgb = resize_area(&view.rgb, w, h, camera.width as usize, camera.height as usize);
-    TrainView { camera, rgb }
+    let rgb = resize_area(&view.rgb.to_f32(), w, h, camera.width as usize, camera.height as usize);
+    TrainView {
+        camera,
+        rgb: rgb.into(),
+    }
 }

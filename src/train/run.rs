@@ -41,11 +41,17 @@
 //!    steps (not at the last) an evaluation on at most [`RunConfig::eval_views`] evenly spaced
 //!    test views ([`TrainEvent::Evaluation`]).
 //!
-//! At the end, with an output folder, the model is saved as the reference saves it (8-bit
-//! textures, [`crate::model_file`]) in `<output>/model`, the checkpoint written, and the model
-//! **re-loaded** and evaluated on every test view, as the reference's `render.py` does; the
-//! summary goes to `<output>/summary.json` ([`TrainSummary`]). Without an output folder nothing
-//! is written and the final evaluation renders the trainer's float model.
+//! At the end, with an output folder, the checkpoint is written first (if the model cannot be
+//! saved, [`RunError::ModelSave`] names it: the trained state is not lost), then the model is
+//! saved as the reference saves it (8-bit textures, [`crate::model_file`]) in `<output>/model`,
+//! and **re-loaded** and evaluated on every test view, as the reference's `render.py` does; the
+//! summary goes to `<output>/summary.json` ([`TrainSummary`], with every warning). Without an
+//! output folder nothing is written and the final evaluation renders the trainer's float model.
+//!
+//! The [`StopSignal`] is also checked between the views of every evaluation: an intermediate
+//! evaluation is abandoned and the run stops with its checkpoint; during the final phase the run
+//! stops (as [`RunOutcome::Stopped`] at the last step) once the checkpoint and model are saved,
+//! without a summary; continuing from that checkpoint redoes the final save and evaluation.
 //!
 //! # Non-finite values
 //!
@@ -107,6 +113,9 @@ pub struct RunConfig {
     pub scene: String,
     /// The command line, recorded in the summary (program name first; empty when embedded).
     pub command: Vec<String>,
+    /// Warnings raised before the run (e.g. [`crate::scene::Scene::warnings`]), recorded in the
+    /// summary with the run's own [`RunWarning`]s.
+    pub warnings: Vec<String>,
 }
 
 impl Default for RunConfig {
@@ -120,6 +129,7 @@ impl Default for RunConfig {
             resolution: ResolutionSchedule::OFF,
             scene: String::new(),
             command: Vec::new(),
+            warnings: Vec::new(),
         }
     }
 }
@@ -173,8 +183,9 @@ impl std::fmt::Display for RunWarning {
 }
 
 /// What a run reports to its caller's `on_event`, in order: `Started`, then per step `Step`
-/// (and `Checkpoint` / `Evaluation` when due), and at the end `ModelSaved`, `Checkpoint` and
-/// `Finished`, or `Checkpoint` and `Stopped`.
+/// (and `Checkpoint` / `Evaluation` when due), and at the end `Checkpoint`, `ModelSaved` and
+/// `Finished` (or `Checkpoint`, `ModelSaved` and `Stopped` when a stop request arrives after the last
+/// step), or `Checkpoint` and `Stopped`.
 #[derive(Clone, Debug, PartialEq)]
 #[non_exhaustive]
 pub enum TrainEvent {
@@ -302,6 +313,15 @@ pub enum RunError {
     /// Saving or re-loading the model failed.
     #[error(transparent)]
     Model(#[from] ModelFileError),
+    /// Saving the model failed after training; the trained state was written to the checkpoint
+    /// first, so nothing is lost: continue from it once the problem is fixed.
+    #[error("{source}; the trained state is saved in {}", .checkpoint.display())]
+    ModelSave {
+        /// Why the model could not be saved.
+        source: ModelFileError,
+        /// The checkpoint holding the trained state.
+        checkpoint: PathBuf,
+    },
     /// An evaluation failed (a test image that does not match its camera).
     #[error("evaluating the test views: {0}")]
     Evaluation(#[from] LossError),
@@ -335,23 +355,29 @@ fn evenly_spaced<T>(items: &[T], at_most: usize) -> Vec<&T> {
     (0..at_most).map(|k| &items[k * items.len() / at_most]).collect()
 }
 
-/// Mean PSNR, SSIM and render milliseconds of `set` over `views`.
+/// Mean PSNR, SSIM and render milliseconds of `set` over `views`; `None` when `stop` was raised
+/// before the last view (checked between views, so a stop request waits for one render).
 fn evaluate(
     set: &ActivatedRef<'_>,
     views: &[&TrainView],
     settings: &RenderSettings,
-) -> Result<(f64, f64, f64), LossError> {
+    stop: &StopSignal,
+) -> Result<Option<(f64, f64, f64)>, LossError> {
     let report = evaluate_views(
         set,
-        views.iter().map(|v| EvalView {
+        views.iter().take_while(|_| !stop.is_requested()).map(|v| EvalView {
             name: "",
             camera: &v.camera,
-            rgb: &v.rgb,
+            // An 8-bit view is converted for its evaluation only.
+            rgb: v.rgb.to_f32(),
         }),
         settings,
         |_, _| {},
     )?;
-    Ok((report.mean_psnr, report.mean_ssim, report.mean_render_ms))
+    if stop.is_requested() {
+        return Ok(None);
+    }
+    Ok(Some((report.mean_psnr, report.mean_ssim, report.mean_render_ms)))
 }
 
 /// Writes `text` to `path` with [`crate::train::checkpoint::write_atomic`] (a temporary file in
@@ -414,8 +440,10 @@ pub fn run(
         billboards: trainer.model.len(),
         texture_size: trainer.model.texture_size,
     });
+    let mut warnings = config.warnings.clone();
     if test.is_empty() {
         on_event(&TrainEvent::Warning(RunWarning::NoTestViews));
+        warnings.push(RunWarning::NoTestViews.to_string());
     }
     let output = config.output.as_deref();
     if let Some(dir) = output {
@@ -520,7 +548,11 @@ pub fn run(
             && step < iterations
             && !eval_subset.is_empty()
         {
-            let (psnr, ssim, _) = evaluate(&trainer.activated.borrowed(), &eval_subset, &eval_settings)?;
+            let Some((psnr, ssim, _)) = evaluate(&trainer.activated.borrowed(), &eval_subset, &eval_settings, stop)?
+            else {
+                // Interrupted: the stop request is handled at the top of the loop.
+                continue;
+            };
             curve.push(CurvePoint {
                 step,
                 seconds: train_seconds,
@@ -537,23 +569,49 @@ pub fn run(
         }
     }
     // The model is saved as the reference saves it (8-bit textures) and evaluated as re-loaded,
-    // as the reference's render.py does.
+    // as the reference's render.py does. The checkpoint is written first: if the model cannot
+    // be saved, the trained state is not lost.
     let mut model_bytes = 0;
     let saved = match output {
         Some(dir) => {
+            let written = save(trainer, &mut on_event)?;
             let model_dir = dir.join(MODEL_DIR);
             let meta = ModelMeta::for_model(&trainer.model, tc.sh_degree, tc.background.to_array());
-            model_bytes = save_model(&model_dir, &trainer.export_model(), &meta)?;
+            model_bytes = match save_model(&model_dir, &trainer.export_model(), &meta) {
+                Ok(bytes) => bytes,
+                Err(source) => {
+                    return Err(match written {
+                        Some(checkpoint) => RunError::ModelSave { source, checkpoint },
+                        None => RunError::Model(source),
+                    });
+                }
+            };
             on_event(&TrainEvent::ModelSaved {
                 path: model_dir.clone(),
                 bytes: model_bytes,
             });
-            save(trainer, &mut on_event)?;
             let (model, _) = load_model(&model_dir)?;
             Some(model.activate())
         }
         None => None,
     };
+    let stopped = |on_event: &mut dyn FnMut(&TrainEvent)| {
+        let step = trainer.step_index();
+        let reason = StopReason::Requested;
+        on_event(&TrainEvent::Stopped {
+            step,
+            reason,
+            checkpoint: checkpoint.clone(),
+        });
+        Ok(RunOutcome::Stopped {
+            step,
+            reason,
+            checkpoint: checkpoint.clone(),
+        })
+    };
+    if stop.is_requested() {
+        return stopped(&mut on_event);
+    }
     let all_test: Vec<&TrainView> = test.iter().collect();
     let (test_psnr, test_ssim, render_ms) = if test.is_empty() {
         (f64::NAN, f64::NAN, f64::NAN)
@@ -562,7 +620,12 @@ pub fn run(
             Some(b) => b.borrowed(),
             None => trainer.activated.borrowed(),
         };
-        evaluate(&set, &all_test, &eval_settings)?
+        match evaluate(&set, &all_test, &eval_settings, stop)? {
+            Some(result) => result,
+            // Interrupted during the final evaluation: the model and the checkpoint are saved;
+            // resuming from the checkpoint (at the last step) redoes the save and evaluation.
+            None => return stopped(&mut on_event),
+        }
     };
     curve.push(CurvePoint {
         step: iterations,
@@ -597,6 +660,7 @@ pub fn run(
             settings: RecordedSettings {
                 clamp_gradient: clamp_gradient_name(tc.clamp_gradient).to_string(),
             },
+            warnings,
         };
         let text = serde_json::to_string_pretty(&file).map_err(RunError::Summary)?;
         write_text_atomic(&dir.join(SUMMARY_FILE), &text)?;

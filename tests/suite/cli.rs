@@ -60,13 +60,13 @@ fn tiny_demo_runs_and_writes_renders() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-fn temp(tag: &str) -> std::path::PathBuf {
+pub(crate) fn temp(tag: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("bbsplat-cli-{tag}-{}", std::process::id()));
     std::fs::remove_dir_all(&dir).ok();
     dir
 }
 
-fn run_ok(args: &[&str]) -> String {
+pub(crate) fn run_ok(args: &[&str]) -> String {
     let out = Command::new(env!("CARGO_BIN_EXE_bbsplat"))
         .args(args)
         .output()
@@ -158,7 +158,7 @@ fn eval_names_an_unreadable_model() {
 }
 
 /// Exports the demo scene at `resolution` px with `billboards` into `root/data`; returns that folder.
-fn export_demo(root: &std::path::Path, resolution: u32, billboards: usize) -> std::path::PathBuf {
+pub(crate) fn export_demo(root: &std::path::Path, resolution: u32, billboards: usize) -> std::path::PathBuf {
     let data = root.join("data");
     let (resolution, billboards) = (resolution.to_string(), billboards.to_string());
     run_ok(&[
@@ -173,7 +173,7 @@ fn export_demo(root: &std::path::Path, resolution: u32, billboards: usize) -> st
     data
 }
 
-fn tiny_train_args<'a>(data: &'a str, out: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
+pub(crate) fn tiny_train_args<'a>(data: &'a str, out: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
     let mut args = vec![
         "train",
         data,
@@ -286,7 +286,7 @@ fn ctrl_c_saves_a_checkpoint_and_exits_cleanly() {
 
 /// Writes a tiny NeRF-synthetic scene: 6 train and 2 test views of a disc-shaped object on a ring
 /// of cameras, as RGBA PNGs (`alpha = true`) or RGB PNGs.
-fn write_tiny_blender_scene(dir: &std::path::Path, alpha: bool) {
+pub(crate) fn write_tiny_blender_scene(dir: &std::path::Path, alpha: bool) {
     let size = 24u32;
     for split in ["train", "test"] {
         std::fs::create_dir_all(dir.join(split)).unwrap();
@@ -337,7 +337,7 @@ fn hull_initialisation_needs_alpha_masks() {
     args.retain(|a| *a != "--quiet");
     let printed = run_ok(&args);
     assert!(printed.contains("120 on the visual hull"), "{printed}");
-    let (ok, err) = run(&tiny_train_args(rgb_s, out_s, &["--init", "hull"]));
+    let (ok, err) = run(&tiny_train_args(rgb_s, out_s, &["--init", "hull", "--overwrite"]));
     assert!(!ok);
     assert!(err.contains("alpha mask"), "{err}");
     std::fs::remove_dir_all(&root).ok();

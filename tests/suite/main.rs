@@ -6,6 +6,8 @@
 mod bench_scene;
 #[cfg(feature = "cli")]
 mod cli;
+#[cfg(feature = "cli")]
+mod cli_reliability;
 mod f64_reference;
 mod init_fibonacci;
 mod init_fps;

@@ -463,3 +463,51 @@ fn size_report() {
     }
     fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Failure 6: a model with a NaN or infinite parameter is never saved, and a model file holding
+/// one (here a NaN written into the PLY) is refused on loading, naming the vertex and field.
+#[test]
+fn non_finite_values_are_never_saved_and_refused_on_loading() {
+    let dir = scratch("non-finite");
+    let mut m = fresh_model(5, 4, 1);
+    m.colour_logits[3 * 16 * 2 + 7] = f32::NAN;
+    let meta = ModelMeta::for_model(&m, 3, [0.0; 3]);
+    let err = save_model(&dir.join("bad"), &m, &meta).unwrap_err();
+    assert!(
+        matches!(&err, ModelFileError::InvalidModel { reason, .. } if reason.contains("billboard 2") && reason.contains("colour")),
+        "{err}"
+    );
+    assert!(!dir.join("bad").exists(), "nothing written");
+    let good = fresh_model(5, 4, 1);
+    save_model(&dir.join("good"), &good, &meta).unwrap();
+    let ply = dir.join("good").join(PLY_FILE);
+    let mut bytes = fs::read(&ply).unwrap();
+    let header = bbsplat::model_file::ply::header_len(5);
+    // Vertex 1, field 1 (y).
+    let at = header + (bbsplat::model_file::ply::PLY_FLOATS + 1) * 4;
+    bytes[at..at + 4].copy_from_slice(&f32::INFINITY.to_le_bytes());
+    fs::write(&ply, bytes).unwrap();
+    let err = load_model(&dir.join("good")).unwrap_err();
+    let text = err.to_string();
+    assert!(
+        text.contains("vertex 1") && text.contains("non-finite") && text.contains(" y"),
+        "{text}"
+    );
+    fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Failure 4: a texture side above what the loader reads (1024) is refused by `save_model`
+/// before anything is written, instead of a model the loader then refuses.
+#[test]
+fn a_texture_larger_than_the_loader_reads_is_never_saved() {
+    let dir = scratch("ts-1025");
+    let m = fresh_model(1, bbsplat::model_file::MAX_TEXTURE_SIZE + 1, 2);
+    let meta = ModelMeta::for_model(&m, 3, [0.0; 3]);
+    let err = save_model(&dir.join("model"), &m, &meta).unwrap_err();
+    assert!(
+        matches!(&err, ModelFileError::InvalidModel { reason, .. } if reason.contains("1025")),
+        "{err}"
+    );
+    assert!(!dir.join("model").exists());
+    fs::remove_dir_all(&dir).unwrap();
+}

@@ -26,7 +26,7 @@ fn setup(adam: AdamMode, texture_mode: TextureMode) -> (Trainer, Vec<TrainView>)
         .iter()
         .map(|v| TrainView {
             camera: v.camera,
-            rgb: v.rgb.clone(),
+            rgb: v.rgb.clone().into(),
         })
         .collect();
     let mut model = RawBillboards::from_points(&scene.points, &scene.colours, 4, 8);
@@ -137,6 +137,20 @@ const LR_SCALES_AT: usize = 8 + 4 + 8 + 8 + 4 + 12 + 8 + 4 + 12 + 3 + 8;
 /// Byte offset of the clamp-gradient byte (version ≥ 3), right after the multipliers.
 const CLAMP_AT: usize = LR_SCALES_AT + 16;
 
+/// A checkpoint without its run-record section (the trailing length and JSON before the
+/// checksum), as format versions 1-3 end; not resealed.
+fn strip_record(mut bytes: Vec<u8>) -> Vec<u8> {
+    let len = bytes.len();
+    let body_end = len - 8;
+    // The record is the JSON object that ends just before the checksum; its length precedes it.
+    let record_start = (0..body_end - 8)
+        .rev()
+        .find(|&at| u64::from_le_bytes(bytes[at..at + 8].try_into().unwrap()) as usize == body_end - at - 8)
+        .expect("a run record section");
+    bytes.drain(record_start..body_end);
+    bytes
+}
+
 /// `bytes` with the header's length and the checksum recomputed.
 fn resealed(mut bytes: Vec<u8>) -> Vec<u8> {
     let len = bytes.len();
@@ -165,7 +179,7 @@ fn version_1_checkpoints_load_with_the_reference_learning_rates() {
         "the clamp gradient (pass-through) sits where this test expects"
     );
     // The same state as version 1 wrote it: no multipliers, no clamp gradient.
-    let mut v1 = v3.clone();
+    let mut v1 = strip_record(v3.clone());
     v1.drain(LR_SCALES_AT..CLAMP_AT + 1);
     v1[8..12].copy_from_slice(&OLDEST_VERSION.to_le_bytes());
     let v1 = resealed(v1);
@@ -216,7 +230,7 @@ fn the_clamp_gradient_is_checkpointed_and_version_2_reads_as_exact() {
     assert_eq!(back.config().clamp_gradient, ClampGradient::PassThrough);
     assert_eq!(*back.config(), *tr.config());
 
-    let mut v2 = v3.clone();
+    let mut v2 = strip_record(v3.clone());
     v2.remove(CLAMP_AT);
     v2[8..12].copy_from_slice(&2u32.to_le_bytes());
     let old = Trainer::from_checkpoint_bytes(&resealed(v2), &path).unwrap();
@@ -370,13 +384,55 @@ fn bad_views_are_typed_errors_and_leave_the_trainer_unchanged() {
     let (mut tr, mut views) = setup(AdamMode::Dense, TextureMode::Full);
     let before = tr.checkpoint_bytes();
     assert_eq!(tr.step(&[]).unwrap_err(), TrainError::NoViews);
-    views[2].rgb.pop();
+    let whole = views[2].rgb.clone();
+    let mut short = whole.to_f32().into_owned();
+    short.pop();
+    views[2].rgb = short.into();
     let err = tr.step(&views).unwrap_err();
     assert!(matches!(err, TrainError::ImageSize { view: 2, .. }), "{err}");
     assert!(tr.checkpoint_bytes() == before, "a refused step changes nothing");
-    views[2].rgb.push(0.5);
+    views[2].rgb = whole;
     tr.step(&views).unwrap();
     // The stack now holds views 0..5 minus one; dropping views leaves stale indices.
     let err = tr.step(&views[..1]).unwrap_err();
     assert!(matches!(err, TrainError::ViewSetChanged { .. }), "{err}");
+}
+
+/// Version 4 stores the run record (arguments and dataset fingerprint) and reads it back; a
+/// version-3 file (no record) reads with an empty one; a record that is not valid JSON is refused
+/// by name.
+#[test]
+fn the_run_record_is_checkpointed_and_version_3_reads_as_empty() {
+    use bbsplat::train::run_record::{DatasetFingerprint, RunRecord};
+    let (mut tr, views) = setup(AdamMode::Dense, TextureMode::Full);
+    tr.step(&views).unwrap();
+    let record = RunRecord {
+        arguments: [("--seed".to_string(), "8".to_string())].into(),
+        dataset: Some(DatasetFingerprint::of_views(views.iter().map(|v| ("v", &v.camera)))),
+    };
+    tr.set_run_record(record.clone());
+    let v4 = tr.checkpoint_bytes();
+    assert_eq!(u32::from_le_bytes(v4[8..12].try_into().unwrap()), 4);
+    let path = PathBuf::from("r.ckpt");
+    let back = Trainer::from_checkpoint_bytes(&v4, &path).unwrap();
+    assert_eq!(back.run_record(), &record);
+    assert!(back.checkpoint_bytes() == v4);
+
+    let mut v3 = strip_record(v4.clone());
+    v3[8..12].copy_from_slice(&3u32.to_le_bytes());
+    let old = Trainer::from_checkpoint_bytes(&resealed(v3), &path).unwrap();
+    assert!(old.run_record().is_empty());
+    assert_eq!(old.step_index(), tr.step_index());
+
+    let mut bad = v4.clone();
+    let brace = bad.len() - 9; // the record's closing brace, just before the checksum
+    assert_eq!(bad[brace], b'}');
+    bad[brace] = b'!';
+    let err = Trainer::from_checkpoint_bytes(&resealed(bad), &path)
+        .err()
+        .expect("must fail");
+    assert!(
+        matches!(&err, CheckpointError::Inconsistent { what, .. } if what.contains("run record")),
+        "{err}"
+    );
 }

@@ -36,7 +36,7 @@ fn run(
         v.iter()
             .map(|v| TrainView {
                 camera: v.camera,
-                rgb: v.rgb.clone(),
+                rgb: v.rgb.clone().into(),
             })
             .collect()
     };

@@ -157,7 +157,7 @@ fn relocation_resets_the_moments_of_sources_and_dead_slots_only() {
         .iter()
         .map(|v| TrainView {
             camera: v.camera,
-            rgb: v.rgb.clone(),
+            rgb: v.rgb.clone().into(),
         })
         .collect();
     let model = RawBillboards::from_points(&scene.points, &scene.colours, TS, 4);

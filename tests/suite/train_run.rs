@@ -102,7 +102,7 @@ fn a_run_reports_its_events_in_order_and_equals_stepping_by_hand() {
             expected.push(format!("eval@{s}/1"));
         }
     }
-    expected.extend(["model".into(), "ckpt@12".into(), "finished".into()]);
+    expected.extend(["ckpt@12".into(), "model".into(), "finished".into()]);
     assert_eq!(events, expected);
 
     for _ in 0..12 {
@@ -261,7 +261,9 @@ fn a_nan_pixel_stops_the_run_with_the_last_good_state_on_disk() {
         test,
     } = setup(40, |c| c);
     let clean_views = train.clone();
-    train[BAD].rgb[100] = f32::NAN;
+    let mut poisoned = train[BAD].rgb.to_f32().into_owned();
+    poisoned[100] = f32::NAN;
+    train[BAD].rgb = poisoned.into();
     let dir = temp_dir("nan-pixel");
     let config = RunConfig {
         eval_every: 0,
@@ -623,4 +625,261 @@ fn measure_non_finite_check_cost() {
         rayon::current_num_threads(),
         100.0 * (grad_ms + param_ms) / step_ms
     );
+}
+
+/// A stop request raised while an intermediate evaluation is due abandons the evaluation (no
+/// `Evaluation` event, no curve point) and stops at once with a checkpoint of that step.
+#[test]
+fn a_stop_request_during_an_evaluation_abandons_it_and_saves_the_checkpoint() {
+    let Setup {
+        mut trainer,
+        train,
+        test,
+    } = setup(12, |c| c);
+    let dir = temp_dir("stop-eval");
+    let config = RunConfig {
+        eval_every: 5,
+        output: Some(dir.clone()),
+        ..RunConfig::default()
+    };
+    let stop = StopSignal::new();
+    let mut events = Vec::new();
+    let outcome = run(&mut trainer, &train, &test, &config, &stop, |e| {
+        // Raised after step 5's work, before its evaluation.
+        if matches!(e, TrainEvent::Step { log, .. } if log.step == 5) {
+            stop.request();
+        }
+        events.push(trace(e));
+    })
+    .unwrap();
+    assert!(
+        matches!(
+            outcome,
+            RunOutcome::Stopped {
+                step: 5,
+                reason: StopReason::Requested,
+                ..
+            }
+        ),
+        "{outcome:?}"
+    );
+    assert!(!events.iter().any(|e| e.starts_with("eval")), "{events:?}");
+    assert_eq!(
+        events[events.len() - 2..],
+        ["ckpt@5".to_string(), "stopped@5".to_string()]
+    );
+    assert_eq!(
+        Trainer::load_checkpoint(dir.join(CHECKPOINT_FILE))
+            .unwrap()
+            .step_index(),
+        5
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A stop request during the final phase (after the last step: save, re-load, final evaluation)
+/// ends the run as `Stopped` at the last step with the model and checkpoint saved and no
+/// summary; resuming from that checkpoint finishes with the files of an uninterrupted run.
+#[test]
+fn a_stop_request_in_the_final_phase_keeps_the_model_and_resumes_to_the_same_files() {
+    let dir_a = temp_dir("final-a");
+    let dir_b = temp_dir("final-b");
+    let config = |dir: &PathBuf| RunConfig {
+        eval_every: 0,
+        output: Some(dir.clone()),
+        ..RunConfig::default()
+    };
+    let Setup {
+        mut trainer,
+        train,
+        test,
+    } = setup(8, |c| c);
+    let plain = run(&mut trainer, &train, &test, &config(&dir_a), &StopSignal::new(), |_| {}).unwrap();
+    assert!(matches!(plain, RunOutcome::Finished(_)));
+
+    let Setup { mut trainer, .. } = setup(8, |c| c);
+    let stop = StopSignal::new();
+    let outcome = run(&mut trainer, &train, &test, &config(&dir_b), &stop, |e| {
+        if matches!(e, TrainEvent::ModelSaved { .. }) {
+            stop.request();
+        }
+    })
+    .unwrap();
+    assert!(
+        matches!(
+            outcome,
+            RunOutcome::Stopped {
+                step: 8,
+                reason: StopReason::Requested,
+                ..
+            }
+        ),
+        "{outcome:?}"
+    );
+    assert!(dir_b.join(MODEL_DIR).join("point_cloud.ply").exists());
+    assert!(
+        !dir_b.join(SUMMARY_FILE).exists(),
+        "no summary for an interrupted final evaluation"
+    );
+    let mut resumed = Trainer::load_checkpoint(dir_b.join(CHECKPOINT_FILE)).unwrap();
+    let finished = run(&mut resumed, &train, &test, &config(&dir_b), &StopSignal::new(), |_| {}).unwrap();
+    assert!(matches!(finished, RunOutcome::Finished(_)));
+    for file in [
+        CHECKPOINT_FILE,
+        "model/point_cloud.ply",
+        "model/texture_color.npz",
+        "model/texture_alpha.npz",
+    ] {
+        assert!(
+            std::fs::read(dir_a.join(file)).unwrap() == std::fs::read(dir_b.join(file)).unwrap(),
+            "{file} differs"
+        );
+    }
+    std::fs::remove_dir_all(&dir_a).ok();
+    std::fs::remove_dir_all(&dir_b).ok();
+}
+
+/// When the model cannot be saved after training (here `model` is a file), the trained state is
+/// already in the checkpoint and the error says where.
+#[test]
+fn a_model_that_cannot_be_saved_leaves_the_trained_state_in_the_checkpoint() {
+    let Setup {
+        mut trainer,
+        train,
+        test,
+    } = setup(6, |c| c);
+    let dir = temp_dir("model-taken");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join(MODEL_DIR), b"not a model").unwrap();
+    let config = RunConfig {
+        eval_every: 0,
+        output: Some(dir.clone()),
+        ..RunConfig::default()
+    };
+    let err = run(&mut trainer, &train, &test, &config, &StopSignal::new(), |_| {}).unwrap_err();
+    let RunError::ModelSave { checkpoint, .. } = &err else {
+        panic!("expected ModelSave, got {err:?}");
+    };
+    assert_eq!(checkpoint, &dir.join(CHECKPOINT_FILE));
+    assert!(err.to_string().contains("the trained state is saved in"), "{err}");
+    let saved = Trainer::load_checkpoint(checkpoint).unwrap();
+    assert_eq!(saved.step_index(), 6);
+    assert!(saved.checkpoint_bytes() == trainer.checkpoint_bytes());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Warnings given to the run and the run's own land in summary.json.
+#[test]
+fn every_warning_is_recorded_in_the_summary() {
+    let Setup { mut trainer, train, .. } = setup(3, |c| c);
+    let dir = temp_dir("warnings");
+    let config = RunConfig {
+        eval_every: 0,
+        output: Some(dir.clone()),
+        warnings: vec!["frame 7 skipped: image missing".into()],
+        ..RunConfig::default()
+    };
+    run(&mut trainer, &train, &[], &config, &StopSignal::new(), |_| {}).unwrap();
+    let text = std::fs::read_to_string(dir.join(SUMMARY_FILE)).unwrap();
+    // Without test views the PSNR is NaN (null in JSON): read the warnings alone.
+    let file: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let warnings: Vec<String> = serde_json::from_value(file["warnings"].clone()).unwrap();
+    assert_eq!(warnings.len(), 2, "{warnings:?}");
+    assert_eq!(warnings[0], "frame 7 skipped: image missing");
+    assert!(warnings[1].contains("no test views"), "{warnings:?}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Failure 10: views kept as 8-bit values (3 bytes a pixel, converted per step) train exactly as
+/// their float copies (`byte / 255`), bit for bit; a loaded scene view is kept as 8-bit.
+#[test]
+fn eight_bit_views_train_bit_for_bit_as_their_float_copies() {
+    use bbsplat::train::ViewPixels;
+    let Setup { train, test, .. } = setup(6, |c| c);
+    let quantise = |views: &[TrainView]| -> Vec<Vec<u8>> {
+        views
+            .iter()
+            .map(|v| {
+                v.rgb
+                    .to_f32()
+                    .iter()
+                    .map(|x| (x * 255.0).round().clamp(0.0, 255.0) as u8)
+                    .collect()
+            })
+            .collect()
+    };
+    let with = |bytes: &[Vec<u8>], views: &[TrainView], float: bool| -> Vec<TrainView> {
+        bytes
+            .iter()
+            .zip(views)
+            .map(|(b, v)| TrainView {
+                camera: v.camera,
+                rgb: if float {
+                    ViewPixels::F32(b.iter().map(|&x| x as f32 / 255.0).collect())
+                } else {
+                    ViewPixels::U8(b.clone())
+                },
+            })
+            .collect()
+    };
+    let (train_bytes, test_bytes) = (quantise(&train), quantise(&test));
+    let mut results = Vec::new();
+    for float in [false, true] {
+        let (tr, te) = (with(&train_bytes, &train, float), with(&test_bytes, &test, float));
+        assert_eq!(tr[0].rgb.bytes(), if float { 4 } else { 1 } * tr[0].rgb.len());
+        let Setup { mut trainer, .. } = setup(6, |c| c);
+        let config = RunConfig {
+            eval_every: 3,
+            ..RunConfig::default()
+        };
+        let outcome = run(&mut trainer, &tr, &te, &config, &StopSignal::new(), |_| {}).unwrap();
+        let RunOutcome::Finished(summary) = outcome else {
+            panic!()
+        };
+        results.push((
+            trainer.checkpoint_bytes(),
+            summary.test_psnr.to_bits(),
+            summary.curve[0].psnr.to_bits(),
+        ));
+    }
+    assert!(results[0] == results[1], "8-bit and float views differ");
+}
+
+/// Failure 3: a texture threshold that is negative, NaN or infinite (which panicked in worker
+/// threads, or wrote NaN into the model) is a typed error of the step, naming the setting; the
+/// trainer is unchanged.
+#[test]
+fn an_out_of_range_texture_threshold_is_a_typed_error() {
+    for bad in [-5.0f32, f32::NAN, f32::INFINITY] {
+        let Setup { mut trainer, train, .. } = setup(4, |c| TrainConfig {
+            impact_threshold: bad,
+            ..c
+        });
+        let before = trainer.checkpoint_bytes();
+        let err = trainer.step(&train).unwrap_err();
+        assert!(
+            matches!(&err, TrainError::InvalidConfig(what) if what.contains("texture threshold")),
+            "{bad}: {err}"
+        );
+        assert!(trainer.checkpoint_bytes() == before);
+        let err = run(
+            &mut trainer,
+            &train,
+            &[],
+            &RunConfig::default(),
+            &StopSignal::new(),
+            |_| {},
+        )
+        .unwrap_err();
+        assert!(
+            matches!(
+                err,
+                RunError::Step {
+                    source: TrainError::InvalidConfig(_),
+                    ..
+                }
+            ),
+            "{err}"
+        );
+    }
 }
