@@ -81,7 +81,7 @@ fn trained_like_setup(size: u32, billboards: usize) -> Setup {
     let target = render(&target_scene.borrowed(), &camera, &settings).rgb;
     let views = vec![TrainView {
         camera,
-        rgb: target.iter().map(|v| v.clamp(0.0, 1.0)).collect(),
+        rgb: target.iter().map(|v| v.clamp(0.0, 1.0)).collect::<Vec<f32>>().into(),
     }];
     let config = TrainConfig {
         iterations: 0,
