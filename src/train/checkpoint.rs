@@ -1,13 +1,13 @@
 //! Training checkpoints: everything needed to continue a run bit for bit.
 //!
-//! # Format (version 3)
+//! # Format (version 4)
 //!
 //! Little-endian, no padding. `T = TS²`, `n` = number of billboards.
 //!
 //! | field | type | notes |
 //! |---|---|---|
 //! | magic | 8 bytes | `BBSPLCKP` |
-//! | version | u32 | 3 (versions 1 and 2 are still read, see [`OLDEST_VERSION`]) |
+//! | version | u32 | 4 (versions 1 to 3 are still read, see [`OLDEST_VERSION`]) |
 //! | file length | u64 | total bytes including the checksum |
 //! | iterations | u64 | [`TrainConfig::iterations`] |
 //! | sh_degree | u32 | ≤ 3 |
@@ -34,6 +34,14 @@
 //! | per group: row_len, rows, global step | 3 × u64 | rows = n |
 //! | per group: m, v | 2 × `rows·row_len` × f32 | |
 //! | per group: update counts | `rows` × u32 | |
+//! | **growth and time budget** (version 4; absent before: no growth, no budget) | | |
+//! | growth cap | u64 | [`TrainConfig::growth_cap`] |
+//! | time plan present | u8 | 0 / 1; then, when 1, the [`TimePlan`] fields: |
+//! | budget, spent | 2 × f64 | seconds |
+//! | coarse step estimate, coarse steps measured | f64, u64 | |
+//! | fine step estimate, fine steps measured | f64, u64 | |
+//! | fine from | u64 | the step full resolution started at; `u64::MAX`: not yet |
+//! | calibration steps, calibrated ratio | u64, f64 | |
 //! | checksum | u64 | FNV-1a 64 of every preceding byte |
 //!
 //! Derived state is not stored: the activated textures (recomputed from the logits), the
@@ -46,6 +54,7 @@
 //! allocates more than the file's size.
 
 use super::adam::AdamGroup;
+use super::time_budget::TimePlan;
 use super::{AdamMode, ClampGradient, LearningRateScales, TextureMode, TrainConfig, Trainer, adam_groups, group};
 use crate::model::RawBillboards;
 use crate::raster::SH_FLOATS;
@@ -58,11 +67,12 @@ use thiserror::Error;
 /// File magic.
 pub const MAGIC: [u8; 8] = *b"BBSPLCKP";
 /// Format version written (and the newest read).
-pub const VERSION: u32 = 3;
+pub const VERSION: u32 = 4;
 
 /// Oldest format version still read. Version 1 lacks the learning-rate multipliers, read as
 /// [`super::LearningRateScales::REFERENCE`]; versions 1 and 2 lack the clamp gradient, read as
-/// [`ClampGradient::Exact`] (the only one the trainer used before it became a setting).
+/// [`ClampGradient::Exact`] (the only one the trainer used before it became a setting); versions
+/// 1 to 3 lack the growth and time-budget section, read as no growth and no budget.
 pub const OLDEST_VERSION: u32 = 1;
 
 /// What went wrong reading or writing a checkpoint; every variant names the file.
@@ -198,6 +208,9 @@ impl<S: Sink> Writer<S> {
     fn f32(&mut self, x: f32) {
         self.0.put(&x.to_le_bytes());
     }
+    fn f64(&mut self, x: f64) {
+        self.0.put(&x.to_le_bytes());
+    }
     /// Little-endian floats, converted through a small buffer so that large arrays stream
     /// without a second copy of their size.
     fn f32s(&mut self, xs: &[f32]) {
@@ -247,6 +260,9 @@ impl<'a> Reader<'a> {
     }
     fn f32(&mut self, what: &str) -> Result<f32, CheckpointError> {
         Ok(f32::from_le_bytes(self.take(4, what)?.try_into().expect("4 bytes")))
+    }
+    fn f64(&mut self, what: &str) -> Result<f64, CheckpointError> {
+        Ok(f64::from_le_bytes(self.take(8, what)?.try_into().expect("8 bytes")))
     }
     /// A count stored as u64 that must fit the remaining bytes at `unit` bytes each.
     fn count(&mut self, unit: usize, what: &str) -> Result<usize, CheckpointError> {
@@ -379,6 +395,62 @@ fn encode_into<S: Sink>(tr: &Trainer, len: u64, sink: &mut S) {
             w.u32(s);
         }
     }
+    encode_growth_and_plan(tr, &mut w);
+}
+
+/// The version-4 section: growth cap and time plan.
+fn encode_growth_and_plan<S: Sink>(tr: &Trainer, w: &mut Writer<S>) {
+    w.u64(tr.config.growth_cap as u64);
+    match &tr.time_plan {
+        None => w.u8(0),
+        Some(p) => {
+            w.u8(1);
+            w.f64(p.budget_seconds);
+            w.f64(p.spent_seconds);
+            w.f64(p.coarse_step_seconds);
+            w.u64(p.coarse_steps);
+            w.f64(p.fine_step_seconds);
+            w.u64(p.fine_steps);
+            w.u64(p.fine_from.map_or(u64::MAX, |s| s as u64));
+            w.u64(p.calibration_steps);
+            w.f64(p.calibrated_ratio);
+        }
+    }
+}
+
+/// Reads the version-4 section: `(growth cap, time plan)`.
+fn decode_growth_and_plan(r: &mut Reader<'_>) -> Result<(usize, Option<TimePlan>), CheckpointError> {
+    let cap = r.u64("growth cap")?;
+    let cap = usize::try_from(cap).map_err(|_| r.inconsistent(format!("growth cap {cap} does not fit")))?;
+    if !r.flag("time plan present")? {
+        return Ok((cap, None));
+    }
+    let what = "time plan";
+    let plan = TimePlan {
+        budget_seconds: r.f64(what)?,
+        spent_seconds: r.f64(what)?,
+        coarse_step_seconds: r.f64(what)?,
+        coarse_steps: r.u64(what)?,
+        fine_step_seconds: r.f64(what)?,
+        fine_steps: r.u64(what)?,
+        fine_from: match r.u64(what)? {
+            u64::MAX => None,
+            s => Some(s as usize),
+        },
+        calibration_steps: r.u64(what)?,
+        calibrated_ratio: r.f64(what)?,
+    };
+    let times = [
+        plan.budget_seconds,
+        plan.spent_seconds,
+        plan.coarse_step_seconds,
+        plan.fine_step_seconds,
+        plan.calibrated_ratio,
+    ];
+    if !times.iter().all(|x| x.is_finite() && *x >= 0.0) {
+        return Err(r.inconsistent(format!("time plan {plan:?} holds negative or non-finite seconds")));
+    }
+    Ok((cap, Some(plan)))
 }
 
 fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
@@ -480,7 +552,7 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
     } else {
         ClampGradient::Exact
     };
-    let config = TrainConfig {
+    let mut config = TrainConfig {
         iterations,
         sh_degree,
         background,
@@ -493,6 +565,7 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
         texture_mode,
         relocate,
         relocate_every,
+        growth_cap: 0,
         lr_scales,
         clamp_gradient,
     };
@@ -565,6 +638,12 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
             global_step,
         };
     }
+    let (growth_cap, time_plan) = if version >= 4 {
+        decode_growth_and_plan(&mut r)?
+    } else {
+        (0, None)
+    };
+    config.growth_cap = growth_cap;
     if r.pos != body.len() {
         return Err(r.inconsistent(format!("{} unexpected bytes before the checksum", body.len() - r.pos)));
     }
@@ -586,6 +665,7 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
     trainer.order = order;
     trainer.rng = rng;
     trainer.step = step;
+    trainer.time_plan = time_plan;
     Ok(trainer)
 }
 

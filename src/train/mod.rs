@@ -28,11 +28,13 @@ pub mod adam;
 pub mod checkpoint;
 pub mod error;
 pub mod finite;
+pub mod grow;
 pub mod regularise;
 pub mod relocate;
 pub mod resolution;
 pub mod run;
 pub mod texture_step;
+pub mod time_budget;
 
 use crate::billboards::ActivatedBillboards;
 use crate::camera::Camera;
@@ -185,6 +187,9 @@ pub struct TrainConfig {
     /// Steps between relocations, not scaled with `iterations` (reference 100); the window
     /// `500/32 000 < (step+1)/iterations < 25 000/32 000` is scaled.
     pub relocate_every: usize,
+    /// Grow the set toward this many billboards at every relocation step ([`grow`], spec §6:
+    /// `min(cap, ⌊1.05·N⌋)`); 0 (the default) or a cap at or below the count: no growth.
+    pub growth_cap: usize,
     /// Multipliers of the reference learning rates (all 1 by default).
     pub lr_scales: LearningRateScales,
     /// How the gradient of a step's backward pass goes through the compositing clamp
@@ -241,7 +246,8 @@ impl Default for LearningRateScales {
 impl Default for TrainConfig {
     /// The reference settings: 32 000 iterations, SH degree 3, black background, seed 0, extent 1,
     /// σ = 500, weights `1e-4` / `0.01`, dense Adam, full textures, relocation every 100 steps,
-    /// the reference learning rates, the exact clamp gradient.
+    /// the reference learning rates, the exact clamp gradient, no growth (the initial count is the
+    /// reference's cap).
     fn default() -> Self {
         Self {
             iterations: 32_000,
@@ -256,6 +262,7 @@ impl Default for TrainConfig {
             texture_mode: TextureMode::Full,
             relocate: true,
             relocate_every: 100,
+            growth_cap: 0,
             lr_scales: LearningRateScales::REFERENCE,
             clamp_gradient: ClampGradient::Exact,
         }
@@ -371,6 +378,8 @@ pub struct StepLog {
     pub updated: usize,
     /// Dead billboards relocated after the step (0 when relocation did not run).
     pub relocated: usize,
+    /// Billboards added by growth after the step ([`grow`]; 0 when it did not run).
+    pub grown: usize,
 }
 
 /// Index of each Adam group in the trainer's array.
@@ -420,6 +429,8 @@ pub struct Trainer {
     opacity_logits: Vec<f32>,
     /// The storage of the last step's render, recycled by the next (values never carried over).
     render_buffers: RenderBuffers,
+    /// The time budget's plan, when the run has one ([`time_budget`]).
+    time_plan: Option<time_budget::TimePlan>,
 }
 
 fn adam_groups(n: usize, t: usize) -> [AdamGroup; group::COUNT] {
@@ -483,6 +494,7 @@ impl Trainer {
             shape,
             opacity_logits,
             render_buffers: RenderBuffers::default(),
+            time_plan: None,
         };
         if config.texture_mode == TextureMode::Gaussian {
             for b in 0..n {
@@ -500,6 +512,27 @@ impl Trainer {
     /// The settings of the run.
     pub fn config(&self) -> &TrainConfig {
         &self.config
+    }
+
+    /// The time budget's plan, when the run has one.
+    pub fn time_plan(&self) -> Option<&time_budget::TimePlan> {
+        self.time_plan.as_ref()
+    }
+
+    /// Gives the run a time budget ([`time_budget`]; [`run()`] then plans
+    /// [`TrainConfig::iterations`] from the measured step times), or removes it with `None`.
+    pub fn set_time_plan(&mut self, plan: Option<time_budget::TimePlan>) {
+        self.time_plan = plan;
+    }
+
+    /// Mutable plan, for [`run()`].
+    pub(crate) fn time_plan_mut(&mut self) -> Option<&mut time_budget::TimePlan> {
+        self.time_plan.as_mut()
+    }
+
+    /// Re-plans the run's length (a time budget's plan; every schedule follows).
+    pub(crate) fn set_iterations(&mut self, iterations: usize) {
+        self.config.iterations = iterations;
     }
 
     /// The Adam state, indexed by the constants of [`group`].
@@ -688,12 +721,13 @@ impl Trainer {
             self.grads.textures.fill([0.0; 4]);
         }
         self.grads.background = Vec3::ZERO;
-        let relocated =
-            if self.config.relocate && relocation_due(self.step, self.config.iterations, self.config.relocate_every) {
-                self.relocate()
-            } else {
-                0
-            };
+        let due = relocation_due(self.step, self.config.iterations, self.config.relocate_every);
+        let relocated = if self.config.relocate && due {
+            self.relocate()
+        } else {
+            0
+        };
+        let grown = if due { self.grow() } else { 0 };
         self.step += 1;
         if let Some(group) = finite::non_finite_parameter(&self.model, &self.opacity_logits) {
             return Err(TrainError::NonFinite {
@@ -711,6 +745,7 @@ impl Trainer {
             psnr,
             updated,
             relocated,
+            grown,
         })
     }
 
@@ -862,6 +897,49 @@ impl Trainer {
                 g.reset_row(r);
             }
             self.refresh_row(r);
+        }
+        plan.moves.len()
+    }
+
+    /// Grows the set one step toward [`TrainConfig::growth_cap`] now ([`grow`]; normally called
+    /// by [`Trainer::step`] after relocation, on the same schedule) and returns how many
+    /// billboards were added.
+    ///
+    /// New rows are copies of sources drawn ∝ mean alpha with the trainer's RNG, appended in
+    /// draw order, alpha split texel-wise with their source (Gaussian mode: the opacity scalar
+    /// is split). The new rows start with zero Adam moments and update counts; the sources'
+    /// moments and counts are zeroed, as relocation does.
+    pub fn grow(&mut self) -> usize {
+        let n = self.model.len();
+        let target = grow::growth_target(n, self.config.growth_cap);
+        let plan = grow::plan_growth(&self.activated.mean_alphas(), target - n, &mut self.rng);
+        if plan.is_empty() {
+            return 0;
+        }
+        let total = n + plan.moves.len();
+        grow::apply_growth(&mut self.model, &plan);
+        grow::extend_activated(&mut self.activated, total);
+        grow::extend_gradients(&mut self.grads, total, self.model.texture_size);
+        for g in &mut self.adam {
+            grow::extend_adam(g, total);
+        }
+        if self.config.texture_mode == TextureMode::Gaussian {
+            self.opacity_logits.resize(total, 0.0);
+            for &(s, c) in &plan.multiplicity {
+                self.opacity_logits[s] = split_alpha_logit(self.opacity_logits[s], c + 1);
+            }
+            for &(d, s) in &plan.moves {
+                self.opacity_logits[d] = self.opacity_logits[s];
+            }
+        }
+        for &(s, _) in &plan.multiplicity {
+            for g in &mut self.adam {
+                g.reset_row(s);
+            }
+            self.refresh_row(s);
+        }
+        for d in n..total {
+            self.refresh_row(d);
         }
         plan.moves.len()
     }

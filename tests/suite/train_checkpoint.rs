@@ -137,6 +137,22 @@ const LR_SCALES_AT: usize = 8 + 4 + 8 + 8 + 4 + 12 + 8 + 4 + 12 + 3 + 8;
 /// Byte offset of the clamp-gradient byte (version ≥ 3), right after the multipliers.
 const CLAMP_AT: usize = LR_SCALES_AT + 16;
 
+/// Bytes of the version-4 growth and time-budget section of a checkpoint without a time plan
+/// (growth cap u64, plan flag u8), just before the checksum.
+const GROWTH_SECTION: usize = 9;
+
+/// `bytes` without the version-4 section (as versions 1-3 wrote them; not resealed).
+fn without_growth_section(mut bytes: Vec<u8>) -> Vec<u8> {
+    let len = bytes.len();
+    assert_eq!(
+        bytes[len - 8 - 1],
+        0,
+        "no time plan: the section is {GROWTH_SECTION} bytes"
+    );
+    bytes.drain(len - 8 - GROWTH_SECTION..len - 8);
+    bytes
+}
+
 /// `bytes` with the header's length and the checksum recomputed.
 fn resealed(mut bytes: Vec<u8>) -> Vec<u8> {
     let len = bytes.len();
@@ -165,7 +181,7 @@ fn version_1_checkpoints_load_with_the_reference_learning_rates() {
         "the clamp gradient (pass-through) sits where this test expects"
     );
     // The same state as version 1 wrote it: no multipliers, no clamp gradient.
-    let mut v1 = v3.clone();
+    let mut v1 = without_growth_section(v3.clone());
     v1.drain(LR_SCALES_AT..CLAMP_AT + 1);
     v1[8..12].copy_from_slice(&OLDEST_VERSION.to_le_bytes());
     let v1 = resealed(v1);
@@ -216,7 +232,7 @@ fn the_clamp_gradient_is_checkpointed_and_version_2_reads_as_exact() {
     assert_eq!(back.config().clamp_gradient, ClampGradient::PassThrough);
     assert_eq!(*back.config(), *tr.config());
 
-    let mut v2 = v3.clone();
+    let mut v2 = without_growth_section(v3.clone());
     v2.remove(CLAMP_AT);
     v2[8..12].copy_from_slice(&2u32.to_le_bytes());
     let old = Trainer::from_checkpoint_bytes(&resealed(v2), &path).unwrap();
@@ -379,4 +395,44 @@ fn bad_views_are_typed_errors_and_leave_the_trainer_unchanged() {
     // The stack now holds views 0..5 minus one; dropping views leaves stale indices.
     let err = tr.step(&views[..1]).unwrap_err();
     assert!(matches!(err, TrainError::ViewSetChanged { .. }), "{err}");
+}
+
+/// Version 3 (no growth and time-budget section) loads as no growth and no budget; version 4
+/// keeps both, and a negative budget is refused by name.
+#[test]
+fn version_3_reads_as_no_growth_and_the_growth_section_round_trips() {
+    let (mut tr, views) = setup(AdamMode::Dense, TextureMode::Full);
+    tr.step(&views).unwrap();
+    let current = tr.checkpoint_bytes();
+    let mut v3 = without_growth_section(current.clone());
+    v3[8..12].copy_from_slice(&3u32.to_le_bytes());
+    let path = PathBuf::from("v3.ckpt");
+    let old = Trainer::from_checkpoint_bytes(&resealed(v3), &path).unwrap();
+    assert_eq!((old.config().growth_cap, old.time_plan()), (0, None));
+    assert_eq!(
+        resealed(old.checkpoint_bytes()),
+        current,
+        "the same state, written as version 4"
+    );
+    // A cap and a plan survive the round trip.
+    let mut with = Trainer::from_checkpoint_bytes(&current, &path).unwrap();
+    let mut plan = bbsplat::train::time_budget::TimePlan::new(2.5);
+    plan.record(0, true, 0.25);
+    plan.record(1, false, 0.5);
+    with.set_time_plan(Some(plan));
+    let bytes = with.checkpoint_bytes();
+    let back = Trainer::from_checkpoint_bytes(&bytes, &path).unwrap();
+    assert_eq!(back.time_plan(), Some(&plan));
+    assert_eq!(back.checkpoint_bytes(), bytes);
+    // The budget is the first of the plan's 9 fields of 8 bytes before the checksum.
+    let at = bytes.len() - 8 - 8 * 9;
+    let mut bad = bytes.clone();
+    bad[at..at + 8].copy_from_slice(&(-1.0f64).to_le_bytes());
+    let err = Trainer::from_checkpoint_bytes(&resealed(bad), &path)
+        .err()
+        .expect("must fail");
+    assert!(
+        matches!(&err, CheckpointError::Inconsistent { what, .. } if what.contains("time plan")),
+        "{err}"
+    );
 }
