@@ -113,10 +113,11 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = 0.5)]
     pub coarse_until: f64,
     /// Multiply every learning rate by this factor (1: the reference's rates; the schedules are
-    /// unchanged). Runs much shorter than the reference's 32 000 steps gain from more: see
-    /// docs/quality.md.
-    #[arg(long, default_value_t = 1.0, value_parser = non_negative)]
-    pub lr_scale: f32,
+    /// unchanged). Default: a factor of the run length (4 up to 7000 steps, 1 at the reference's
+    /// 32 000, log-linear between; measured on lego, see docs/quality.md), used when no
+    /// learning-rate flag is given.
+    #[arg(long, value_parser = non_negative)]
+    pub lr_scale: Option<f32>,
     /// Learning-rate factor of the positions (default: `--lr-scale`).
     #[arg(long, value_parser = non_negative)]
     pub lr_position: Option<f32>,
@@ -165,14 +166,29 @@ fn texture_mode() -> impl TypedValueParser<Value = TextureMode> {
 }
 
 impl TrainArgs {
-    /// The learning-rate multipliers of the flags.
+    /// The learning-rate multipliers of the flags (1 where none is given).
     pub fn lr_scales(&self) -> LearningRateScales {
+        let all = self.lr_scale.unwrap_or(1.0);
         LearningRateScales {
-            position: self.lr_position.unwrap_or(self.lr_scale),
-            sh: self.lr_sh.unwrap_or(self.lr_scale),
-            shape: self.lr_shape.unwrap_or(self.lr_scale),
-            texture: self.lr_texture.unwrap_or(self.lr_scale),
+            position: self.lr_position.unwrap_or(all),
+            sh: self.lr_sh.unwrap_or(all),
+            shape: self.lr_shape.unwrap_or(all),
+            texture: self.lr_texture.unwrap_or(all),
         }
+    }
+
+    /// True when no learning-rate flag is given: the rates then follow the run length
+    /// ([`bbsplat::train::run_length_lr_factor`]).
+    pub fn lr_by_run_length(&self) -> bool {
+        [
+            self.lr_scale,
+            self.lr_position,
+            self.lr_sh,
+            self.lr_shape,
+            self.lr_texture,
+        ]
+        .iter()
+        .all(Option::is_none)
     }
 }
 
@@ -301,6 +317,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
                 relocate: !args.no_relocate,
                 growth_cap: auto.growth_cap,
                 lr_scales: args.lr_scales(),
+                lr_by_run_length: args.lr_by_run_length(),
                 clamp_gradient: args.clamp_gradient.into(),
                 ..TrainConfig::default()
             };

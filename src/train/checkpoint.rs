@@ -36,6 +36,7 @@
 //! | per group: update counts | `rows` × u32 | |
 //! | **growth and time budget** (version 4; absent before: no growth, no budget) | | |
 //! | growth cap | u64 | [`TrainConfig::growth_cap`] |
+//! | learning rate by run length | u8 | [`TrainConfig::lr_by_run_length`], 0 / 1 |
 //! | time plan present | u8 | 0 / 1; then, when 1, the [`TimePlan`] fields: |
 //! | budget, spent | 2 × f64 | seconds |
 //! | coarse step estimate, coarse steps measured | f64, u64 | |
@@ -401,6 +402,7 @@ fn encode_into<S: Sink>(tr: &Trainer, len: u64, sink: &mut S) {
 /// The version-4 section: growth cap and time plan.
 fn encode_growth_and_plan<S: Sink>(tr: &Trainer, w: &mut Writer<S>) {
     w.u64(tr.config.growth_cap as u64);
+    w.u8(tr.config.lr_by_run_length as u8);
     match &tr.time_plan {
         None => w.u8(0),
         Some(p) => {
@@ -418,12 +420,13 @@ fn encode_growth_and_plan<S: Sink>(tr: &Trainer, w: &mut Writer<S>) {
     }
 }
 
-/// Reads the version-4 section: `(growth cap, time plan)`.
-fn decode_growth_and_plan(r: &mut Reader<'_>) -> Result<(usize, Option<TimePlan>), CheckpointError> {
+/// Reads the version-4 section: `(growth cap, learning rate by run length, time plan)`.
+fn decode_growth_and_plan(r: &mut Reader<'_>) -> Result<(usize, bool, Option<TimePlan>), CheckpointError> {
     let cap = r.u64("growth cap")?;
     let cap = usize::try_from(cap).map_err(|_| r.inconsistent(format!("growth cap {cap} does not fit")))?;
+    let by_length = r.flag("learning rate by run length")?;
     if !r.flag("time plan present")? {
-        return Ok((cap, None));
+        return Ok((cap, by_length, None));
     }
     let what = "time plan";
     let plan = TimePlan {
@@ -450,7 +453,7 @@ fn decode_growth_and_plan(r: &mut Reader<'_>) -> Result<(usize, Option<TimePlan>
     if !times.iter().all(|x| x.is_finite() && *x >= 0.0) {
         return Err(r.inconsistent(format!("time plan {plan:?} holds negative or non-finite seconds")));
     }
-    Ok((cap, Some(plan)))
+    Ok((cap, by_length, Some(plan)))
 }
 
 fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
@@ -566,6 +569,7 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
         relocate,
         relocate_every,
         growth_cap: 0,
+        lr_by_run_length: false,
         lr_scales,
         clamp_gradient,
     };
@@ -638,12 +642,13 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
             global_step,
         };
     }
-    let (growth_cap, time_plan) = if version >= 4 {
+    let (growth_cap, lr_by_run_length, time_plan) = if version >= 4 {
         decode_growth_and_plan(&mut r)?
     } else {
-        (0, None)
+        (0, false, None)
     };
     config.growth_cap = growth_cap;
+    config.lr_by_run_length = lr_by_run_length;
     if r.pos != body.len() {
         return Err(r.inconsistent(format!("{} unexpected bytes before the checksum", body.len() - r.pos)));
     }

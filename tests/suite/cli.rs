@@ -408,6 +408,10 @@ fn learning_rate_flags_reach_the_trainer() {
             texture: 3.0,
         }
     );
+    assert!(
+        !trainer.config().lr_by_run_length,
+        "a learning-rate flag turns the run-length factor off"
+    );
     for (flag, value) in [("--lr-scale", "-1"), ("--lr-position", "nan"), ("--lr-shape", "fast")] {
         let arg = format!("{flag}={value}");
         let (ok, err) = run(&tiny_train_args(d, &out, &[&arg]));
@@ -461,6 +465,8 @@ fn the_background_of_the_data_is_stored_and_reused() {
             serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
         let automatic = summary["automatic"].as_array().unwrap();
         assert!(automatic.iter().any(|c| c["setting"] == "background"), "{summary}");
+        let lr = automatic.iter().find(|c| c["setting"] == "lr-scale").unwrap();
+        assert_eq!(lr["value"], "4.00", "40 steps: the short-run factor");
         let model = out.join("model");
         let eval = |extra: &[&str]| {
             let mut args = vec!["eval", model.to_str().unwrap(), d, "--json"];
@@ -512,5 +518,18 @@ fn minutes_plans_the_run_and_records_it() {
     let spent = summary["plan"]["spent_minutes"].as_f64().unwrap();
     assert!((spent / 0.05 - 1.0).abs() <= 0.03, "{spent} {summary}");
     assert_eq!(summary["plan"]["planned_steps"], summary["iterations"]);
+    // Without learning-rate flags the rates follow the planned length, recorded as chosen.
+    let automatic = summary["automatic"].as_array().unwrap();
+    let lr = automatic
+        .iter()
+        .find(|c| c["setting"] == "lr-scale")
+        .expect("lr-scale chosen");
+    assert_eq!(lr["value"], "by run length");
+    let checkpoint = bbsplat::train::Trainer::load_checkpoint(out.join("checkpoint.bin")).unwrap();
+    assert!(checkpoint.config().lr_by_run_length);
+    assert_eq!(
+        checkpoint.config().lr_scales,
+        bbsplat::train::LearningRateScales::REFERENCE
+    );
     std::fs::remove_dir_all(&root).ok();
 }

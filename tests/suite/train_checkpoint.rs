@@ -138,8 +138,8 @@ const LR_SCALES_AT: usize = 8 + 4 + 8 + 8 + 4 + 12 + 8 + 4 + 12 + 3 + 8;
 const CLAMP_AT: usize = LR_SCALES_AT + 16;
 
 /// Bytes of the version-4 growth and time-budget section of a checkpoint without a time plan
-/// (growth cap u64, plan flag u8), just before the checksum.
-const GROWTH_SECTION: usize = 9;
+/// (growth cap u64, learning rate by run length u8, plan flag u8), just before the checksum.
+const GROWTH_SECTION: usize = 10;
 
 /// `bytes` without the version-4 section (as versions 1-3 wrote them; not resealed).
 fn without_growth_section(mut bytes: Vec<u8>) -> Vec<u8> {
@@ -408,7 +408,10 @@ fn version_3_reads_as_no_growth_and_the_growth_section_round_trips() {
     v3[8..12].copy_from_slice(&3u32.to_le_bytes());
     let path = PathBuf::from("v3.ckpt");
     let old = Trainer::from_checkpoint_bytes(&resealed(v3), &path).unwrap();
-    assert_eq!((old.config().growth_cap, old.time_plan()), (0, None));
+    assert_eq!(
+        (old.config().growth_cap, old.config().lr_by_run_length, old.time_plan()),
+        (0, false, None)
+    );
     assert_eq!(
         resealed(old.checkpoint_bytes()),
         current,
@@ -416,6 +419,7 @@ fn version_3_reads_as_no_growth_and_the_growth_section_round_trips() {
     );
     // A cap and a plan survive the round trip.
     let mut with = Trainer::from_checkpoint_bytes(&current, &path).unwrap();
+    assert!(!with.config().lr_by_run_length);
     let mut plan = bbsplat::train::time_budget::TimePlan::new(2.5);
     plan.record(0, true, 0.25);
     plan.record(1, false, 0.5);

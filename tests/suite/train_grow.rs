@@ -194,6 +194,7 @@ fn demo() -> (RawBillboards, Vec<TrainView>, TrainConfig) {
         seed: 1,
         extent: camera_extent(&cams),
         growth_cap: 400,
+        lr_by_run_length: true,
         ..TrainConfig::default()
     };
     (model, train, config)
