@@ -50,9 +50,10 @@ pub const CALIBRATE_AFTER: u64 = 3 * WARMUP_STEPS;
 pub const CALIBRATION_STEPS: u64 = 2;
 /// Largest number of steps a plan may choose.
 pub const MAX_PLANNED_STEPS: usize = 100_000_000;
-/// Steps planned before any step was measured (only step 0 runs under it: its schedules do not
-/// depend on the count).
-pub const PROVISIONAL_STEPS: usize = 1_000_000;
+/// Steps planned before any step was measured (only step 0 runs under it; its schedules do not
+/// depend on the count, except the run-length learning-rate factor, which this short-run count
+/// gives its short-run value).
+pub const PROVISIONAL_STEPS: usize = 7000;
 
 /// The state of a time-budgeted run.
 #[derive(Clone, Copy, Debug, PartialEq)]
