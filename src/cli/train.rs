@@ -259,8 +259,9 @@ pub fn run(args: TrainArgs) -> Result<()> {
             let t = Trainer::load_checkpoint(path).with_context(|| format!("resuming from {}", path.display()))?;
             match t.time_plan() {
                 Some(plan) => anyhow::ensure!(
-                    args.iterations.is_none(),
-                    "{}: the checkpoint is of a {:.2}-minute run; resume it without --iterations",
+                    args.iterations.is_none() && args.minutes.is_none_or(|m| m * 60.0 == plan.budget_seconds),
+                    "{}: the checkpoint is of a --minutes {} run; resume it with that budget (or no --minutes) \
+                     and without --iterations",
                     path.display(),
                     plan.budget_seconds / 60.0
                 ),

@@ -533,3 +533,38 @@ fn minutes_plans_the_run_and_records_it() {
     );
     std::fs::remove_dir_all(&root).ok();
 }
+
+/// A budgeted run stopped with `--stop-after` and resumed continues its plan: the steps of both
+/// calls take the budget; another budget or `--iterations` on resume is refused.
+#[test]
+fn a_budgeted_run_resumes_its_plan() {
+    let root = temp("minutes_resume");
+    let data = export_demo(&root, 24, 100);
+    let out = root.join("out");
+    let (d, o) = (data.to_str().unwrap(), out.to_str().unwrap());
+    let common = ["--texture-size", "4", "--eval-every", "0", "--quiet"];
+    let mut first = vec!["train", d, "-o", o, "--minutes", "0.05", "--stop-after", "60"];
+    first.extend(common);
+    run_ok(&first);
+    let checkpoint = out.join("checkpoint.bin");
+    let c = checkpoint.to_str().unwrap();
+    let stopped = bbsplat::train::Trainer::load_checkpoint(&checkpoint).unwrap();
+    let spent_before = stopped.time_plan().unwrap().spent_seconds;
+    for bad in [&["--minutes", "0.1"][..], &["--iterations", "100"][..]] {
+        let mut args = vec!["train", d, "-o", o, "--resume", c];
+        args.extend(common);
+        args.extend_from_slice(bad);
+        let (ok, err) = run(&args);
+        assert!(!ok && err.contains("--minutes 0.05"), "{bad:?}: {err}");
+    }
+    let mut resume = vec!["train", d, "-o", o, "--resume", c];
+    resume.extend(common);
+    run_ok(&resume);
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let spent = summary["plan"]["spent_minutes"].as_f64().unwrap();
+    assert!((spent / 0.05 - 1.0).abs() <= 0.03, "{spent} {summary}");
+    let this_call = summary["train_seconds"].as_f64().unwrap();
+    assert!((spent * 60.0 - spent_before - this_call).abs() < 1e-6, "{summary}");
+    std::fs::remove_dir_all(&root).ok();
+}
