@@ -72,8 +72,8 @@ fn exact() -> String {
     "exact".into()
 }
 
-/// The content of `summary.json`: a [`TrainSummary`] and the [`RecordedSettings`] as one flat
-/// JSON object.
+/// The content of `summary.json`: a [`TrainSummary`], the [`RecordedSettings`] and the
+/// [`RunReport`] as one flat JSON object.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SummaryFile {
     /// The run's results.
@@ -87,6 +87,68 @@ pub struct SummaryFile {
     /// there were none.
     #[serde(default)]
     pub warnings: Vec<String>,
+    /// What was chosen automatically, the time plan and the growth (absent in older summaries).
+    #[serde(flatten, default)]
+    pub record: RunReport,
+}
+
+/// A setting chosen automatically (not given on the command line) and why.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct AutoChoice {
+    /// The setting, named as its flag (`background`, `init`, `billboards`, ...).
+    pub setting: String,
+    /// The value chosen.
+    pub value: String,
+    /// The rule and the numbers it used.
+    pub reason: String,
+}
+
+/// The time budget of a run (`--minutes`) as it went.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PlanRecord {
+    /// The budget of step time, minutes.
+    pub budget_minutes: f64,
+    /// Step time spent over the whole run (resumed calls included), minutes.
+    pub spent_minutes: f64,
+    /// The steps the plan ended with.
+    pub planned_steps: usize,
+    /// Last estimate of a coarse step, seconds (0 without coarse steps).
+    pub coarse_step_seconds: f64,
+    /// Last estimate of a full-resolution step, seconds.
+    pub fine_step_seconds: f64,
+    /// The step full resolution started at, if it did.
+    pub fine_from: Option<usize>,
+}
+
+/// The billboard count over the run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct GrowthRecord {
+    /// Billboards when this call of the run started.
+    pub initial: usize,
+    /// Billboards at the end.
+    pub final_count: usize,
+    /// Billboards alive at the end.
+    pub alive: usize,
+    /// The growth cap (0: no growth).
+    pub cap: usize,
+}
+
+/// What `bbsplat train` chose and what happened, beyond the [`TrainSummary`].
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct RunReport {
+    /// Settings chosen automatically, in the order they were chosen.
+    #[serde(default)]
+    pub automatic: Vec<AutoChoice>,
+    /// The time plan, for a `--minutes` run.
+    #[serde(default)]
+    pub plan: Option<PlanRecord>,
+    /// The billboard count.
+    #[serde(default)]
+    pub growth: Option<GrowthRecord>,
+    /// Wall-clock seconds of this call of the run outside the steps (evaluations, checkpoints,
+    /// saving, the final evaluation); not counted in the time budget.
+    #[serde(default)]
+    pub other_seconds: f64,
 }
 
 /// One evaluation during training.
@@ -181,6 +243,21 @@ mod tests {
                 clamp_gradient: "straight-through".into(),
             },
             warnings: vec!["a warning".into()],
+            record: RunReport {
+                automatic: vec![AutoChoice {
+                    setting: "background".into(),
+                    value: "white".into(),
+                    reason: "test".into(),
+                }],
+                plan: None,
+                growth: Some(GrowthRecord {
+                    initial: 4,
+                    final_count: 5,
+                    alive: 4,
+                    cap: 9,
+                }),
+                other_seconds: 0.5,
+            },
         };
         let text = serde_json::to_string(&file).unwrap();
         assert!(text.contains(r#""clamp_gradient":"straight-through""#), "{text}");

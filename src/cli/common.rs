@@ -1,6 +1,7 @@
 //! Pieces shared by the subcommands: scene-loading flags, thread pool, atomic PNG writes.
 
 use anyhow::{Context, Result};
+use bbsplat::scene::data_background::{BackgroundChoice, load_with_data_background};
 use bbsplat::scene::{Background, LoadOptions, Scene, View};
 use clap::{Args, ValueEnum};
 use std::path::Path;
@@ -26,9 +27,11 @@ impl From<BackgroundArg> for Background {
 /// How a scene folder is read (shared by `train`, `render` and `eval`).
 #[derive(Args, Clone, Debug)]
 pub struct SceneArgs {
-    /// Background composited behind transparent pixels and the billboards.
-    #[arg(long, value_enum, default_value_t = BackgroundArg::Black)]
-    pub background: BackgroundArg,
+    /// Background composited behind transparent pixels and the billboards. Default: `train`
+    /// takes it from the data (white for NeRF-synthetic images with alpha, black otherwise) and
+    /// stores it in the model; `render` and `eval` use the model's.
+    #[arg(long, value_enum)]
+    pub background: Option<BackgroundArg>,
     /// Integer image downscale factor (1, 2, 4, 8, ...).
     #[arg(long, default_value_t = 1)]
     pub downscale: u32,
@@ -45,18 +48,41 @@ pub struct SceneArgs {
 }
 
 impl SceneArgs {
-    /// Loads `path` with these options; warnings go to stderr unless `quiet`.
-    pub fn load(&self, path: &Path, quiet: bool) -> Result<Scene> {
-        let options = LoadOptions {
-            background: self.background.into(),
+    fn options(&self, background: Background, quiet: bool) -> LoadOptions {
+        LoadOptions {
+            background,
             downscale: self.downscale,
             max_width: self.max_width,
             test_every: self.test_every,
             print_warnings: !quiet,
             allow_damaged_images: self.allow_damaged_images,
             ..LoadOptions::default()
-        };
-        bbsplat::scene::load(path, &options).with_context(|| format!("loading the scene {}", path.display()))
+        }
+    }
+
+    /// Loads `path` with these options and `--background` if given, else `default`; warnings go
+    /// to stderr unless `quiet`.
+    pub fn load(&self, path: &Path, quiet: bool, default: Background) -> Result<Scene> {
+        let background = self.background.map_or(default, Background::from);
+        bbsplat::scene::load(path, &self.options(background, quiet))
+            .with_context(|| format!("loading the scene {}", path.display()))
+    }
+
+    /// Loads `path` for training: with `--background` if given, else with the background of
+    /// the data ([`load_with_data_background`]); returns the choice and why.
+    pub fn load_for_training(&self, path: &Path, quiet: bool) -> Result<(Scene, BackgroundChoice)> {
+        let context = || format!("loading the scene {}", path.display());
+        match self.background {
+            Some(arg) => {
+                let scene = self.load(path, quiet, arg.into())?;
+                let choice = BackgroundChoice {
+                    background: arg.into(),
+                    reason: format!("{}: given by --background", format!("{arg:?}").to_lowercase()),
+                };
+                Ok((scene, choice))
+            }
+            None => load_with_data_background(path, &self.options(Background::Black, quiet)).with_context(context),
+        }
     }
 }
 

@@ -7,6 +7,7 @@ use anyhow::{Context, Result};
 use bbsplat::eval::{EvalReport, EvalView, evaluate_views};
 use bbsplat::model_file::load_model;
 use bbsplat::raster::RenderSettings;
+use bbsplat::scene::Background;
 use clap::Args;
 use glam::Vec3;
 use std::path::PathBuf;
@@ -61,7 +62,20 @@ fn run_views(
     start_threads(common.threads)?;
     let (model, meta) =
         load_model(&common.model).with_context(|| format!("loading the model {}", common.model.display()))?;
-    let scene = common.scene_args.load(&common.scene, true)?;
+    // The model's background unless --background overrides it (the truth images are composited
+    // on the same one).
+    let model_background = Background::from_rgb(meta.background).ok_or_else(|| {
+        anyhow::anyhow!(
+            "{}: background {:?} is neither black nor white; give --background",
+            common.model.display(),
+            meta.background
+        )
+    });
+    let background = match common.scene_args.background {
+        Some(arg) => arg.into(),
+        None => model_background?,
+    };
+    let scene = common.scene_args.load(&common.scene, true, background)?;
     let views = split_views(&scene, common.split);
     anyhow::ensure!(
         !views.is_empty(),

@@ -9,11 +9,15 @@ use std::path::Path;
 
 /// The record of this command: every flag that changes the model or the optimisation (not
 /// `--threads`, `--eval-*`, `--save-every`, `--stop-after`, `--quiet`, `--output`, `--resume`,
-/// `--overwrite`), and the fingerprint of the loaded scene's views.
+/// `--overwrite`; nor `--iterations` and `--minutes`, which `train` checks against the
+/// checkpoint's step count or time plan), and the fingerprint of the loaded scene's views.
 pub fn record_of(args: &TrainArgs, scene: &Scene) -> RunRecord {
     let opt = |x: Option<f32>| x.map_or("(default)".to_string(), |v| v.to_string());
     let arguments = [
-        ("--iterations", args.iterations.to_string()),
+        (
+            "--growth-cap",
+            args.growth_cap.map_or("(from the scene)".into(), |n| n.to_string()),
+        ),
         (
             "--billboards",
             args.billboards.map_or("(from the scene)".into(), |n| n.to_string()),
@@ -29,16 +33,14 @@ pub fn record_of(args: &TrainArgs, scene: &Scene) -> RunRecord {
         ("--hull-resolution", args.hull_resolution.to_string()),
         ("--coarse-factor", args.coarse_factor.to_string()),
         ("--coarse-until", args.coarse_until.to_string()),
-        ("--lr-scale", args.lr_scale.to_string()),
+        ("--lr-scale", opt(args.lr_scale)),
         ("--lr-position", opt(args.lr_position)),
         ("--lr-sh", opt(args.lr_sh)),
         ("--lr-shape", opt(args.lr_shape)),
         ("--lr-texture", opt(args.lr_texture)),
         ("--clamp-gradient", format!("{:?}", args.clamp_gradient).to_lowercase()),
-        (
-            "--background",
-            format!("{:?}", args.scene_args.background).to_lowercase(),
-        ),
+        // The background in effect (given, or chosen from the data).
+        ("--background", format!("{:?}", scene.background).to_lowercase()),
         ("--downscale", args.scene_args.downscale.to_string()),
         (
             "--max-width",

@@ -1,15 +1,16 @@
 //! `bbsplat train <scene> -o <out>`: the main job.
 
+use super::auto_settings;
 use super::common::{SceneArgs, start_threads};
 use super::signals::Signals;
 use super::{preflight, resume, validate};
 use anyhow::{Context, Result};
-use bbsplat::init::budget::{BudgetInputs, budget_for};
-use bbsplat::init::hull::HullConfig;
-use bbsplat::init::scene_init::{PointlessInit, init_model_with};
+use bbsplat::init::scene_init::init_model_with;
+use bbsplat::report::RunReport;
 use bbsplat::train::RunError;
 use bbsplat::train::footprint::{output_bytes, training_bytes};
 use bbsplat::train::resolution::ResolutionSchedule;
+use bbsplat::train::time_budget::TimePlan;
 use bbsplat::train::{
     AdamMode, ClampGradient, LearningRateScales, RunConfig, RunOutcome, StopReason, TextureMode, TrainConfig,
     TrainEvent, TrainView, Trainer,
@@ -32,9 +33,16 @@ pub struct TrainArgs {
     #[command(flatten)]
     pub scene_args: SceneArgs,
     /// Optimisation steps, one image each (the reference's 32 000 is the 100 % point of every
-    /// schedule; all milestones scale with this number).
-    #[arg(long, default_value_t = 7000)]
-    pub iterations: usize,
+    /// schedule; all milestones scale with this number). Default 7000, unless `--minutes` is
+    /// given. Exact and reproducible, unlike `--minutes`.
+    #[arg(long, conflicts_with = "minutes")]
+    pub iterations: Option<usize>,
+    /// A time budget: train for this many minutes of step time (evaluations and saving not
+    /// counted), the number of steps and every schedule planned from the step time measured
+    /// while training (see docs/training.md). The plan is in the checkpoint: `--resume`
+    /// continues it.
+    #[arg(long, value_parser = positive_minutes)]
+    pub minutes: Option<f64>,
     /// Billboard count (default: derived from the scene, see docs/training.md).
     #[arg(long)]
     pub billboards: Option<usize>,
@@ -79,6 +87,10 @@ pub struct TrainArgs {
     /// Do not recycle dead billboards (mean alpha ≤ 0.005).
     #[arg(long)]
     pub no_relocate: bool,
+    /// Grow the set by 5 % every 100 steps (spec §6) up to this many billboards (0: no growth).
+    /// Default: from the scene (see docs/training.md).
+    #[arg(long)]
+    pub growth_cap: Option<usize>,
     /// Stop after this many steps (of `--iterations`) with a checkpoint, as Ctrl-C does: lets a
     /// long run be done in slices with `--resume`.
     #[arg(long)]
@@ -93,26 +105,29 @@ pub struct TrainArgs {
     /// atomically, as this run writes its own.
     #[arg(long)]
     pub overwrite: bool,
-    /// Initialisation of scenes without SfM points: `random` points in the scene box (the
-    /// reference), or `hull`: points on the visual hull carved from the images' alpha masks
-    /// (RGBA images such as NeRF-synthetic; see docs/training.md).
-    #[arg(long, value_enum, default_value_t = InitArg::Random)]
+    /// Initialisation of scenes without SfM points, in the box the cameras look at: `auto`
+    /// (the hull when the images have alpha masks, else random points plus a background shell),
+    /// `random` points (the reference), or `hull`: points on the visual hull carved from the
+    /// images' alpha masks (RGBA images such as NeRF-synthetic; see docs/training.md).
+    #[arg(long, value_enum, default_value_t = InitArg::Auto)]
     pub init: InitArg,
     /// Voxels per side of the `--init hull` grid.
     #[arg(long, default_value_t = 128)]
     pub hull_resolution: usize,
     /// Coarse-to-fine: train the first `--coarse-until` of the run on images downscaled by this
     /// factor (1: off, the reference). A coarse step costs about 1/factor² of a full one.
-    #[arg(long, default_value_t = 1)]
+    /// Default 2 (measured on lego, docs/quality.md).
+    #[arg(long, default_value_t = 2)]
     pub coarse_factor: u32,
     /// Fraction of the run (0-1) trained on the coarse images when `--coarse-factor` > 1.
     #[arg(long, default_value_t = 0.5)]
     pub coarse_until: f64,
     /// Multiply every learning rate by this factor (1: the reference's rates; the schedules are
-    /// unchanged). Runs much shorter than the reference's 32 000 steps gain from more: see
-    /// docs/quality.md.
-    #[arg(long, default_value_t = 1.0, value_parser = non_negative)]
-    pub lr_scale: f32,
+    /// unchanged). Default: a factor of the run length (4 up to 7000 steps, 1 at the reference's
+    /// 32 000, log-linear between; measured on lego, see docs/quality.md), used when no
+    /// learning-rate flag is given.
+    #[arg(long, value_parser = non_negative)]
+    pub lr_scale: Option<f32>,
     /// Learning-rate factor of the positions (default: `--lr-scale`).
     #[arg(long, value_parser = non_negative)]
     pub lr_position: Option<f32>,
@@ -132,6 +147,18 @@ pub struct TrainArgs {
     pub clamp_gradient: ClampGradientArg,
 }
 
+/// `--minutes`: a finite number > 0.
+fn positive_minutes(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
+        Ok(x) => Err(format!("{x} is not a finite number > 0")),
+        Err(e) => Err(format!("{text:?} is not a number: {e}")),
+    }
+}
+
+/// Steps of a run without `--iterations` or `--minutes`.
+pub const DEFAULT_ITERATIONS: usize = 7000;
+
 /// A finite number ≥ 0 (the learning-rate factors).
 fn non_negative(text: &str) -> Result<f32, String> {
     match text.parse::<f32>() {
@@ -149,20 +176,37 @@ fn texture_mode() -> impl TypedValueParser<Value = TextureMode> {
 }
 
 impl TrainArgs {
-    /// The learning-rate multipliers of the flags.
+    /// The learning-rate multipliers of the flags (1 where none is given).
     pub fn lr_scales(&self) -> LearningRateScales {
+        let all = self.lr_scale.unwrap_or(1.0);
         LearningRateScales {
-            position: self.lr_position.unwrap_or(self.lr_scale),
-            sh: self.lr_sh.unwrap_or(self.lr_scale),
-            shape: self.lr_shape.unwrap_or(self.lr_scale),
-            texture: self.lr_texture.unwrap_or(self.lr_scale),
+            position: self.lr_position.unwrap_or(all),
+            sh: self.lr_sh.unwrap_or(all),
+            shape: self.lr_shape.unwrap_or(all),
+            texture: self.lr_texture.unwrap_or(all),
         }
+    }
+
+    /// True when no learning-rate flag is given: the rates then follow the run length
+    /// ([`bbsplat::train::run_length_lr_factor`]).
+    pub fn lr_by_run_length(&self) -> bool {
+        [
+            self.lr_scale,
+            self.lr_position,
+            self.lr_sh,
+            self.lr_shape,
+            self.lr_texture,
+        ]
+        .iter()
+        .all(Option::is_none)
     }
 }
 
 /// `--init`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum InitArg {
+    /// The hull when the images have alpha masks, else random points plus a background shell.
+    Auto,
     /// Uniform random points in the scene box.
     Random,
     /// Points on the surface of the visual hull of the alpha masks.
@@ -242,19 +286,20 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let signals = Signals::install()?;
     let start = Instant::now();
     validate::train_args(&args)?;
+    let iterations = args.iterations.unwrap_or(DEFAULT_ITERATIONS);
     if let Some(n) = args.billboards {
         validate::memory(
             &format!("--billboards {n} at --texture-size {}", args.texture_size),
             training_bytes(n, args.texture_size, 0, 0),
         )?;
     }
-    if args.init == InitArg::Hull {
+    if matches!(args.init, InitArg::Hull | InitArg::Auto) {
         let r = args.hull_resolution as u64;
         validate::memory(&format!("--hull-resolution {r}"), r.saturating_pow(3).saturating_mul(2))?;
     }
     preflight::output_folder(&args.output, args.resume.as_deref(), args.overwrite)?;
     let threads = start_threads(args.threads)?;
-    let scene = args.scene_args.load(&args.scene, args.quiet)?;
+    let (scene, background) = args.scene_args.load_for_training(&args.scene, args.quiet)?;
     anyhow::ensure!(
         !scene.train.is_empty(),
         "{}: the scene has no training view",
@@ -263,55 +308,51 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let views = scene.train.iter().chain(&scene.test);
     let view_pixels: u64 = views.clone().map(|v| v.camera.pixel_count() as u64).sum();
     let largest_view = views.map(|v| v.camera.pixel_count() as u64).max().unwrap_or(0);
-    let config = TrainConfig {
-        iterations: args.iterations,
-        sh_degree: args.sh_degree,
-        background: Vec3::from_array(scene.background.rgb()),
-        seed: args.seed,
-        extent: scene.extent,
-        impact_threshold: args.texture_threshold,
-        adam: match args.adam {
-            AdamModeArg::Dense => AdamMode::Dense,
-            AdamModeArg::Sparse => AdamMode::Sparse,
-        },
-        texture_mode: args.texture_mode,
-        relocate: !args.no_relocate,
-        lr_scales: args.lr_scales(),
-        clamp_gradient: args.clamp_gradient.into(),
-        ..TrainConfig::default()
-    };
     let record = resume::record_of(&args, &scene);
+    let mut automatic = Vec::new();
     let mut trainer = match &args.resume {
         Some(path) => {
             let t = Trainer::load_checkpoint(path).with_context(|| format!("resuming from {}", path.display()))?;
+            match t.time_plan() {
+                Some(plan) => anyhow::ensure!(
+                    args.iterations.is_none() && args.minutes.is_none_or(|m| m * 60.0 == plan.budget_seconds),
+                    "{}: the checkpoint is of a --minutes {} run; resume it with that budget (or no --minutes) \
+                     and without --iterations",
+                    path.display(),
+                    plan.budget_seconds / 60.0
+                ),
+                None => {
+                    anyhow::ensure!(
+                        args.minutes.is_none(),
+                        "{}: the checkpoint is of a {}-step run, not of a --minutes run",
+                        path.display(),
+                        t.config().iterations
+                    );
+                    anyhow::ensure!(
+                        t.config().iterations == iterations,
+                        "{}: the checkpoint is of a {}-step run, not --iterations {}",
+                        path.display(),
+                        t.config().iterations,
+                        iterations
+                    );
+                }
+            }
             if let Some(note) = resume::check(path, t.run_record(), &record)? {
                 eprintln!("{note}");
             }
-            anyhow::ensure!(
-                t.config().iterations == args.iterations,
-                "{}: the checkpoint is of a {}-step run, not --iterations {}",
-                path.display(),
-                t.config().iterations,
-                args.iterations
-            );
             preflight::free_space(&args.output, output_bytes(t.model.len(), t.model.texture_size))?;
             println!("resuming at step {} from {}", t.step_index(), path.display());
             t
         }
         None => {
-            let budget = match args.billboards {
-                Some(n) => {
-                    anyhow::ensure!(n >= 1, "--billboards must be at least 1");
-                    n
+            let auto = auto_settings::resolve(&args, &scene, &background)?;
+            if !args.quiet {
+                for c in &auto.choices {
+                    println!("{}: {} ({})", c.setting, c.value, c.reason);
                 }
-                None => {
-                    let b = budget_for(&BudgetInputs::from_scene(&scene, args.texture_size));
-                    if !args.quiet {
-                        println!("budget: {}", b.reason);
-                    }
-                    b.billboards
-                }
-            };
+            }
+            automatic = auto.choices.clone();
+            let budget = auto.billboards;
             validate::memory(
                 &format!(
                     "training {budget} billboards at --texture-size {} on {} views",
@@ -321,14 +362,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
                 training_bytes(budget, args.texture_size, view_pixels, largest_view),
             )?;
             preflight::free_space(&args.output, output_bytes(budget, args.texture_size))?;
-            let pointless = match args.init {
-                InitArg::Random => PointlessInit::Random,
-                InitArg::Hull => PointlessInit::Hull(HullConfig {
-                    resolution: args.hull_resolution,
-                    ..HullConfig::default()
-                }),
-            };
-            let (model, init) = init_model_with(&scene, budget, args.texture_size, args.seed, &pointless)
+            let (model, init) = init_model_with(&scene, budget, args.texture_size, args.seed, &auto.pointless)
                 .with_context(|| format!("initialising {} billboards", budget))?;
             if args.init == InitArg::Hull && init.hull == 0 {
                 eprintln!(
@@ -336,27 +370,31 @@ pub fn run(args: TrainArgs) -> Result<()> {
                 );
             }
             if !args.quiet {
-                let hull = if init.hull > 0 {
-                    format!(
-                        ", {} on the visual hull (of {} surface voxels)",
-                        init.hull, init.hull_candidates
-                    )
-                } else {
-                    String::new()
-                };
-                let random_box = if init.random > 0 {
-                    format!(" ({})", init.box_rule)
-                } else {
-                    String::new()
-                };
-                println!(
-                    "initial billboards: {} from SfM points, {} on the sky sphere (radius {:.2}){hull}, {} random{random_box}",
-                    init.sfm, init.sky, init.sky_radius, init.random,
-                );
+                println!("initial billboards: {init}");
             }
-            let mut t = Trainer::new(model, config);
-            t.set_run_record(record);
-            t
+            let config = TrainConfig {
+                iterations,
+                sh_degree: args.sh_degree,
+                background: Vec3::from_array(scene.background.rgb()),
+                seed: args.seed,
+                extent: scene.extent,
+                impact_threshold: args.texture_threshold,
+                adam: match args.adam {
+                    AdamModeArg::Dense => AdamMode::Dense,
+                    AdamModeArg::Sparse => AdamMode::Sparse,
+                },
+                texture_mode: args.texture_mode,
+                relocate: !args.no_relocate,
+                growth_cap: auto.growth_cap,
+                lr_scales: args.lr_scales(),
+                lr_by_run_length: args.lr_by_run_length(),
+                clamp_gradient: args.clamp_gradient.into(),
+                ..TrainConfig::default()
+            };
+            let mut trainer = Trainer::new(model, config);
+            trainer.set_time_plan(args.minutes.map(TimePlan::new));
+            trainer.set_run_record(record);
+            trainer
         }
     };
     // The views' 8-bit images move into the training views (converted to floats per step).
@@ -368,7 +406,10 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let bar = if args.quiet {
         ProgressBar::hidden()
     } else {
-        let bar = ProgressBar::with_draw_target(Some(args.iterations as u64), ProgressDrawTarget::stderr_with_hz(4));
+        let bar = ProgressBar::with_draw_target(
+            Some(trainer.config().iterations as u64),
+            ProgressDrawTarget::stderr_with_hz(4),
+        );
         bar.set_style(
             ProgressStyle::with_template("{bar:28} {pos}/{len} [{elapsed_precise}<{eta_precise}, {per_sec}] {msg}")
                 .expect("a valid template"),
@@ -389,7 +430,9 @@ pub fn run(args: TrainArgs) -> Result<()> {
         // Arguments as the OS gave them (a path need not be UTF-8).
         command: std::env::args_os().map(|a| a.to_string_lossy().into_owned()).collect(),
         warnings: scene_warnings,
+        automatic,
     };
+    let last_record = std::cell::RefCell::new(None::<RunReport>);
     let on_event = |event: &TrainEvent| match event {
         TrainEvent::Started {
             train_views,
@@ -407,10 +450,12 @@ pub fn run(args: TrainArgs) -> Result<()> {
         TrainEvent::Warning(warning) if !args.quiet => bar.suspend(|| eprintln!("warning: {warning}")),
         TrainEvent::Step {
             log,
+            iterations,
             running_psnr,
             relocated_total,
             ..
         } => {
+            bar.set_length(*iterations as u64);
             bar.set_position(log.step as u64);
             bar.set_message(format!(
                 "loss {:.4} | train PSNR {running_psnr:.2} dB | relocated {relocated_total}",
@@ -426,6 +471,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         } if !args.quiet => bar.suspend(|| {
             println!("step {step:>6}: test PSNR {psnr:.2} dB, SSIM {ssim:.4} ({views} views), {seconds:.0} s")
         }),
+        TrainEvent::Record(record) => *last_record.borrow_mut() = Some((**record).clone()),
         _ => {}
     };
     let outcome = bbsplat::train::run(&mut trainer, &train, &test, &run_config, &stop, on_event);
@@ -476,5 +522,39 @@ pub fn run(args: TrainArgs) -> Result<()> {
         summary.model_bytes as f64 / 1e6,
         summary.peak_rss_bytes as f64 / 1e6
     );
+    if let Some(record) = last_record.into_inner() {
+        print!("{}", describe_record(&record));
+    }
     Ok(())
+}
+
+/// The end-of-run lines about the automatic choices, the plan and the billboard count.
+fn describe_record(record: &RunReport) -> String {
+    let mut out = String::new();
+    for c in &record.automatic {
+        out.push_str(&format!("chosen {}: {} ({})\n", c.setting, c.value, c.reason));
+    }
+    if let Some(p) = &record.plan {
+        out.push_str(&format!(
+            "time budget {:.2} min: {:.2} min of steps ({:+.1} %), {} steps planned; step {:.3} s coarse, {:.3} s full{}\n",
+            p.budget_minutes,
+            p.spent_minutes,
+            100.0 * (p.spent_minutes / p.budget_minutes - 1.0),
+            p.planned_steps,
+            p.coarse_step_seconds,
+            p.fine_step_seconds,
+            p.fine_from.map_or(String::new(), |s| format!(", full resolution from step {s}"))
+        ));
+    }
+    if let Some(g) = &record.growth {
+        out.push_str(&format!(
+            "billboards: {} at the start, {} at the end ({} alive), growth cap {}\n",
+            g.initial, g.final_count, g.alive, g.cap
+        ));
+    }
+    out.push_str(&format!(
+        "outside the steps (evaluation, saving): {:.1} s\n",
+        record.other_seconds
+    ));
+    out
 }

@@ -62,7 +62,10 @@ pub fn train_args(args: &TrainArgs) -> Result<()> {
         "--sh-degree must be 0, 1, 2 or 3 (got {})",
         args.sh_degree
     );
-    anyhow::ensure!(args.iterations >= 1, "--iterations must be at least 1");
+    anyhow::ensure!(
+        args.iterations.is_none_or(|n| n >= 1),
+        "--iterations must be at least 1"
+    );
     anyhow::ensure!(
         (1..=MAX_COARSE_FACTOR).contains(&args.coarse_factor),
         "--coarse-factor must be between 1 and {MAX_COARSE_FACTOR} (got {})",

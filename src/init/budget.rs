@@ -13,8 +13,8 @@
 //!    of the training views, clamped to `[`[`MIN_BUDGET`]`, `[`MAX_BUDGET`]`]` (the upper end
 //!    is the reference default cap).
 //! 2. **Points.** With `m` SfM points, never more than `m + sky(m)` billboards
-//!    (`sky` = [`sky_point_count`]): initialisation cannot place more, and the trainer never adds
-//!    billboards (there is no growth; relocation only moves dead billboards onto alive ones).
+//!    (`sky` = [`sky_point_count`]): initialisation cannot place more. Growth during training
+//!    ([`crate::train::grow`]) then adds billboards up to [`growth_cap`].
 //!
 //! The budget is the smaller of the two. Figures for the test scenes (TS 16): NeRF-synthetic
 //! lego at 400×400 (100 views, no points) → 10 000; the fox (225×400 cropped by undistortion
@@ -92,18 +92,48 @@ impl BudgetInputs {
     }
 }
 
-/// The budget rule of the [module documentation](self).
-pub fn budget_for(inputs: &BudgetInputs) -> Budget {
+/// The pixel bound of rule 1 and its explanation.
+fn pixel_bound(inputs: &BudgetInputs) -> (usize, String) {
     let ts = inputs.texture_size.max(1) as u64;
     let footprint = (ts * ts).div_ceil(4).max(1);
     let coverage = (inputs.views as u64).min(COVERAGE);
     let raw = (coverage * inputs.pixels_per_view).div_ceil(footprint);
-    let pixel_bound = (raw.min(MAX_BUDGET as u64) as usize).max(MIN_BUDGET);
-    let mut reason = format!(
-        "pixel bound {pixel_bound} = clamp(ceil({coverage} views' worth x {} px / {footprint} px per billboard), \
+    let bound = (raw.min(MAX_BUDGET as u64) as usize).max(MIN_BUDGET);
+    let reason = format!(
+        "pixel bound {bound} = clamp(ceil({coverage} views' worth x {} px / {footprint} px per billboard), \
          {MIN_BUDGET}, {MAX_BUDGET})",
         inputs.pixels_per_view
     );
+    (bound, reason)
+}
+
+/// Cap of growth over the pixel bound ([`growth_cap`]).
+pub const GROWTH_CAP_FACTOR: usize = 2;
+
+/// The growth cap of a scene (the count [`crate::train::grow`] grows toward): `min(`
+/// [`MAX_BUDGET`]`, `[`GROWTH_CAP_FACTOR`]` × pixel bound)`, never below `initial`. The pixel
+/// bound is what the views constrain at one layer per footprint; the factor 2 leaves room for
+/// growth to add billboards where alpha says the scene needs them (the reference grows 60k-100k
+/// initial billboards to caps of 60k-300k, spec §6). A provisional rule: it was not chosen by a
+/// quality measurement yet (`docs/quality.md`).
+///
+/// ```
+/// use bbsplat::init::budget::{growth_cap, BudgetInputs};
+/// let beer = BudgetInputs { views: 62, pixels_per_view: 87_074, sfm_points: Some(4_414), texture_size: 16 };
+/// assert_eq!(growth_cap(&beer, 4_414).billboards, 10_886);
+/// ```
+pub fn growth_cap(inputs: &BudgetInputs, initial: usize) -> Budget {
+    let (bound, reason) = pixel_bound(inputs);
+    let cap = (GROWTH_CAP_FACTOR * bound).min(MAX_BUDGET).max(initial);
+    Budget {
+        billboards: cap,
+        reason: format!("cap {cap} = max(initial {initial}, min({MAX_BUDGET}, {GROWTH_CAP_FACTOR} x {reason}))"),
+    }
+}
+
+/// The budget rule of the [module documentation](self).
+pub fn budget_for(inputs: &BudgetInputs) -> Budget {
+    let (pixel_bound, mut reason) = pixel_bound(inputs);
     let billboards = match inputs.sfm_points {
         Some(m) => {
             let sky = sky_point_count(m);

@@ -17,28 +17,42 @@
 //!     L∞ norms, the largest L∞ norm)`, so up to 1 % far outliers do not blow the sky up
 //!     (the reference uses the largest L∞ norm, also reported);
 //!   - sky colour white `(1, 1, 1)`, SfM colours as read; sky points first (reference order).
-//! - **Without points** (NeRF-synthetic, instant-ngp): `N` points uniform in a box, colour
-//!   `0.5 + C0·U[0, 1/255]` per channel (the reference's `SH2RGB(U[0, 1/255])`, grey), seeded.
-//!   The box is `[−1.3, 1.3]³` for NeRF-synthetic scenes (spec §8). For other scenes it comes
-//!   from the training cameras ([`camera_box`]): the centre is the least-squares point nearest
+//! - **Without points** (NeRF-synthetic, instant-ngp): the scene box comes from the training
+//!   cameras for every format ([`camera_box`]): the centre is the least-squares point nearest
 //!   to all optical axes (what the cameras look at), the half side is the median over cameras
 //!   of `distance to the centre × sin(half the smaller field of view)`: the cube around the
 //!   largest sphere the median camera sees whole. (On lego, 400×400 with fx = 555.6 px and
 //!   cameras 4.03 from the origin, this rule gives a half side of 1.37 around the origin, close
-//!   to the spec's 1.3.)
+//!   to the spec's fixed `[−1.3, 1.3]³`, which an unseen scene whose cameras sit far from the
+//!   origin would miss entirely.) What goes in it ([`PointlessInit`]):
+//!   - [`PointlessInit::Random`]: `N` points uniform in the box, colour
+//!     `0.5 + C0·U[0, 1/255]` per channel (the reference's `SH2RGB(U[0, 1/255])`, grey), seeded;
+//!   - [`PointlessInit::Hull`]: the visual hull of the alpha masks ([`crate::init::hull`]);
+//!   - [`PointlessInit::Auto`] (the CLI default): the hull when any training view has an alpha
+//!     mask (the background is then a uniform colour and needs no billboards); otherwise
+//!     `N − ⌊N·`[`SHELL_FRACTION`]`⌋` random points in the box and a background shell of
+//!     `⌊N·SHELL_FRACTION⌋` points on a Fibonacci sphere around the box centre of radius
+//!     [`SHELL_RADIUS_FACTOR`] × the largest camera distance from it (beyond every camera,
+//!     like the reference's sky sphere: floors, walls and sky far from the object have
+//!     billboards to start from), grey as the random points.
 
 use crate::init::fibonacci::{fibonacci_sphere, sky_point_count, sky_radius, sky_radius_reference};
 use crate::init::fps::farthest_point_sampling;
 use crate::init::hull::{HullConfig, HullError, visual_hull_points};
 use crate::model::RawBillboards;
 use crate::rng::Rng;
-use crate::scene::{Scene, SceneFormat};
+use crate::scene::Scene;
 use crate::stages::sh::SH_C0;
 use glam::{DMat3, DVec3, Vec3};
 use thiserror::Error;
 
-/// Half side of the NeRF-synthetic random box (spec §8).
+/// Half side of the reference's NeRF-synthetic random box (spec §8), for comparison: the box
+/// now comes from the cameras ([`camera_box`]) for every format.
 pub const BLENDER_HALF_SIDE: f32 = 1.3;
+/// Fraction of the budget on the background shell of [`PointlessInit::Auto`] without masks.
+pub const SHELL_FRACTION: f64 = 0.25;
+/// Radius of the background shell over the largest camera distance from the box centre.
+pub const SHELL_RADIUS_FACTOR: f32 = 2.0;
 /// Colour of sky points.
 pub const SKY_COLOUR: [f32; 3] = [1.0, 1.0, 1.0];
 
@@ -57,6 +71,10 @@ pub struct InitReport {
     pub sky: usize,
     /// Random points added.
     pub random: usize,
+    /// Points on the background shell ([`PointlessInit::Auto`] without masks).
+    pub shell: usize,
+    /// Radius of the background shell, 0 without.
+    pub shell_radius: f32,
     /// Points on the visual hull's surface ([`PointlessInit::Hull`]).
     pub hull: usize,
     /// Surface voxels the hull points were sampled from (0 without a hull).
@@ -74,7 +92,7 @@ pub struct InitReport {
 impl InitReport {
     /// Total points.
     pub fn total(&self) -> usize {
-        self.sfm + self.sky + self.random + self.hull
+        self.sfm + self.sky + self.random + self.hull + self.shell
     }
 }
 
@@ -95,6 +113,13 @@ impl std::fmt::Display for InitReport {
                 f,
                 ", {} on the visual hull (farthest points of {} surface voxels)",
                 self.hull, self.hull_candidates
+            )?;
+        }
+        if self.shell > 0 {
+            write!(
+                f,
+                ", {} on a background shell of radius {:.3}",
+                self.shell, self.shell_radius
             )?;
         }
         if self.sky > 0 {
@@ -144,6 +169,22 @@ pub enum PointlessInit {
     /// alpha masks, in the scene box ([`crate::init::hull`]); needs RGBA images. Topped up with
     /// random points when the surface has fewer voxels than the budget.
     Hull(HullConfig),
+    /// [`PointlessInit::Hull`] when any training view has an alpha mask, else random points in
+    /// the camera box plus a background shell (module rules).
+    Auto(HullConfig),
+}
+
+impl PointlessInit {
+    /// What `self` does on `scene` (without SfM points): [`PointlessInit::Auto`] resolved to
+    /// `Hull` or kept as `Auto` (random + shell); the others unchanged.
+    pub fn resolve(&self, scene: &Scene) -> PointlessInit {
+        match *self {
+            PointlessInit::Auto(config) if scene.train.iter().any(|v| v.coverage.is_some()) => {
+                PointlessInit::Hull(config)
+            }
+            other => other,
+        }
+    }
 }
 
 /// The initial points of `scene` for a budget of `budget` billboards (rules in the [module
@@ -191,6 +232,8 @@ pub fn init_points_with(
         sfm: 0,
         sky: 0,
         random: 0,
+        shell: 0,
+        shell_radius: 0.0,
         hull: 0,
         hull_candidates: 0,
         sky_radius: 0.0,
@@ -199,27 +242,15 @@ pub fn init_points_with(
         box_rule: String::new(),
     };
     if m == 0 {
-        let (lo, hi, rule) = match scene.format {
-            SceneFormat::NerfSynthetic => (
-                Vec3::splat(-BLENDER_HALF_SIDE),
-                Vec3::splat(BLENDER_HALF_SIDE),
-                "NeRF-synthetic [-1.3, 1.3]^3".to_string(),
-            ),
-            _ => {
-                let cams: Vec<_> = scene.train.iter().map(|v| v.camera).collect();
-                let (c, h) = camera_box(&cams);
-                (
-                    c - Vec3::splat(h),
-                    c + Vec3::splat(h),
-                    "from the training cameras (centre nearest the optical axes, half side median d*sin(fov/2))"
-                        .to_string(),
-                )
-            }
-        };
+        let cams: Vec<_> = scene.train.iter().map(|v| v.camera).collect();
+        let (c, h) = camera_box(&cams);
+        let (lo, hi) = (c - Vec3::splat(h), c + Vec3::splat(h));
         report.random_box = Some((lo, hi));
-        report.box_rule = rule;
+        report.box_rule =
+            "from the training cameras (centre nearest the optical axes, half side median d*sin(fov/2))".to_string();
+        let pointless = pointless.resolve(scene);
         if let PointlessInit::Hull(config) = pointless {
-            let (surface, surface_colours) = visual_hull_points(&scene.train, lo, hi, config, seed)?;
+            let (surface, surface_colours) = visual_hull_points(&scene.train, lo, hi, &config, seed)?;
             let keep = farthest_point_sampling(&surface, budget.min(surface.len())).expect("hull points are finite");
             let mut points: Vec<Vec3> = keep.iter().map(|&i| surface[i]).collect();
             let mut cols: Vec<[f32; 3]> = keep.iter().map(|&i| surface_colours[i]).collect();
@@ -229,6 +260,27 @@ pub fn init_points_with(
             report.random = extra.len();
             points.extend(extra);
             cols.extend(extra_cols);
+            return Ok(SceneInit {
+                points,
+                colours: cols,
+                report,
+            });
+        }
+        if let PointlessInit::Auto(_) = pointless {
+            let shell = (budget as f64 * SHELL_FRACTION).floor() as usize;
+            let far = cams
+                .iter()
+                .map(|cam| (cam.centre() - c).length())
+                .filter(|d| d.is_finite())
+                .fold(h, f32::max);
+            let radius = SHELL_RADIUS_FACTOR * far;
+            let (mut points, mut cols) = random_points(budget - shell, lo, hi, seed);
+            let (_, shell_cols) = random_points(shell, lo, hi, seed ^ 0x0053_4845_4c4c);
+            points.extend(fibonacci_sphere(shell, radius, c));
+            cols.extend(shell_cols);
+            report.random = budget - shell;
+            report.shell = shell;
+            report.shell_radius = if shell > 0 { radius } else { 0.0 };
             return Ok(SceneInit {
                 points,
                 colours: cols,

@@ -28,6 +28,7 @@ pub mod colmap;
 pub mod colmap_binary;
 mod colmap_scene;
 pub mod colmap_text;
+pub mod data_background;
 pub mod distortion;
 mod error;
 #[cfg(feature = "testing")]
@@ -188,6 +189,20 @@ impl Background {
             Background::Black => [0.0; 3],
             Background::White => [1.0; 3],
         }
+    }
+
+    /// The background of an RGB colour: exactly `[0, 0, 0]` or `[1, 1, 1]`, else `None` (e.g. a
+    /// model's [`crate::model_file::ModelMeta::background`]).
+    ///
+    /// ```
+    /// use bbsplat::scene::Background;
+    /// assert_eq!(Background::from_rgb([1.0; 3]), Some(Background::White));
+    /// assert_eq!(Background::from_rgb([0.5; 3]), None);
+    /// ```
+    pub fn from_rgb(rgb: [f32; 3]) -> Option<Background> {
+        [Background::Black, Background::White]
+            .into_iter()
+            .find(|b| b.rgb() == rgb)
     }
 }
 

@@ -34,6 +34,15 @@
 //! | per group: row_len, rows, global step | 3 × u64 | rows = n |
 //! | per group: m, v | 2 × `rows·row_len` × f32 | |
 //! | per group: update counts | `rows` × u32 | |
+//! | **growth and time budget** (version 4; absent before: no growth, no budget) | | |
+//! | growth cap | u64 | [`TrainConfig::growth_cap`] |
+//! | learning rate by run length | u8 | [`TrainConfig::lr_by_run_length`], 0 / 1 |
+//! | time plan present | u8 | 0 / 1; then, when 1, the [`TimePlan`] fields: |
+//! | budget, spent | 2 × f64 | seconds |
+//! | coarse step estimate, coarse steps measured | f64, u64 | |
+//! | fine step estimate, fine steps measured | f64, u64 | |
+//! | fine from | u64 | the step full resolution started at; `u64::MAX`: not yet |
+//! | calibration steps, calibrated ratio | u64, f64 | |
 //! | **run record** (version 4) | | |
 //! | record length `r` | u64 | |
 //! | record | `r` bytes | UTF-8 JSON of [`RunRecord`]: the run's arguments and the dataset fingerprint; absent in versions 1-3 (read as empty) |
@@ -50,6 +59,7 @@
 
 use super::adam::AdamGroup;
 use super::run_record::RunRecord;
+use super::time_budget::TimePlan;
 use super::{AdamMode, ClampGradient, LearningRateScales, TextureMode, TrainConfig, Trainer, adam_groups, group};
 use crate::model::RawBillboards;
 use crate::raster::SH_FLOATS;
@@ -66,8 +76,9 @@ pub const VERSION: u32 = 4;
 
 /// Oldest format version still read. Version 1 lacks the learning-rate multipliers, read as
 /// [`super::LearningRateScales::REFERENCE`]; versions 1 and 2 lack the clamp gradient, read as
-/// [`ClampGradient::Exact`] (the only one the trainer used before it became a setting);
-/// versions 1 to 3 lack the run record, read as empty ([`RunRecord::default`]).
+/// [`ClampGradient::Exact`] (the only one the trainer used before it became a setting); versions
+/// 1 to 3 lack the growth and time-budget section, read as no growth and no budget, and the run
+/// record, read as empty ([`RunRecord::default`]).
 pub const OLDEST_VERSION: u32 = 1;
 
 /// What went wrong reading or writing a checkpoint; every variant names the file.
@@ -203,6 +214,9 @@ impl<S: Sink> Writer<S> {
     fn f32(&mut self, x: f32) {
         self.0.put(&x.to_le_bytes());
     }
+    fn f64(&mut self, x: f64) {
+        self.0.put(&x.to_le_bytes());
+    }
     /// Little-endian floats, converted through a small buffer so that large arrays stream
     /// without a second copy of their size.
     fn f32s(&mut self, xs: &[f32]) {
@@ -252,6 +266,9 @@ impl<'a> Reader<'a> {
     }
     fn f32(&mut self, what: &str) -> Result<f32, CheckpointError> {
         Ok(f32::from_le_bytes(self.take(4, what)?.try_into().expect("4 bytes")))
+    }
+    fn f64(&mut self, what: &str) -> Result<f64, CheckpointError> {
+        Ok(f64::from_le_bytes(self.take(8, what)?.try_into().expect("8 bytes")))
     }
     /// A count stored as u64 that must fit the remaining bytes at `unit` bytes each.
     fn count(&mut self, unit: usize, what: &str) -> Result<usize, CheckpointError> {
@@ -384,10 +401,68 @@ fn encode_into<S: Sink>(tr: &Trainer, len: u64, sink: &mut S) {
             w.u32(s);
         }
     }
+    encode_growth_and_plan(tr, &mut w);
     // Run record (version 4).
     let record = serde_json::to_vec(&tr.record).expect("the run record serialises");
     w.u64(record.len() as u64);
     w.0.put(&record);
+}
+
+/// The version-4 section: growth cap and time plan.
+fn encode_growth_and_plan<S: Sink>(tr: &Trainer, w: &mut Writer<S>) {
+    w.u64(tr.config.growth_cap as u64);
+    w.u8(tr.config.lr_by_run_length as u8);
+    match &tr.time_plan {
+        None => w.u8(0),
+        Some(p) => {
+            w.u8(1);
+            w.f64(p.budget_seconds);
+            w.f64(p.spent_seconds);
+            w.f64(p.coarse_step_seconds);
+            w.u64(p.coarse_steps);
+            w.f64(p.fine_step_seconds);
+            w.u64(p.fine_steps);
+            w.u64(p.fine_from.map_or(u64::MAX, |s| s as u64));
+            w.u64(p.calibration_steps);
+            w.f64(p.calibrated_ratio);
+        }
+    }
+}
+
+/// Reads the version-4 section: `(growth cap, learning rate by run length, time plan)`.
+fn decode_growth_and_plan(r: &mut Reader<'_>) -> Result<(usize, bool, Option<TimePlan>), CheckpointError> {
+    let cap = r.u64("growth cap")?;
+    let cap = usize::try_from(cap).map_err(|_| r.inconsistent(format!("growth cap {cap} does not fit")))?;
+    let by_length = r.flag("learning rate by run length")?;
+    if !r.flag("time plan present")? {
+        return Ok((cap, by_length, None));
+    }
+    let what = "time plan";
+    let plan = TimePlan {
+        budget_seconds: r.f64(what)?,
+        spent_seconds: r.f64(what)?,
+        coarse_step_seconds: r.f64(what)?,
+        coarse_steps: r.u64(what)?,
+        fine_step_seconds: r.f64(what)?,
+        fine_steps: r.u64(what)?,
+        fine_from: match r.u64(what)? {
+            u64::MAX => None,
+            s => Some(s as usize),
+        },
+        calibration_steps: r.u64(what)?,
+        calibrated_ratio: r.f64(what)?,
+    };
+    let times = [
+        plan.budget_seconds,
+        plan.spent_seconds,
+        plan.coarse_step_seconds,
+        plan.fine_step_seconds,
+        plan.calibrated_ratio,
+    ];
+    if !times.iter().all(|x| x.is_finite() && *x >= 0.0) {
+        return Err(r.inconsistent(format!("time plan {plan:?} holds negative or non-finite seconds")));
+    }
+    Ok((cap, by_length, Some(plan)))
 }
 
 fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
@@ -489,7 +564,7 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
     } else {
         ClampGradient::Exact
     };
-    let config = TrainConfig {
+    let mut config = TrainConfig {
         iterations,
         sh_degree,
         background,
@@ -502,6 +577,8 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
         texture_mode,
         relocate,
         relocate_every,
+        growth_cap: 0,
+        lr_by_run_length: false,
         lr_scales,
         clamp_gradient,
     };
@@ -574,6 +651,13 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
             global_step,
         };
     }
+    let (growth_cap, lr_by_run_length, time_plan) = if version >= 4 {
+        decode_growth_and_plan(&mut r)?
+    } else {
+        (0, false, None)
+    };
+    config.growth_cap = growth_cap;
+    config.lr_by_run_length = lr_by_run_length;
     let record = if version >= 4 {
         let len = r.count(1, "run record length")?;
         let bytes = r.take(len, "run record")?;
@@ -604,6 +688,7 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
     trainer.rng = rng;
     trainer.step = step;
     trainer.record = record;
+    trainer.time_plan = time_plan;
     Ok(trainer)
 }
 

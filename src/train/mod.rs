@@ -29,12 +29,14 @@ pub mod checkpoint;
 pub mod error;
 pub mod finite;
 pub mod footprint;
+pub mod grow;
 pub mod regularise;
 pub mod relocate;
 pub mod resolution;
 pub mod run;
 pub mod run_record;
 pub mod texture_step;
+pub mod time_budget;
 pub mod view_pixels;
 
 use crate::billboards::ActivatedBillboards;
@@ -198,8 +200,15 @@ pub struct TrainConfig {
     /// Steps between relocations, not scaled with `iterations` (reference 100); the window
     /// `500/32 000 < (step+1)/iterations < 25 000/32 000` is scaled.
     pub relocate_every: usize,
+    /// Grow the set toward this many billboards at every relocation step ([`grow`], spec §6:
+    /// `min(cap, ⌊1.05·N⌋)`); 0 (the default) or a cap at or below the count: no growth.
+    pub growth_cap: usize,
     /// Multipliers of the reference learning rates (all 1 by default).
     pub lr_scales: LearningRateScales,
+    /// Also multiply every rate by [`run_length_lr_factor`] of the run's current length (off by
+    /// default; `bbsplat train` turns it on unless a learning-rate flag is given). Evaluated at
+    /// every step, so a time budget's re-planned length is followed.
+    pub lr_by_run_length: bool,
     /// How the gradient of a step's backward pass goes through the compositing clamp
     /// `α = min(0.99, a)`: [`ClampGradient::Exact`] (default: zero above the clamp, the
     /// derivative of the forward) or [`ClampGradient::PassThrough`] (straight-through, as the
@@ -283,7 +292,8 @@ impl Default for LearningRateScales {
 impl Default for TrainConfig {
     /// The reference settings: 32 000 iterations, SH degree 3, black background, seed 0, extent 1,
     /// σ = 500, weights `1e-4` / `0.01`, dense Adam, full textures, relocation every 100 steps,
-    /// the reference learning rates, the exact clamp gradient.
+    /// the reference learning rates, the exact clamp gradient, no growth (the initial count is the
+    /// reference's cap).
     fn default() -> Self {
         Self {
             iterations: 32_000,
@@ -298,7 +308,9 @@ impl Default for TrainConfig {
             texture_mode: TextureMode::Full,
             relocate: true,
             relocate_every: 100,
+            growth_cap: 0,
             lr_scales: LearningRateScales::REFERENCE,
+            lr_by_run_length: false,
             clamp_gradient: ClampGradient::Exact,
         }
     }
@@ -378,6 +390,32 @@ impl LearningRates {
     }
 }
 
+/// Run length up to which [`run_length_lr_factor`] is [`SHORT_RUN_LR_FACTOR`].
+pub const SHORT_RUN_STEPS: usize = 7000;
+/// Learning-rate factor of short runs (measured on lego: ×4 gave +4.3 dB at 1200 steps and
+/// +3.3 dB at 6000 steps over the reference's rates, `docs/quality.md`).
+pub const SHORT_RUN_LR_FACTOR: f32 = 4.0;
+
+/// The learning-rate factor of a run of `iterations` steps: [`SHORT_RUN_LR_FACTOR`] up to
+/// [`SHORT_RUN_STEPS`], 1 (the reference's rates, made for its 32 000 steps) from 32 000 on,
+/// log-linear in the step count between. The two ends are measured (lego, 1200 and 6000 steps
+/// at ×4; the reference at 32 000); the interpolation between them is not.
+///
+/// ```
+/// use bbsplat::train::run_length_lr_factor;
+/// assert_eq!(run_length_lr_factor(1200), 4.0);
+/// assert_eq!(run_length_lr_factor(7000), 4.0);
+/// assert_eq!(run_length_lr_factor(32_000), 1.0);
+/// let mid = run_length_lr_factor(15_000);
+/// assert!(mid > 1.0 && mid < 4.0);
+/// ```
+pub fn run_length_lr_factor(iterations: usize) -> f32 {
+    let (short, full) = (SHORT_RUN_STEPS as f64, REFERENCE_ITERATIONS as f64);
+    let n = (iterations.max(1) as f64).clamp(short, full);
+    let t = (n / short).ln() / (full / short).ln();
+    (SHORT_RUN_LR_FACTOR as f64).powf(1.0 - t) as f32
+}
+
 /// Active SH degree at `step`: +1 every 1/32 of the run, up to `max_degree`.
 pub fn active_sh_degree(step: usize, iterations: usize, max_degree: u32) -> u32 {
     let per = (iterations / 32).max(1);
@@ -413,6 +451,8 @@ pub struct StepLog {
     pub updated: usize,
     /// Dead billboards relocated after the step (0 when relocation did not run).
     pub relocated: usize,
+    /// Billboards added by growth after the step ([`grow`]; 0 when it did not run).
+    pub grown: usize,
 }
 
 /// Index of each Adam group in the trainer's array.
@@ -466,6 +506,8 @@ pub struct Trainer {
     target: Vec<f32>,
     /// The run's arguments and dataset, saved in the checkpoint ([`run_record`]).
     record: run_record::RunRecord,
+    /// The time budget's plan, when the run has one ([`time_budget`]).
+    time_plan: Option<time_budget::TimePlan>,
 }
 
 fn adam_groups(n: usize, t: usize) -> [AdamGroup; group::COUNT] {
@@ -531,6 +573,7 @@ impl Trainer {
             render_buffers: RenderBuffers::default(),
             target: Vec::new(),
             record: run_record::RunRecord::default(),
+            time_plan: None,
         };
         if config.texture_mode == TextureMode::Gaussian {
             for b in 0..n {
@@ -559,6 +602,27 @@ impl Trainer {
     /// The settings of the run.
     pub fn config(&self) -> &TrainConfig {
         &self.config
+    }
+
+    /// The time budget's plan, when the run has one.
+    pub fn time_plan(&self) -> Option<&time_budget::TimePlan> {
+        self.time_plan.as_ref()
+    }
+
+    /// Gives the run a time budget ([`time_budget`]; [`run()`] then plans
+    /// [`TrainConfig::iterations`] from the measured step times), or removes it with `None`.
+    pub fn set_time_plan(&mut self, plan: Option<time_budget::TimePlan>) {
+        self.time_plan = plan;
+    }
+
+    /// Mutable plan, for [`run()`].
+    pub(crate) fn time_plan_mut(&mut self) -> Option<&mut time_budget::TimePlan> {
+        self.time_plan.as_mut()
+    }
+
+    /// Re-plans the run's length (a time budget's plan; every schedule follows).
+    pub(crate) fn set_iterations(&mut self, iterations: usize) {
+        self.config.iterations = iterations;
     }
 
     /// The Adam state, indexed by the constants of [`group`].
@@ -733,7 +797,13 @@ impl Trainer {
                 value,
             });
         }
-        let lr = learning_rates(self.step, self.config.iterations, self.config.extent).scaled(&self.config.lr_scales);
+        let mut lr =
+            learning_rates(self.step, self.config.iterations, self.config.extent).scaled(&self.config.lr_scales);
+        if self.config.lr_by_run_length {
+            lr = lr.scaled(&LearningRateScales::uniform(run_length_lr_factor(
+                self.config.iterations,
+            )));
+        }
         let updated = match self.config.adam {
             AdamMode::Dense => {
                 for g in &mut self.adam {
@@ -754,12 +824,13 @@ impl Trainer {
             self.grads.textures.fill([0.0; 4]);
         }
         self.grads.background = Vec3::ZERO;
-        let relocated =
-            if self.config.relocate && relocation_due(self.step, self.config.iterations, self.config.relocate_every) {
-                self.relocate()
-            } else {
-                0
-            };
+        let due = relocation_due(self.step, self.config.iterations, self.config.relocate_every);
+        let relocated = if self.config.relocate && due {
+            self.relocate()
+        } else {
+            0
+        };
+        let grown = if due { self.grow() } else { 0 };
         self.step += 1;
         if let Some(group) = finite::non_finite_parameter(&self.model, &self.opacity_logits) {
             return Err(TrainError::NonFinite {
@@ -777,6 +848,7 @@ impl Trainer {
             psnr,
             updated,
             relocated,
+            grown,
         })
     }
 
@@ -928,6 +1000,49 @@ impl Trainer {
                 g.reset_row(r);
             }
             self.refresh_row(r);
+        }
+        plan.moves.len()
+    }
+
+    /// Grows the set one step toward [`TrainConfig::growth_cap`] now ([`grow`]; normally called
+    /// by [`Trainer::step`] after relocation, on the same schedule) and returns how many
+    /// billboards were added.
+    ///
+    /// New rows are copies of sources drawn ∝ mean alpha with the trainer's RNG, appended in
+    /// draw order, alpha split texel-wise with their source (Gaussian mode: the opacity scalar
+    /// is split). The new rows start with zero Adam moments and update counts; the sources'
+    /// moments and counts are zeroed, as relocation does.
+    pub fn grow(&mut self) -> usize {
+        let n = self.model.len();
+        let target = grow::growth_target(n, self.config.growth_cap);
+        let plan = grow::plan_growth(&self.activated.mean_alphas(), target - n, &mut self.rng);
+        if plan.is_empty() {
+            return 0;
+        }
+        let total = n + plan.moves.len();
+        grow::apply_growth(&mut self.model, &plan);
+        grow::extend_activated(&mut self.activated, total);
+        grow::extend_gradients(&mut self.grads, total, self.model.texture_size);
+        for g in &mut self.adam {
+            grow::extend_adam(g, total);
+        }
+        if self.config.texture_mode == TextureMode::Gaussian {
+            self.opacity_logits.resize(total, 0.0);
+            for &(s, c) in &plan.multiplicity {
+                self.opacity_logits[s] = split_alpha_logit(self.opacity_logits[s], c + 1);
+            }
+            for &(d, s) in &plan.moves {
+                self.opacity_logits[d] = self.opacity_logits[s];
+            }
+        }
+        for &(s, _) in &plan.multiplicity {
+            for g in &mut self.adam {
+                g.reset_row(s);
+            }
+            self.refresh_row(s);
+        }
+        for d in n..total {
+            self.refresh_row(d);
         }
         plan.moves.len()
     }

@@ -56,21 +56,47 @@ pub fn plan_relocation(mean_alpha: &[f32], rng: &mut Rng) -> RelocationPlan {
     if dead.is_empty() || alive.is_empty() {
         return RelocationPlan::default();
     }
-    let mut cumulative = Vec::with_capacity(alive.len());
+    let moves = dead
+        .iter()
+        .copied()
+        .zip(draw_sources(mean_alpha, &alive, dead.len(), rng))
+        .collect();
+    plan_from_moves(moves, mean_alpha.len())
+}
+
+/// Draws `count` sources from `candidates` with replacement, with probability ∝
+/// `weight[candidate]`: one uniform from `rng` per draw, in order, and the candidate whose
+/// cumulative-weight interval (f64 sums in candidate order) contains `u · Σ weights` (binary
+/// search). The one sampler of relocation and growth ([`crate::train::grow`]). Draws nothing
+/// and returns nothing when `candidates` is empty or the weights do not sum to a positive
+/// finite number.
+pub fn draw_sources(weight: &[f32], candidates: &[usize], count: usize, rng: &mut Rng) -> Vec<usize> {
+    let mut cumulative = Vec::with_capacity(candidates.len());
     let mut total = 0.0f64;
-    for &i in &alive {
-        total += mean_alpha[i] as f64;
+    for &i in candidates {
+        let w = weight[i] as f64;
+        total += if w.is_finite() && w > 0.0 { w } else { 0.0 };
         cumulative.push(total);
     }
-    let mut counts = vec![0u32; mean_alpha.len()];
-    let mut moves = Vec::with_capacity(dead.len());
-    for &d in &dead {
-        let target = rng.uniform_f64() * total;
-        // First index whose cumulative weight exceeds the target.
-        let k = cumulative.partition_point(|&c| c <= target).min(alive.len() - 1);
-        let s = alive[k];
+    if candidates.is_empty() || !(total > 0.0 && total.is_finite()) {
+        return Vec::new();
+    }
+    (0..count)
+        .map(|_| {
+            let target = rng.uniform_f64() * total;
+            // First index whose cumulative weight exceeds the target.
+            let k = cumulative.partition_point(|&c| c <= target).min(candidates.len() - 1);
+            candidates[k]
+        })
+        .collect()
+}
+
+/// The plan of `(destination, source)` moves over `n` billboards: the moves as given and each
+/// distinct source with its count, in increasing source order.
+pub fn plan_from_moves(moves: Vec<(usize, usize)>, n: usize) -> RelocationPlan {
+    let mut counts = vec![0u32; n];
+    for &(_, s) in &moves {
         counts[s] += 1;
-        moves.push((d, s));
     }
     let multiplicity = counts
         .iter()

@@ -74,7 +74,10 @@ use crate::eval::{EvalView, evaluate_views};
 use crate::loss::LossError;
 use crate::model_file::{ModelFileError, ModelMeta, load_model, save_model};
 use crate::raster::{ActivatedRef, RenderSettings};
-use crate::report::{CurvePoint, RecordedSettings, SUMMARY_VERSION, SummaryFile, TrainSummary, peak_rss_bytes};
+use crate::report::{
+    AutoChoice, CurvePoint, GrowthRecord, PlanRecord, RecordedSettings, RunReport, SUMMARY_VERSION, SummaryFile,
+    TrainSummary, peak_rss_bytes,
+};
 use crate::stages::composite::ClampGradient;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -116,6 +119,8 @@ pub struct RunConfig {
     /// Warnings raised before the run (e.g. [`crate::scene::Scene::warnings`]), recorded in the
     /// summary with the run's own [`RunWarning`]s.
     pub warnings: Vec<String>,
+    /// Settings chosen automatically by the caller and why, recorded in the summary.
+    pub automatic: Vec<AutoChoice>,
 }
 
 impl Default for RunConfig {
@@ -130,6 +135,7 @@ impl Default for RunConfig {
             scene: String::new(),
             command: Vec::new(),
             warnings: Vec::new(),
+            automatic: Vec::new(),
         }
     }
 }
@@ -183,9 +189,9 @@ impl std::fmt::Display for RunWarning {
 }
 
 /// What a run reports to its caller's `on_event`, in order: `Started`, then per step `Step`
-/// (and `Checkpoint` / `Evaluation` when due), and at the end `Checkpoint`, `ModelSaved` and
-/// `Finished` (or `Checkpoint`, `ModelSaved` and `Stopped` when a stop request arrives after the last
-/// step), or `Checkpoint` and `Stopped`.
+/// (and `Checkpoint` / `Evaluation` when due), and at the end `Checkpoint`, `ModelSaved`, `Record`
+/// and `Finished` (or `Checkpoint`, `ModelSaved` and `Stopped` when a stop request arrives after
+/// the last step), or `Checkpoint` and `Stopped`.
 #[derive(Clone, Debug, PartialEq)]
 #[non_exhaustive]
 pub enum TrainEvent {
@@ -260,6 +266,9 @@ pub enum TrainEvent {
         /// The checkpoint written (with an output folder).
         checkpoint: Option<PathBuf>,
     },
+    /// What was chosen and what happened (the [`RunReport`] of `summary.json`), just before
+    /// `Finished`.
+    Record(Box<RunReport>),
     /// The run is complete.
     Finished(Box<TrainSummary>),
 }
@@ -421,7 +430,20 @@ pub fn run(
         });
     }
     let tc = *trainer.config();
-    let iterations = tc.iterations;
+    let run_start = Instant::now();
+    let initial_billboards = trainer.model.len();
+    // A time budget plans the run's length from the step times measured so far.
+    let replan = |trainer: &mut Trainer| {
+        let step = trainer.step_index();
+        if let Some(n) = trainer
+            .time_plan()
+            .map(|p| p.planned_iterations(step, &config.resolution))
+        {
+            trainer.set_iterations(n);
+        }
+    };
+    replan(trainer);
+    let iterations = trainer.config().iterations;
     let coarse: Vec<TrainView> = if config.resolution.factor > 1 {
         train
             .iter()
@@ -477,7 +499,7 @@ pub fn run(
         });
         Ok(Some(path.clone()))
     };
-    while trainer.step_index() < iterations {
+    while trainer.step_index() < trainer.config().iterations {
         let reason = if config.stop_after.is_some_and(|n| trainer.step_index() >= n) {
             Some(StopReason::StopAfter)
         } else if stop.is_requested() {
@@ -500,11 +522,13 @@ pub fn run(
             });
         }
         let t0 = Instant::now();
-        let views = if config.resolution.is_coarse(trainer.step_index(), iterations) {
-            &coarse
-        } else {
-            train
+        let (step_before, planned) = (trainer.step_index(), trainer.config().iterations);
+        let (is_coarse, calibrating) = match trainer.time_plan() {
+            Some(plan) if plan.wants_calibration(&config.resolution) => (false, true),
+            Some(plan) => (plan.is_coarse(step_before, planned, &config.resolution), false),
+            None => (config.resolution.is_coarse(step_before, planned), false),
         };
+        let views = if is_coarse { &coarse } else { train };
         let log = match trainer.step(views) {
             Ok(log) => log,
             Err(source) => {
@@ -525,7 +549,17 @@ pub fn run(
                 return Err(RunError::Step { source, checkpoint });
             }
         };
-        train_seconds += t0.elapsed().as_secs_f64();
+        let seconds = t0.elapsed().as_secs_f64();
+        train_seconds += seconds;
+        if let Some(plan) = trainer.time_plan_mut() {
+            if calibrating {
+                plan.record_calibration(seconds);
+            } else {
+                plan.record(step_before, is_coarse, seconds);
+            }
+        }
+        replan(trainer);
+        let iterations = trainer.config().iterations;
         running_psnr = if running_psnr.is_nan() {
             log.psnr
         } else {
@@ -568,6 +602,7 @@ pub fn run(
             });
         }
     }
+    let iterations = trainer.config().iterations;
     // The model is saved as the reference saves it (8-bit textures) and evaluated as re-loaded,
     // as the reference's render.py does. The checkpoint is written first: if the model cannot
     // be saved, the trained state is not lost.
@@ -654,6 +689,25 @@ pub fn run(
         curve,
         command: config.command.clone(),
     };
+    let record = RunReport {
+        automatic: config.automatic.clone(),
+        plan: trainer.time_plan().map(|p| PlanRecord {
+            budget_minutes: p.budget_seconds / 60.0,
+            spent_minutes: p.spent_seconds / 60.0,
+            planned_steps: iterations,
+            coarse_step_seconds: p.coarse_step_seconds,
+            fine_step_seconds: p.fine_step_seconds,
+            fine_from: p.fine_from,
+        }),
+        growth: Some(GrowthRecord {
+            initial: initial_billboards,
+            final_count: trainer.model.len(),
+            alive: summary.alive,
+            cap: trainer.config().growth_cap,
+        }),
+        other_seconds: (run_start.elapsed().as_secs_f64() - train_seconds).max(0.0),
+    };
+    on_event(&TrainEvent::Record(Box::new(record.clone())));
     let summary = if let Some(dir) = output {
         let file = SummaryFile {
             summary,
@@ -661,6 +715,7 @@ pub fn run(
                 clamp_gradient: clamp_gradient_name(tc.clamp_gradient).to_string(),
             },
             warnings,
+            record,
         };
         let text = serde_json::to_string_pretty(&file).map_err(RunError::Summary)?;
         write_text_atomic(&dir.join(SUMMARY_FILE), &text)?;

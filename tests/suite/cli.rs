@@ -353,7 +353,8 @@ fn coarse_to_fine_resumes_across_the_switch_bit_for_bit() {
     let out = |name: &str| root.join(name).to_str().unwrap().to_string();
     let (plain, a, b) = (out("plain"), out("a"), out("b"));
     let coarse = ["--coarse-factor", "2", "--coarse-until", "0.5"];
-    run_ok(&tiny_train_args(d, &plain, &[]));
+    // The default is coarse-to-fine (the flags above); the reference is --coarse-factor 1.
+    run_ok(&tiny_train_args(d, &plain, &["--coarse-factor", "1"]));
     run_ok(&tiny_train_args(d, &a, &coarse));
     let mut stop: Vec<&str> = coarse.to_vec();
     stop.extend(["--stop-after", "10"]);
@@ -407,6 +408,10 @@ fn learning_rate_flags_reach_the_trainer() {
             texture: 3.0,
         }
     );
+    assert!(
+        !trainer.config().lr_by_run_length,
+        "a learning-rate flag turns the run-length factor off"
+    );
     for (flag, value) in [("--lr-scale", "-1"), ("--lr-position", "nan"), ("--lr-shape", "fast")] {
         let arg = format!("{flag}={value}");
         let (ok, err) = run(&tiny_train_args(d, &out, &[&arg]));
@@ -434,5 +439,132 @@ fn the_clamp_gradient_flag_reaches_the_checkpoint_and_the_summary() {
     assert_eq!(file.settings.clamp_gradient, "straight-through");
     let (ok, err) = run(&tiny_train_args(d, &out, &["--clamp-gradient", "sideways"]));
     assert!(!ok && err.contains("sideways"), "{err}");
+    std::fs::remove_dir_all(&root).ok();
+}
+
+/// `train` takes the background from the data and stores it in the model; `render` and `eval`
+/// use the stored one unless `--background` overrides it.
+#[test]
+fn the_background_of_the_data_is_stored_and_reused() {
+    let root = temp("background");
+    let (rgba, rgb) = (root.join("rgba"), root.join("rgb"));
+    write_tiny_blender_scene(&rgba, true);
+    write_tiny_blender_scene(&rgb, false);
+    for (data, expected) in [(&rgba, [1.0f32; 3]), (&rgb, [0.0; 3])] {
+        let out = root.join(format!("out_{}", expected[0]));
+        let (d, o) = (data.to_str().unwrap(), out.to_str().unwrap());
+        let mut args = tiny_train_args(d, o, &[]);
+        args.retain(|a| *a != "--quiet");
+        let printed = run_ok(&args);
+        assert!(printed.contains("background: "), "{printed}");
+        let meta: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("model/bbsplat.json")).unwrap()).unwrap();
+        let stored: Vec<f32> = serde_json::from_value(meta["background"].clone()).unwrap();
+        assert_eq!(stored, expected, "{}", data.display());
+        let summary: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+        let automatic = summary["automatic"].as_array().unwrap();
+        assert!(automatic.iter().any(|c| c["setting"] == "background"), "{summary}");
+        let lr = automatic.iter().find(|c| c["setting"] == "lr-scale").unwrap();
+        assert_eq!(lr["value"], "4.00", "40 steps: the short-run factor");
+        let model = out.join("model");
+        let eval = |extra: &[&str]| {
+            let mut args = vec!["eval", model.to_str().unwrap(), d, "--json"];
+            args.extend_from_slice(extra);
+            serde_json::from_str::<bbsplat::eval::EvalReport>(&run_ok(&args))
+                .unwrap()
+                .mean_psnr
+        };
+        // The stored background reproduces train's final evaluation; another one does not.
+        let psnr = eval(&[]);
+        assert!(
+            (psnr - summary["test_psnr"].as_f64().unwrap()).abs() < 1e-9,
+            "{psnr} {summary}"
+        );
+        if expected[0] == 1.0 {
+            assert!((eval(&["--background", "black"]) - psnr).abs() > 1e-3);
+        }
+    }
+    std::fs::remove_dir_all(&root).ok();
+}
+
+/// `--minutes` with `--iterations` is refused; a budgeted run records its plan.
+#[test]
+fn minutes_plans_the_run_and_records_it() {
+    let root = temp("minutes");
+    let data = export_demo(&root, 24, 100);
+    let out = root.join("out");
+    let (d, o) = (data.to_str().unwrap(), out.to_str().unwrap());
+    let (ok, err) = run(&["train", d, "-o", o, "--minutes", "0.1", "--iterations", "10"]);
+    assert!(!ok && err.contains("--minutes"), "{err}");
+    let (ok, err) = run(&["train", d, "-o", o, "--minutes", "0"]);
+    assert!(!ok && err.contains("> 0"), "{err}");
+    let printed = run_ok(&[
+        "train",
+        d,
+        "-o",
+        o,
+        "--minutes",
+        "0.05",
+        "--texture-size",
+        "4",
+        "--eval-every",
+        "0",
+    ]);
+    assert!(printed.contains("time budget 0.05 min"), "{printed}");
+    assert!(printed.contains("growth cap"), "{printed}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let spent = summary["plan"]["spent_minutes"].as_f64().unwrap();
+    assert!((spent / 0.05 - 1.0).abs() <= 0.03, "{spent} {summary}");
+    assert_eq!(summary["plan"]["planned_steps"], summary["iterations"]);
+    // Without learning-rate flags the rates follow the planned length, recorded as chosen.
+    let automatic = summary["automatic"].as_array().unwrap();
+    let lr = automatic
+        .iter()
+        .find(|c| c["setting"] == "lr-scale")
+        .expect("lr-scale chosen");
+    assert_eq!(lr["value"], "by run length");
+    let checkpoint = bbsplat::train::Trainer::load_checkpoint(out.join("checkpoint.bin")).unwrap();
+    assert!(checkpoint.config().lr_by_run_length);
+    assert_eq!(
+        checkpoint.config().lr_scales,
+        bbsplat::train::LearningRateScales::REFERENCE
+    );
+    std::fs::remove_dir_all(&root).ok();
+}
+
+/// A budgeted run stopped with `--stop-after` and resumed continues its plan: the steps of both
+/// calls take the budget; another budget or `--iterations` on resume is refused.
+#[test]
+fn a_budgeted_run_resumes_its_plan() {
+    let root = temp("minutes_resume");
+    let data = export_demo(&root, 24, 100);
+    let out = root.join("out");
+    let (d, o) = (data.to_str().unwrap(), out.to_str().unwrap());
+    let common = ["--texture-size", "4", "--eval-every", "0", "--quiet"];
+    let mut first = vec!["train", d, "-o", o, "--minutes", "0.05", "--stop-after", "60"];
+    first.extend(common);
+    run_ok(&first);
+    let checkpoint = out.join("checkpoint.bin");
+    let c = checkpoint.to_str().unwrap();
+    let stopped = bbsplat::train::Trainer::load_checkpoint(&checkpoint).unwrap();
+    let spent_before = stopped.time_plan().unwrap().spent_seconds;
+    for bad in [&["--minutes", "0.1"][..], &["--iterations", "100"][..]] {
+        let mut args = vec!["train", d, "-o", o, "--resume", c];
+        args.extend(common);
+        args.extend_from_slice(bad);
+        let (ok, err) = run(&args);
+        assert!(!ok && err.contains("--minutes 0.05"), "{bad:?}: {err}");
+    }
+    let mut resume = vec!["train", d, "-o", o, "--resume", c];
+    resume.extend(common);
+    run_ok(&resume);
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let spent = summary["plan"]["spent_minutes"].as_f64().unwrap();
+    assert!((spent / 0.05 - 1.0).abs() <= 0.03, "{spent} {summary}");
+    let this_call = summary["train_seconds"].as_f64().unwrap();
+    assert!((spent * 60.0 - spent_before - this_call).abs() < 1e-6, "{summary}");
     std::fs::remove_dir_all(&root).ok();
 }

@@ -4,7 +4,11 @@ use bbsplat::camera::Camera;
 use bbsplat::init::budget::{BudgetInputs, MAX_BUDGET, MIN_BUDGET, budget_for, default_budget};
 use bbsplat::init::fibonacci::{sky_radius, sky_radius_reference};
 use bbsplat::init::fps::farthest_point_sampling;
-use bbsplat::init::scene_init::{InitError, camera_box, init_model, init_points};
+use bbsplat::init::hull::HullConfig;
+use bbsplat::init::scene_init::{
+    InitError, PointlessInit, SHELL_FRACTION, SHELL_RADIUS_FACTOR, camera_box, init_model, init_points,
+    init_points_with,
+};
 use bbsplat::rng::Rng;
 use bbsplat::scene::{Background, Image, LoadOptions, PointCloud, Scene, SceneFormat, View, load};
 use glam::Vec3;
@@ -129,12 +133,15 @@ fn scenes_without_points_get_seeded_grey_points_in_a_box() {
     assert_eq!(a, init_points(&blender, 2_000, 7).unwrap(), "seeded");
     assert_ne!(a.points, init_points(&blender, 2_000, 8).unwrap().points);
     assert_eq!((a.report.random, a.report.sfm, a.report.sky), (2_000, 0, 0));
-    assert_eq!(a.report.random_box, Some((Vec3::splat(-1.3), Vec3::splat(1.3))));
-    assert!(a.points.iter().all(|p| p.abs().max_element() <= 1.3));
+    // NeRF-synthetic too: the box the cameras look at, not the spec's fixed [-1.3, 1.3]^3.
+    let cams: Vec<Camera> = blender.train.iter().map(|v| v.camera).collect();
+    let (c, h) = camera_box(&cams);
+    assert_eq!(a.report.random_box, Some((c - Vec3::splat(h), c + Vec3::splat(h))));
+    assert!(a.points.iter().all(|p| (*p - c).abs().max_element() <= h));
     // Spread over the box, not clumped.
     let mean = a.points.iter().copied().sum::<Vec3>() / 2000.0;
-    assert!(mean.abs().max_element() < 0.1, "{mean}");
-    assert!(a.points.iter().any(|p| p.x > 1.2) && a.points.iter().any(|p| p.x < -1.2));
+    assert!((mean - c).abs().max_element() < 0.1 * h, "{mean}");
+    assert!(a.points.iter().any(|p| p.x > c.x + 0.9 * h) && a.points.iter().any(|p| p.x < c.x - 0.9 * h));
     for c in a.colours.iter().flatten() {
         assert!((0.5..=0.5 + 0.2821 / 255.0).contains(c), "{c}");
     }
@@ -285,4 +292,63 @@ fn budgets_and_initialisation_of_the_real_scenes() {
             assert!(((lo + hi) / 2.0).length() < 3.0, "{lo} {hi}");
         }
     }
+}
+
+/// An unseen synthetic scene without points or masks whose cameras sit 16 units from a centre
+/// far from the origin: the automatic initialisation puts the points where the cameras look
+/// (none in the NeRF-synthetic box [-1.3, 1.3]^3) and a background shell beyond every camera.
+#[test]
+fn a_camera_ring_far_from_the_origin_initialises_where_the_cameras_look() {
+    let target = Vec3::new(40.0, -5.0, 30.0);
+    let s = scene(
+        SceneFormat::NerfSynthetic,
+        ring(24, target, 16.0, 200, 150, 180.0),
+        None,
+    );
+    let auto = PointlessInit::Auto(HullConfig::default());
+    assert_eq!(auto.resolve(&s), auto, "no masks: not the hull");
+    let init = init_points_with(&s, 3_072, 0, &auto).unwrap();
+    let r = &init.report;
+    let shell = (3_072.0 * SHELL_FRACTION).floor() as usize;
+    assert_eq!(
+        (r.random, r.shell, r.sfm, r.hull, r.total()),
+        (3_072 - shell, shell, 0, 0, 3_072)
+    );
+    let cams: Vec<Camera> = s.train.iter().map(|v| v.camera).collect();
+    let (c, h) = camera_box(&cams);
+    assert!((c - target).length() < 1e-2, "{c}");
+    let (objects, background) = init.points.split_at(r.random);
+    assert!(objects.iter().all(|p| (*p - target).abs().max_element() <= h + 1e-3));
+    assert!(
+        !init.points.iter().any(|p| p.abs().max_element() <= 1.3),
+        "nothing in the fixed box"
+    );
+    // The shell: beyond every camera, around what they look at.
+    let far = cams.iter().map(|cam| (cam.centre() - c).length()).fold(0.0, f32::max);
+    for p in background {
+        let d = (*p - c).length();
+        assert!((d - SHELL_RADIUS_FACTOR * far).abs() < 1e-2 * d, "{d} vs {far}");
+        assert!(d > far);
+    }
+    assert!((r.shell_radius - SHELL_RADIUS_FACTOR * far).abs() < 1e-3 * far);
+    // The plain random rule uses the same box, without a shell.
+    let random = init_points_with(&s, 500, 0, &PointlessInit::Random).unwrap();
+    assert_eq!((random.report.random, random.report.shell), (500, 0));
+    assert!(
+        random
+            .points
+            .iter()
+            .all(|p| (*p - target).abs().max_element() <= h + 1e-3)
+    );
+}
+
+/// With alpha masks the automatic initialisation is the visual hull.
+#[test]
+fn auto_init_is_the_hull_when_masks_exist() {
+    let mut s = scene(SceneFormat::NerfSynthetic, ring(4, Vec3::ZERO, 4.0, 8, 8, 8.0), None);
+    let auto = PointlessInit::Auto(HullConfig::default());
+    assert_eq!(auto.resolve(&s), auto);
+    s.train[2].coverage = Some(vec![255; 64]);
+    assert_eq!(auto.resolve(&s), PointlessInit::Hull(HullConfig::default()));
+    assert_eq!(PointlessInit::Random.resolve(&s), PointlessInit::Random);
 }

@@ -33,6 +33,8 @@ mod stage_sh;
 mod stage_splat_transform;
 mod train_checkpoint;
 mod train_demo;
+mod train_grow;
 mod train_regularise;
 mod train_relocate;
 mod train_run;
+mod train_time_budget;

@@ -233,6 +233,54 @@ fn nerf_synthetic_composites_alpha_and_uses_the_test_file() {
     assert_eq!((s.train.len(), s.test.len()), (2, 2));
 }
 
+/// The background of the data: white for NeRF-synthetic images with alpha (composited on
+/// white whatever the options say), black for the same dataset without alpha and for COLMAP.
+#[test]
+fn the_background_comes_from_the_data() {
+    use bbsplat::scene::data_background::load_with_data_background;
+    let d = temp_dir("data_background");
+    nerf_synthetic(&d, true);
+    let (s, choice) = load_with_data_background(&d, &quiet()).unwrap();
+    assert_eq!(
+        (s.background, choice.background),
+        (Background::White, Background::White)
+    );
+    assert!(choice.reason.contains("NeRF-synthetic"), "{}", choice.reason);
+    assert_eq!(s.train[0].image.pixel(19, 0), [255, 255, 255], "composited on white");
+    // The same dataset as RGB images: black, and the images are those of any background.
+    let rgb = temp_dir("data_background_rgb");
+    nerf_synthetic(&rgb, false);
+    for i in 0..4 {
+        let path = rgb.join(format!("train/r_{i}.png"));
+        image::open(&path).unwrap().to_rgb8().save(&path).unwrap();
+    }
+    let (s, choice) = load_with_data_background(&rgb, &quiet()).unwrap();
+    assert_eq!(
+        (s.background, choice.background),
+        (Background::Black, Background::Black)
+    );
+    let white = load(
+        &rgb,
+        &LoadOptions {
+            background: Background::White,
+            ..quiet()
+        },
+    )
+    .unwrap();
+    assert_eq!(s.train[0].image, white.train[0].image);
+    // COLMAP: black.
+    let c = temp_dir("data_background_colmap");
+    colmap_dataset(&c, 6, true);
+    let (s, choice) = load_with_data_background(&c, &quiet()).unwrap();
+    assert_eq!(
+        (s.background, choice.background),
+        (Background::Black, Background::Black)
+    );
+    assert_eq!(Background::from_rgb([1.0; 3]), Some(Background::White));
+    assert_eq!(Background::from_rgb([0.0; 3]), Some(Background::Black));
+    assert_eq!(Background::from_rgb([0.2, 0.0, 0.0]), None);
+}
+
 #[test]
 fn transforms_json_per_frame_intrinsics_missing_frames_and_ply() {
     let d = temp_dir("transforms");

@@ -138,7 +138,7 @@ const LR_SCALES_AT: usize = 8 + 4 + 8 + 8 + 4 + 12 + 8 + 4 + 12 + 3 + 8;
 const CLAMP_AT: usize = LR_SCALES_AT + 16;
 
 /// A checkpoint without its run-record section (the trailing length and JSON before the
-/// checksum), as format versions 1-3 end; not resealed.
+/// checksum); not resealed.
 fn strip_record(mut bytes: Vec<u8>) -> Vec<u8> {
     let len = bytes.len();
     let body_end = len - 8;
@@ -149,6 +149,29 @@ fn strip_record(mut bytes: Vec<u8>) -> Vec<u8> {
         .expect("a run record section");
     bytes.drain(record_start..body_end);
     bytes
+}
+
+/// Bytes of the version-4 growth and time-budget section of a checkpoint without a time plan
+/// (growth cap u64, learning rate by run length u8, plan flag u8), just before the run record.
+const GROWTH_SECTION: usize = 10;
+
+/// `bytes`, already without its run record ([`strip_record`]), without the growth section (not
+/// resealed).
+fn without_growth_section(mut bytes: Vec<u8>) -> Vec<u8> {
+    let len = bytes.len();
+    assert_eq!(
+        bytes[len - 8 - 1],
+        0,
+        "no time plan: the section is {GROWTH_SECTION} bytes"
+    );
+    bytes.drain(len - 8 - GROWTH_SECTION..len - 8);
+    bytes
+}
+
+/// A current checkpoint as format version 3 ended (without the run record and the growth and
+/// time-budget section; version not changed, not resealed).
+fn as_version_3(bytes: Vec<u8>) -> Vec<u8> {
+    without_growth_section(strip_record(bytes))
 }
 
 /// `bytes` with the header's length and the checksum recomputed.
@@ -179,7 +202,7 @@ fn version_1_checkpoints_load_with_the_reference_learning_rates() {
         "the clamp gradient (pass-through) sits where this test expects"
     );
     // The same state as version 1 wrote it: no multipliers, no clamp gradient.
-    let mut v1 = strip_record(v3.clone());
+    let mut v1 = as_version_3(v3.clone());
     v1.drain(LR_SCALES_AT..CLAMP_AT + 1);
     v1[8..12].copy_from_slice(&OLDEST_VERSION.to_le_bytes());
     let v1 = resealed(v1);
@@ -230,7 +253,7 @@ fn the_clamp_gradient_is_checkpointed_and_version_2_reads_as_exact() {
     assert_eq!(back.config().clamp_gradient, ClampGradient::PassThrough);
     assert_eq!(*back.config(), *tr.config());
 
-    let mut v2 = strip_record(v3.clone());
+    let mut v2 = as_version_3(v3.clone());
     v2.remove(CLAMP_AT);
     v2[8..12].copy_from_slice(&2u32.to_le_bytes());
     let old = Trainer::from_checkpoint_bytes(&resealed(v2), &path).unwrap();
@@ -418,7 +441,7 @@ fn the_run_record_is_checkpointed_and_version_3_reads_as_empty() {
     assert_eq!(back.run_record(), &record);
     assert!(back.checkpoint_bytes() == v4);
 
-    let mut v3 = strip_record(v4.clone());
+    let mut v3 = as_version_3(v4.clone());
     v3[8..12].copy_from_slice(&3u32.to_le_bytes());
     let old = Trainer::from_checkpoint_bytes(&resealed(v3), &path).unwrap();
     assert!(old.run_record().is_empty());
@@ -433,6 +456,51 @@ fn the_run_record_is_checkpointed_and_version_3_reads_as_empty() {
         .expect("must fail");
     assert!(
         matches!(&err, CheckpointError::Inconsistent { what, .. } if what.contains("run record")),
+        "{err}"
+    );
+}
+
+/// Version 3 (no growth and time-budget section) loads as no growth and no budget; version 4
+/// keeps both, and a negative budget is refused by name.
+#[test]
+fn version_3_reads_as_no_growth_and_the_growth_section_round_trips() {
+    let (mut tr, views) = setup(AdamMode::Dense, TextureMode::Full);
+    tr.step(&views).unwrap();
+    let current = tr.checkpoint_bytes();
+    let mut v3 = as_version_3(current.clone());
+    v3[8..12].copy_from_slice(&3u32.to_le_bytes());
+    let path = PathBuf::from("v3.ckpt");
+    let old = Trainer::from_checkpoint_bytes(&resealed(v3), &path).unwrap();
+    assert_eq!(
+        (old.config().growth_cap, old.config().lr_by_run_length, old.time_plan()),
+        (0, false, None)
+    );
+    assert_eq!(
+        resealed(old.checkpoint_bytes()),
+        current,
+        "the same state, written as version 4"
+    );
+    // A cap and a plan survive the round trip.
+    let mut with = Trainer::from_checkpoint_bytes(&current, &path).unwrap();
+    assert!(!with.config().lr_by_run_length);
+    let mut plan = bbsplat::train::time_budget::TimePlan::new(2.5);
+    plan.record(0, true, 0.25);
+    plan.record(1, false, 0.5);
+    with.set_time_plan(Some(plan));
+    let bytes = with.checkpoint_bytes();
+    let back = Trainer::from_checkpoint_bytes(&bytes, &path).unwrap();
+    assert_eq!(back.time_plan(), Some(&plan));
+    assert_eq!(back.checkpoint_bytes(), bytes);
+    // The budget is the first of the plan's 9 fields of 8 bytes before the run record.
+    let record_section = bytes.len() - strip_record(bytes.clone()).len();
+    let at = bytes.len() - 8 - record_section - 8 * 9;
+    let mut bad = bytes.clone();
+    bad[at..at + 8].copy_from_slice(&(-1.0f64).to_le_bytes());
+    let err = Trainer::from_checkpoint_bytes(&resealed(bad), &path)
+        .err()
+        .expect("must fail");
+    assert!(
+        matches!(&err, CheckpointError::Inconsistent { what, .. } if what.contains("time plan")),
         "{err}"
     );
 }

@@ -62,6 +62,7 @@ fn trace(event: &TrainEvent) -> String {
         TrainEvent::Checkpoint { step, .. } => format!("ckpt@{step}"),
         TrainEvent::ModelSaved { .. } => "model".into(),
         TrainEvent::Stopped { step, .. } => format!("stopped@{step}"),
+        TrainEvent::Record(_) => "record".into(),
         TrainEvent::Finished(_) => "finished".into(),
         TrainEvent::Warning(w) => format!("warning {w}"),
         other => format!("{other:?}"),
@@ -102,7 +103,7 @@ fn a_run_reports_its_events_in_order_and_equals_stepping_by_hand() {
             expected.push(format!("eval@{s}/1"));
         }
     }
-    expected.extend(["ckpt@12".into(), "model".into(), "finished".into()]);
+    expected.extend(["ckpt@12".into(), "model".into(), "record".into(), "finished".into()]);
     assert_eq!(events, expected);
 
     for _ in 0..12 {
