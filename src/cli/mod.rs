@@ -3,5 +3,7 @@
 
 pub mod common;
 pub mod demo;
+pub mod export;
 pub mod render;
 pub mod train;
+pub mod view;
