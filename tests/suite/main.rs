@@ -5,6 +5,10 @@
 
 #[cfg(feature = "cli")]
 mod cli;
+mod export;
+mod export_blender;
+mod export_browser;
+mod external_tool;
 mod f64_reference;
 mod init_fibonacci;
 mod init_fps;
