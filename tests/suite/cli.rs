@@ -2,7 +2,7 @@
 
 use std::process::Command;
 
-fn run(args: &[&str]) -> (bool, String) {
+pub(super) fn run(args: &[&str]) -> (bool, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_bbsplat"))
         .args(args)
         .output()
@@ -60,13 +60,13 @@ fn tiny_demo_runs_and_writes_renders() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-fn temp(tag: &str) -> std::path::PathBuf {
+pub(super) fn temp(tag: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("bbsplat-cli-{tag}-{}", std::process::id()));
     std::fs::remove_dir_all(&dir).ok();
     dir
 }
 
-fn run_ok(args: &[&str]) -> String {
+pub(super) fn run_ok(args: &[&str]) -> String {
     let out = Command::new(env!("CARGO_BIN_EXE_bbsplat"))
         .args(args)
         .output()
@@ -158,7 +158,7 @@ fn eval_names_an_unreadable_model() {
 }
 
 /// Exports the demo scene at `resolution` px with `billboards` into `root/data`; returns that folder.
-fn export_demo(root: &std::path::Path, resolution: u32, billboards: usize) -> std::path::PathBuf {
+pub(super) fn export_demo(root: &std::path::Path, resolution: u32, billboards: usize) -> std::path::PathBuf {
     let data = root.join("data");
     let (resolution, billboards) = (resolution.to_string(), billboards.to_string());
     run_ok(&[
