@@ -100,6 +100,31 @@ fn export_view_and_orbit_write_their_files() {
     let printed = run_ok(&["view", model_s, "-o", page.to_str().unwrap()]);
     assert!(printed.contains("1 cameras"), "{printed}");
 
+    // --serve: the page over HTTP on a free port, as written.
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_bbsplat"))
+        .args(["view", model_s, "-o", page.to_str().unwrap(), "--serve", "--port", "0"])
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = std::io::BufRead::lines(std::io::BufReader::new(child.stdout.take().unwrap()));
+    let address = lines
+        .by_ref()
+        .map(|l| l.unwrap())
+        .find_map(|l| {
+            l.strip_prefix("serving on http://")
+                .map(|rest| rest.split('/').next().unwrap().to_string())
+        })
+        .expect("the server prints its address");
+    let mut stream = std::net::TcpStream::connect(&address).unwrap();
+    std::io::Write::write_all(&mut stream, b"GET / HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+    let mut response = Vec::new();
+    std::io::Read::read_to_end(&mut stream, &mut response).unwrap();
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let page_bytes = std::fs::read(&page).unwrap();
+    assert!(response.starts_with(b"HTTP/1.1 200 OK"));
+    assert!(response.ends_with(&page_bytes), "the body is the page");
+
     // The orbit: N frames and a GIF of N frames.
     let orbit = root.join("orbit");
     let printed = run_ok(&["render", model_s, data_s, "-o", orbit.to_str().unwrap(), "--orbit", "6"]);
