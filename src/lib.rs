@@ -115,6 +115,7 @@ pub mod camera;
 #[cfg(feature = "tools")]
 pub mod demo;
 pub mod eval;
+pub mod export;
 pub mod fault;
 #[cfg(feature = "testing")]
 pub mod gradcheck;

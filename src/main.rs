@@ -50,6 +50,10 @@ enum Command {
     Render(cli::render::RenderArgs),
     /// Evaluate a saved model on a dataset's views: per-view and mean PSNR/SSIM (8-bit images).
     Eval(cli::render::EvalArgs),
+    /// Export a saved model as textured planes: OBJ + MTL + PNG (as the reference) or glTF binary.
+    Export(cli::export::ExportArgs),
+    /// Write a self-contained WebGL2 viewer page of a saved model (optionally serve it locally).
+    View(cli::view::ViewArgs),
 }
 
 fn main() -> Result<()> {
@@ -71,5 +75,7 @@ fn main() -> Result<()> {
         Command::Train(args) => cli::train::run(args),
         Command::Render(args) => cli::render::render(args),
         Command::Eval(args) => cli::render::eval(args),
+        Command::Export(args) => cli::export::run(args),
+        Command::View(args) => cli::view::run(args),
     }
 }

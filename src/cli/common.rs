@@ -68,6 +68,22 @@ impl SceneArgs {
             .with_context(|| format!("loading the scene {}", path.display()))
     }
 
+    /// Loads `path` for a model read from `model` whose stored background is `stored`: with
+    /// `--background` if given, else with the model's background (the truth images are
+    /// composited on the background the model was trained on).
+    pub fn load_for_model(&self, path: &Path, model: &Path, stored: [f32; 3]) -> Result<Scene> {
+        let background = match self.background {
+            Some(arg) => arg.into(),
+            None => Background::from_rgb(stored).ok_or_else(|| {
+                anyhow::anyhow!(
+                    "{}: background {stored:?} is neither black nor white; give --background",
+                    model.display()
+                )
+            })?,
+        };
+        self.load(path, true, background)
+    }
+
     /// Loads `path` for training: with `--background` if given, else with the background of
     /// the data ([`load_with_data_background`]); returns the choice and why.
     pub fn load_for_training(&self, path: &Path, quiet: bool) -> Result<(Scene, BackgroundChoice)> {

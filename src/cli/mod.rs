@@ -4,9 +4,11 @@
 pub mod auto_settings;
 pub mod common;
 pub mod demo;
+pub mod export;
 pub mod preflight;
 pub mod render;
 pub mod resume;
 pub mod signals;
 pub mod train;
 pub mod validate;
+pub mod view;

@@ -7,7 +7,6 @@ use anyhow::{Context, Result};
 use bbsplat::eval::{EvalReport, EvalView, evaluate_views};
 use bbsplat::model_file::load_model;
 use bbsplat::raster::RenderSettings;
-use bbsplat::scene::Background;
 use clap::Args;
 use glam::Vec3;
 use std::path::PathBuf;
@@ -40,6 +39,14 @@ pub struct RenderArgs {
     /// Also write the ground-truth images beside the renders (`*_truth.png`).
     #[arg(long)]
     pub with_truth: bool,
+    /// Instead of the dataset's views, render N frames on a circle around the scene
+    /// (`bbsplat::export::orbit`: placed from the training cameras) to `orbit_NNNN.png` and an
+    /// animated `orbit.gif` (looping, --frame-ms per frame).
+    #[arg(long, value_name = "N")]
+    pub orbit: Option<usize>,
+    /// Milliseconds per frame of `orbit.gif`.
+    #[arg(long, default_value_t = 80)]
+    pub frame_ms: u32,
 }
 
 /// Flags of `bbsplat eval`.
@@ -62,20 +69,9 @@ fn run_views(
     start_threads(common.threads)?;
     let (model, meta) =
         load_model(&common.model).with_context(|| format!("loading the model {}", common.model.display()))?;
-    // The model's background unless --background overrides it (the truth images are composited
-    // on the same one).
-    let model_background = Background::from_rgb(meta.background).ok_or_else(|| {
-        anyhow::anyhow!(
-            "{}: background {:?} is neither black nor white; give --background",
-            common.model.display(),
-            meta.background
-        )
-    });
-    let background = match common.scene_args.background {
-        Some(arg) => arg.into(),
-        None => model_background?,
-    };
-    let scene = common.scene_args.load(&common.scene, true, background)?;
+    let scene = common
+        .scene_args
+        .load_for_model(&common.scene, &common.model, meta.background)?;
     let views = split_views(&scene, common.split);
     anyhow::ensure!(
         !views.is_empty(),
@@ -125,6 +121,9 @@ fn run_views(
 /// Runs `bbsplat render`.
 pub fn render(args: RenderArgs) -> Result<()> {
     std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
+    if let Some(frames) = args.orbit {
+        return render_orbit(&args, frames);
+    }
     let report = run_views(&args.common, |i, name, rendered, truth, w, h| {
         let file = render_file_name(i, name);
         write_png_atomic(&args.output.join(&file), rendered, w, h)?;
@@ -156,5 +155,65 @@ pub fn eval(args: EvalArgs) -> Result<()> {
     } else {
         print!("{}", report.table());
     }
+    Ok(())
+}
+
+/// `bbsplat render --orbit N`: N frames around the scene, as PNG files and one looping GIF.
+fn render_orbit(args: &RenderArgs, frames: usize) -> Result<()> {
+    use image::codecs::gif::{GifEncoder, Repeat};
+    let common = &args.common;
+    start_threads(common.threads)?;
+    let (model, meta) =
+        load_model(&common.model).with_context(|| format!("loading the model {}", common.model.display()))?;
+    let scene = common
+        .scene_args
+        .load_for_model(&common.scene, &common.model, meta.background)?;
+    let cameras: Vec<_> = scene.train.iter().map(|v| v.camera).collect();
+    let path = bbsplat::export::orbit::orbit_cameras(&cameras, frames)
+        .with_context(|| format!("{}: placing the orbit", common.scene.display()))?;
+    let activated = model.activate();
+    let settings = RenderSettings {
+        background: Vec3::from_array(scene.background.rgb()),
+        sh_degree: meta.sh_degree,
+        ..RenderSettings::default()
+    };
+    let gif_path = args.output.join("orbit.gif");
+    let gif_tmp = args.output.join("orbit.gif.tmp");
+    let file = std::fs::File::create(&gif_tmp).with_context(|| format!("creating {}", gif_tmp.display()))?;
+    let mut gif = GifEncoder::new_with_speed(std::io::BufWriter::new(file), 10);
+    gif.set_repeat(Repeat::Infinite)
+        .with_context(|| format!("writing {}", gif_tmp.display()))?;
+    let delay = image::Delay::from_numer_denom_ms(args.frame_ms, 1);
+    for (k, camera) in path.iter().enumerate() {
+        let out = bbsplat::raster::render(&activated.borrowed(), camera, &settings);
+        write_png_atomic(
+            &args.output.join(format!("orbit_{k:04}.png")),
+            &out.rgb,
+            out.width,
+            out.height,
+        )?;
+        let rgba: Vec<u8> = out
+            .rgb
+            .chunks_exact(3)
+            .flat_map(|c| {
+                [c[0], c[1], c[2]]
+                    .map(bbsplat::loss::psnr::quantize_u8)
+                    .into_iter()
+                    .chain([255])
+            })
+            .collect();
+        let frame = image::RgbaImage::from_raw(out.width, out.height, rgba).context("frame size")?;
+        gif.encode_frame(image::Frame::from_parts(frame, 0, 0, delay))
+            .with_context(|| format!("writing {}", gif_tmp.display()))?;
+    }
+    drop(gif);
+    std::fs::rename(&gif_tmp, &gif_path)
+        .with_context(|| format!("renaming {} to {}", gif_tmp.display(), gif_path.display()))?;
+    println!(
+        "wrote {frames} orbit frames and {} ({} bytes) to {}",
+        gif_path.display(),
+        std::fs::metadata(&gif_path).map(|m| m.len()).unwrap_or(0),
+        args.output.display()
+    );
     Ok(())
 }

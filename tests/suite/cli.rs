@@ -2,7 +2,7 @@
 
 use std::process::Command;
 
-fn run(args: &[&str]) -> (bool, String) {
+pub(super) fn run(args: &[&str]) -> (bool, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_bbsplat"))
         .args(args)
         .output()

@@ -7,7 +7,13 @@ mod bench_scene;
 #[cfg(feature = "cli")]
 mod cli;
 #[cfg(feature = "cli")]
+mod cli_export;
+#[cfg(feature = "cli")]
 mod cli_reliability;
+mod export;
+mod export_blender;
+mod export_browser;
+mod external_tool;
 mod f64_reference;
 mod init_fibonacci;
 mod init_fps;

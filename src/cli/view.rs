@@ -1,0 +1,118 @@
+//! `bbsplat view <model> [scene] -o <page.html> [--serve]`: the self-contained WebGL2 viewer
+//! page (the library: `bbsplat::export::viewer`; docs/export.md).
+
+use super::common::SceneArgs;
+use anyhow::{Context, Result};
+use bbsplat::camera::Camera;
+use bbsplat::export::viewer::{ViewerCamera, write_viewer};
+use bbsplat::model_file::load_model;
+use clap::Args;
+use glam::Vec3;
+use std::io::{BufRead, BufReader, Write};
+use std::net::TcpListener;
+use std::path::PathBuf;
+
+/// Flags of `bbsplat view`.
+#[derive(Args, Clone, Debug)]
+pub struct ViewArgs {
+    /// A model folder written by `bbsplat train` (`<out>/model`).
+    pub model: PathBuf,
+    /// The dataset whose cameras the page can jump to (optional: without it the page starts at a
+    /// camera framing the billboards, over the model's background).
+    pub scene: Option<PathBuf>,
+    #[command(flatten)]
+    pub scene_args: SceneArgs,
+    /// The page to write.
+    #[arg(short, long, default_value = "bbsplat_view.html")]
+    pub output: PathBuf,
+    /// Also serve the page on http://127.0.0.1:<port>/ until interrupted.
+    #[arg(long)]
+    pub serve: bool,
+    /// Port for --serve (0: any free port, printed).
+    #[arg(long, default_value_t = 8080)]
+    pub port: u16,
+}
+
+/// A camera framing `positions`: looking at the centroid from a
+/// distance of 2.5 times the RMS radius, 800 × 600 pixels.
+fn framing_camera(positions: &[Vec3]) -> Camera {
+    let n = positions.len().max(1) as f32;
+    let centre = positions.iter().copied().sum::<Vec3>() / n;
+    let rms = (positions.iter().map(|p| (*p - centre).length_squared()).sum::<f32>() / n).sqrt();
+    let eye = centre + Vec3::new(0.0, -1.0, 0.5).normalize() * (2.5 * rms.max(1e-3));
+    Camera::look_at(eye, centre, Vec3::Z, 800.0, 800.0, 800, 600)
+}
+
+/// Runs `bbsplat view`.
+pub fn run(args: ViewArgs) -> Result<()> {
+    let (model, meta) =
+        load_model(&args.model).with_context(|| format!("loading the model {}", args.model.display()))?;
+    let activated = model.activate();
+    let set = activated.borrowed();
+    let (background, views) = match &args.scene {
+        Some(path) => {
+            let scene = args.scene_args.load_for_model(path, &args.model, meta.background)?;
+            let views: Vec<(String, Camera)> = scene
+                .train
+                .iter()
+                .chain(&scene.test)
+                .map(|v| (v.name.clone(), v.camera))
+                .collect();
+            (Vec3::from_array(scene.background.rgb()), views)
+        }
+        None => (
+            Vec3::from_array(meta.background),
+            vec![("framing".to_string(), framing_camera(set.positions))],
+        ),
+    };
+    let cameras: Vec<ViewerCamera> = views
+        .iter()
+        .map(|(name, camera)| ViewerCamera { name, camera })
+        .collect();
+    let size = write_viewer(&args.output, &set, meta.sh_degree, background, &cameras)?;
+    println!(
+        "wrote {} ({size} bytes, {} billboards, {} cameras)",
+        args.output.display(),
+        set.len(),
+        cameras.len()
+    );
+    if args.serve {
+        serve(&args.output, args.port)?;
+    }
+    Ok(())
+}
+
+/// Serves the file at `path` to every GET request on 127.0.0.1:`port`, one request at a time.
+fn serve(path: &std::path::Path, port: u16) -> Result<()> {
+    let page = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let listener = TcpListener::bind(("127.0.0.1", port)).with_context(|| format!("binding 127.0.0.1:{port}"))?;
+    let address = listener.local_addr()?;
+    println!("serving on http://{address}/ (Ctrl-C to stop)");
+    std::io::stdout().flush()?;
+    for stream in listener.incoming() {
+        let Ok(mut stream) = stream else { continue };
+        let mut request_line = String::new();
+        let mut reader = BufReader::new(&stream);
+        if reader.read_line(&mut request_line).is_err() {
+            continue;
+        }
+        // Skip the headers.
+        let mut line = String::new();
+        while reader.read_line(&mut line).map(|n| n > 0).unwrap_or(false) && line != "\r\n" {
+            line.clear();
+        }
+        let response = if request_line.starts_with("GET ") {
+            let mut r = format!(
+                "HTTP/1.1 200 OK\r\nContent-Type: text/html; charset=utf-8\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+                page.len()
+            )
+            .into_bytes();
+            r.extend_from_slice(&page);
+            r
+        } else {
+            b"HTTP/1.1 405 Method Not Allowed\r\nContent-Length: 0\r\nConnection: close\r\n\r\n".to_vec()
+        };
+        let _ = stream.write_all(&response);
+    }
+    Ok(())
+}
