@@ -372,6 +372,20 @@ pub fn read_element(
     }
     let little = header.encoding == Encoding::BinaryLittleEndian;
     for (ei, e) in elements.iter().enumerate() {
+        if e.properties.is_empty() {
+            // Records of no bytes: nothing to skip (a count of 10¹² is not 10¹² iterations), and
+            // nothing to read if it is the target.
+            if ei == target && e.count > 0 {
+                return Err(err(
+                    Location::Binary {
+                        record: format!("{} element", e.name),
+                        offset: pos as u64,
+                    },
+                    format!("{} {} records with no property", e.count, e.name),
+                ));
+            }
+            continue;
+        }
         let min_size: usize = e.properties.iter().map(|p| p.list.unwrap_or(p.kind).size()).sum();
         if (e.count as u128) * (min_size as u128) > (bytes.len() - pos) as u128 {
             return Err(err(
