@@ -1,7 +1,7 @@
 //! The exported glTF in Blender: `tools/blender_check.py` imports it with Blender's own importer
 //! and renders the scene camera with Cycles; the image must match the renderer's.
 
-use super::export_browser::{byte_scene, psnr_bytes, render_bytes};
+use super::export_browser::{byte_scene, psnr_bytes, render_expected};
 use super::external_tool::find_tool;
 use bbsplat::billboards::random_scene_camera;
 use bbsplat::export::glb::{NamedCamera, write_glb};
@@ -75,16 +75,7 @@ fn the_glb_rendered_by_blender_matches_the_renderer() {
     );
     let shot = image::open(&out).unwrap().to_rgb8();
     assert_eq!(shot.dimensions(), (width, height));
-    let expected = render_bytes(&set, &camera, background);
-    // Kept beside the screenshot when the test fails (the folder is removed on success).
-    image::save_buffer(
-        dir.join("expected.png"),
-        &expected,
-        width,
-        height,
-        image::ExtendedColorType::Rgb8,
-    )
-    .unwrap();
+    let expected = render_expected(&dir, &set, &camera, background);
     let psnr = psnr_bytes(shot.as_raw(), &expected);
     eprintln!("blender (cycles, 32 spp, raw) vs renderer: {psnr:.2} dB");
     assert!(psnr > MIN_PSNR, "blender vs renderer: {psnr:.2} dB");

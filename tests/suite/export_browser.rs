@@ -52,6 +52,21 @@ pub fn render_bytes(set: &ActivatedBillboards, camera: &Camera, background: Vec3
         .collect()
 }
 
+/// [`render_bytes`], also written to `dir/expected.png` (kept beside the client's image when a
+/// test fails; the folder is removed on success).
+pub fn render_expected(dir: &std::path::Path, set: &ActivatedBillboards, camera: &Camera, background: Vec3) -> Vec<u8> {
+    let expected = render_bytes(set, camera, background);
+    image::save_buffer(
+        dir.join("expected.png"),
+        &expected,
+        camera.width,
+        camera.height,
+        image::ExtendedColorType::Rgb8,
+    )
+    .unwrap();
+    expected
+}
+
 /// 8-bit PSNR of two RGB byte images.
 pub fn psnr_bytes(a: &[u8], b: &[u8]) -> f64 {
     let f = |x: &[u8]| x.iter().map(|&v| f32::from(v) / 255.0).collect::<Vec<f32>>();
@@ -120,16 +135,7 @@ fn the_viewer_in_headless_chromium_matches_the_renderer() {
     write_viewer(&page, &set.borrowed(), 3, background, &cameras).unwrap();
     let shot = screenshot(&chromium, &page, 1, width, height, &dir.join("shot.png"));
     assert_eq!(shot.dimensions(), (width, height));
-    let expected = render_bytes(&set, &camera, background);
-    // Kept beside the screenshot when the test fails (the folder is removed on success).
-    image::save_buffer(
-        dir.join("expected.png"),
-        &expected,
-        width,
-        height,
-        image::ExtendedColorType::Rgb8,
-    )
-    .unwrap();
+    let expected = render_expected(&dir, &set, &camera, background);
     let psnr = psnr_bytes(shot.as_raw(), &expected);
     eprintln!("viewer in chromium vs renderer: {psnr:.2} dB");
     assert!(psnr > MIN_PSNR, "viewer screenshot vs renderer: {psnr:.2} dB");
