@@ -1,10 +1,17 @@
 //! Pieces shared by the subcommands: scene-loading flags, thread pool, atomic PNG writes.
 
 use anyhow::{Context, Result};
+use bbsplat::model::RawBillboards;
+use bbsplat::model_file::{ModelMeta, load_model};
 use bbsplat::scene::data_background::{BackgroundChoice, load_with_data_background};
 use bbsplat::scene::{Background, LoadOptions, Scene, View};
 use clap::{Args, ValueEnum};
 use std::path::Path;
+
+/// Reads the model folder `path`, its errors prefixed with the folder's name.
+pub fn read_model(path: &Path) -> Result<(RawBillboards, ModelMeta)> {
+    load_model(path).with_context(|| format!("loading the model {}", path.display()))
+}
 
 /// Background colour flag.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -82,6 +89,14 @@ impl SceneArgs {
             })?,
         };
         self.load(path, true, background)
+    }
+
+    /// Reads the model folder `model` and loads the scene `scene` for it
+    /// ([`SceneArgs::load_for_model`]: with the model's background unless `--background`).
+    pub fn load_model_and_scene(&self, model: &Path, scene: &Path) -> Result<(RawBillboards, ModelMeta, Scene)> {
+        let (raw, meta) = read_model(model)?;
+        let scene = self.load_for_model(scene, model, meta.background)?;
+        Ok((raw, meta, scene))
     }
 
     /// Loads `path` for training: with `--background` if given, else with the background of

@@ -7,7 +7,6 @@ use bbsplat::export::glb::{NamedCamera, write_glb};
 use bbsplat::export::obj::write_obj;
 use bbsplat::export::planes::plane_mesh;
 use bbsplat::export::prune::{PruneRule, accumulate_impact, kept_billboards};
-use bbsplat::model_file::load_model;
 use bbsplat::raster::RenderSettings;
 use clap::{Args, ValueEnum};
 use glam::Vec3;
@@ -53,11 +52,7 @@ pub struct ExportArgs {
 /// Runs `bbsplat export`.
 pub fn run(args: ExportArgs) -> Result<()> {
     start_threads(args.threads)?;
-    let (model, meta) =
-        load_model(&args.model).with_context(|| format!("loading the model {}", args.model.display()))?;
-    let scene = args
-        .scene_args
-        .load_for_model(&args.scene, &args.model, meta.background)?;
+    let (model, meta, scene) = args.scene_args.load_model_and_scene(&args.model, &args.scene)?;
     anyhow::ensure!(
         !scene.train.is_empty(),
         "{}: no training view to measure the billboards' impact",

@@ -5,7 +5,6 @@ use super::common::{
 };
 use anyhow::{Context, Result};
 use bbsplat::eval::{EvalReport, EvalView, evaluate_views};
-use bbsplat::model_file::load_model;
 use bbsplat::raster::RenderSettings;
 use clap::Args;
 use glam::Vec3;
@@ -67,11 +66,7 @@ fn run_views(
     mut on_render: impl FnMut(usize, &str, &[f32], &[f32], u32, u32) -> Result<()>,
 ) -> Result<EvalReport> {
     start_threads(common.threads)?;
-    let (model, meta) =
-        load_model(&common.model).with_context(|| format!("loading the model {}", common.model.display()))?;
-    let scene = common
-        .scene_args
-        .load_for_model(&common.scene, &common.model, meta.background)?;
+    let (model, meta, scene) = common.scene_args.load_model_and_scene(&common.model, &common.scene)?;
     let views = split_views(&scene, common.split);
     anyhow::ensure!(
         !views.is_empty(),
@@ -163,11 +158,7 @@ fn render_orbit(args: &RenderArgs, frames: usize) -> Result<()> {
     use image::codecs::gif::{GifEncoder, Repeat};
     let common = &args.common;
     start_threads(common.threads)?;
-    let (model, meta) =
-        load_model(&common.model).with_context(|| format!("loading the model {}", common.model.display()))?;
-    let scene = common
-        .scene_args
-        .load_for_model(&common.scene, &common.model, meta.background)?;
+    let (model, meta, scene) = common.scene_args.load_model_and_scene(&common.model, &common.scene)?;
     let cameras: Vec<_> = scene.train.iter().map(|v| v.camera).collect();
     let path = bbsplat::export::orbit::orbit_cameras(&cameras, frames)
         .with_context(|| format!("{}: placing the orbit", common.scene.display()))?;

@@ -2,10 +2,10 @@
 //! page (the library: `bbsplat::export::viewer`; docs/export.md).
 
 use super::common::SceneArgs;
+use super::common::read_model;
 use anyhow::{Context, Result};
 use bbsplat::camera::Camera;
 use bbsplat::export::viewer::{ViewerCamera, write_viewer};
-use bbsplat::model_file::load_model;
 use clap::Args;
 use glam::Vec3;
 use std::io::{BufRead, BufReader, Write};
@@ -45,8 +45,7 @@ fn framing_camera(positions: &[Vec3]) -> Camera {
 
 /// Runs `bbsplat view`.
 pub fn run(args: ViewArgs) -> Result<()> {
-    let (model, meta) =
-        load_model(&args.model).with_context(|| format!("loading the model {}", args.model.display()))?;
+    let (model, meta) = read_model(&args.model)?;
     let activated = model.activate();
     let set = activated.borrowed();
     let (background, views) = match &args.scene {
