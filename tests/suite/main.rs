@@ -13,6 +13,7 @@ mod cli_reliability;
 mod export;
 mod export_blender;
 mod export_browser;
+mod export_fixtures;
 mod external_tool;
 mod f64_reference;
 mod init_fibonacci;
