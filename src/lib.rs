@@ -133,6 +133,8 @@ pub mod stages;
 pub mod strategies;
 #[cfg(feature = "tools")]
 pub mod sweep;
+#[cfg(feature = "testing")]
+pub mod testing_internals;
 pub mod train;
 
 pub use billboards::ActivatedBillboards;
