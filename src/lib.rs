@@ -98,7 +98,8 @@
 //!   plotters for its SVG plots) and the process-CPU clock of the benchmark harnesses
 //!   (`report::process_cpu_ms`).
 //! - `testing`: the gradient checker (`gradcheck`), the proptest strategies (`strategies`, with
-//!   proptest) and the parser fuzzing entry points (`scene::fuzz`).
+//!   proptest), the parser fuzzing entry points (`scene::fuzz`) and `testing_internals`
+//!   (crate-private kernels the test suite checks directly; not an API).
 //!
 //! Without features (`default-features = false`) the crate is the core above (scene input,
 //! initialisation, model, training, model files, rendering, evaluation), built on glam, rayon,
