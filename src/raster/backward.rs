@@ -195,7 +195,7 @@ impl SoleEntryRows {
     #[inline]
     fn prefetch(&self, b: usize, taps: &BilinearTaps) {
         if b < self.len {
-            prefetch_taps(self.rows.wrapping_add(b * self.texels), taps);
+            prefetch_taps(self.rows.wrapping_add(b * self.texels), taps.indices());
         }
     }
 }
