@@ -98,7 +98,9 @@ struct Blended {
     /// front, weight, clamp flag), replayed bit for bit as the forward made it.
     blend: Blend,
     depth: f32,
-    taps: BilinearTaps,
+    /// The entry's candidate in the run ([`TileCandidates::of`] of the pixel), which holds its
+    /// taps (referred to, not copied: 72 bytes a pair).
+    candidate: u32,
     colour: Vec3,
 }
 
@@ -412,10 +414,10 @@ fn backward_tile(
             let ray = pixel_ray(&state.camera, px, py);
             scratch.blended.clear();
             let mut t = 1.0f32;
-            for cand in candidates {
+            for (ci, cand) in candidates.iter().enumerate() {
                 let k = cand.slot as usize;
                 let b = list[k];
-                let taps = cand.taps;
+                let taps = &cand.taps;
                 let [r, g, bl, a] = taps.sample_rgba(set.texture_of(b as usize));
                 // Only the forward's blended entries are replayed, with the same arithmetic,
                 // so each classifies as blended again.
@@ -429,7 +431,7 @@ fn backward_tile(
                     billboard: b,
                     blend,
                     depth: cand.depth,
-                    taps,
+                    candidate: ci as u32,
                     colour: Vec3::new(r, g, bl) + pr.rgb,
                 });
                 t = blend.next_transmittance;
@@ -449,15 +451,15 @@ fn backward_tile(
                 let b = bl.billboard as usize;
                 let slot = bl.slot;
                 let d_rgba = [d_colour.x, d_colour.y, d_colour.z, d_tex_alpha];
+                let taps = &candidates[bl.candidate as usize].taps;
                 let (du, dv) = if sole[slot as usize] {
                     // SAFETY: `owns` holds for entry `range.start + slot`, and this task is the
                     // only one processing it.
-                    bl.taps.vjp_rgba(set.texture_of(b), d_rgba, |texel, g| unsafe {
+                    taps.vjp_rgba(set.texture_of(b), d_rgba, |texel, g| unsafe {
                         sole_rows.add(b, texel, g)
                     })
                 } else {
-                    bl.taps
-                        .vjp_rgba(set.texture_of(b), d_rgba, |texel, g| sums.add(slot, texel, g))
+                    taps.vjp_rgba(set.texture_of(b), d_rgba, |texel, g| sums.add(slot, texel, g))
                 };
                 let pr = prepared[b].as_ref().expect("blended entries are prepared");
                 let plane = pr.view_plane();
