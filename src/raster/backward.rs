@@ -272,6 +272,12 @@ impl TexelSums {
         self.texels = texels;
     }
 
+    /// Start of the cell index ([`TexelSums::cell_of`]), for prefetches only (never
+    /// dereferenced through this pointer; valid until the next [`TexelSums::start`]).
+    pub(crate) fn cell_index(&self) -> *const u32 {
+        self.cell_of.as_ptr()
+    }
+
     /// Adds one contribution to cell (`slot`, `texel`).
     #[inline]
     pub(crate) fn add(&mut self, slot: u32, texel: u32, g: [f32; 4]) {
@@ -359,9 +365,15 @@ fn backward_tile(
             .map(|(k, &b)| sole_rows.owns(bins, b, range.start + k)),
     );
     let sole: &[bool] = sole;
-    let prefetch_sole_row = |k: u32, taps: &BilinearTaps| {
+    // Where each candidate's texel gradients will go is prefetched with its texels: the
+    // billboard's gradient row for a sole entry, else the (slot, texel) cells of the sums' index
+    // (a `slots × TS²` array, a random cache line per candidate otherwise).
+    let cell_index = sums.cell_index();
+    let prefetch_gradient_cells = |k: u32, taps: &BilinearTaps| {
         if sole[k as usize] {
             sole_rows.prefetch(list[k as usize] as usize, taps);
+        } else {
+            prefetch_taps(cell_index.wrapping_add(k as usize * ts * ts), taps.indices());
         }
     };
     let rect = (i0, j0, i1, j1);
@@ -387,7 +399,7 @@ fn backward_tile(
             rect,
             first,
             blended_of,
-            prefetch_sole_row,
+            prefetch_gradient_cells,
         );
         // The pixel of `q`, advanced row-major (no division per pixel).
         let (mut i, mut j) = (i0 + (first % tw) as u32, j0 + (first / tw) as u32);

@@ -204,13 +204,13 @@ pub(crate) fn prefetch_ref<T>(r: &T) {
     prefetch_ptr(std::ptr::from_ref(r).cast::<u8>());
 }
 
-/// Hints the CPU to fetch the cache lines holding the texels `taps` reads from a texture (or
-/// texture-gradient row) starting at `texels`, each line once: the two taps of a row share a
-/// line unless they straddle a 64-byte boundary, and the taps come row by row, so comparing
-/// with the previous tap's line finds every repeat. No effect on results; `texels` is never
-/// dereferenced.
+/// Hints the CPU to fetch the cache lines holding the elements `indices` (a bilinear sample's
+/// tap indices) of a per-texel array starting at `texels` (a texture, a texture-gradient row, the
+/// backward's cell index), each line once: the two taps of a row share a line unless they
+/// straddle a 64-byte boundary, and the taps come row by row, so comparing with the previous
+/// tap's line finds every repeat. No effect on results; `texels` is never dereferenced.
 #[inline(always)]
-pub(crate) fn prefetch_taps(texels: *const [f32; 4], indices: &[u32]) {
+pub(crate) fn prefetch_taps<T>(texels: *const T, indices: &[u32]) {
     let mut last_line = usize::MAX;
     for &ix in indices {
         let p = texels.wrapping_add(ix as usize).cast::<u8>();
