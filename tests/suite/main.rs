@@ -20,6 +20,7 @@ mod init_fibonacci;
 mod init_fps;
 mod init_scene;
 mod loss_ssim;
+mod mesh;
 mod model_file;
 mod model_knn;
 mod raster;
