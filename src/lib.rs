@@ -98,7 +98,8 @@
 //!   plotters for its SVG plots) and the process-CPU clock of the benchmark harnesses
 //!   (`report::process_cpu_ms`).
 //! - `testing`: the gradient checker (`gradcheck`), the proptest strategies (`strategies`, with
-//!   proptest) and the parser fuzzing entry points (`scene::fuzz`).
+//!   proptest), the parser fuzzing entry points (`scene::fuzz`) and `testing_internals`
+//!   (crate-private kernels the test suite checks directly; not an API).
 //!
 //! Without features (`default-features = false`) the crate is the core above (scene input,
 //! initialisation, model, training, model files, rendering, evaluation), built on glam, rayon,
@@ -134,6 +135,8 @@ pub mod stages;
 pub mod strategies;
 #[cfg(feature = "tools")]
 pub mod sweep;
+#[cfg(feature = "testing")]
+pub mod testing_internals;
 pub mod train;
 
 pub use billboards::ActivatedBillboards;

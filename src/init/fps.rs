@@ -253,19 +253,19 @@ fn trivial_cases(points: &[Vec3], k: usize) -> Result<Option<Vec<usize>>, FpsErr
     Ok(None)
 }
 
-fn to_f64(p: Vec3) -> [f64; 3] {
+pub(crate) fn to_f64(p: Vec3) -> [f64; 3] {
     [p.x as f64, p.y as f64, p.z as f64]
 }
 
 /// Squared distance, the one expression every distance and bound of this module uses.
 #[inline]
-fn squared(dx: f64, dy: f64, dz: f64) -> f64 {
+pub(crate) fn squared(dx: f64, dy: f64, dz: f64) -> f64 {
     dx * dx + dy * dy + dz * dz
 }
 
 /// A bucket of consecutive points in Morton order.
 #[derive(Clone, Debug)]
-struct Bucket {
+pub(crate) struct Bucket {
     len: usize,
     lo: [f64; 3],
     hi: [f64; 3],
@@ -275,7 +275,7 @@ struct Bucket {
 }
 
 impl Bucket {
-    fn new(coords: &[[f64; 3]], order: &[usize]) -> Self {
+    pub(crate) fn new(coords: &[[f64; 3]], order: &[usize]) -> Self {
         let mut lo = [f64::INFINITY; 3];
         let mut hi = [f64::NEG_INFINITY; 3];
         for p in coords {
@@ -316,7 +316,7 @@ impl Bucket {
     /// per axis the gap `max(lo − c, c − hi, 0)` is at most the computed `|p − c|` (rounding is
     /// monotone), and `squared` is monotone in each argument.
     #[inline]
-    fn lower_bound(&self, c: [f64; 3]) -> f64 {
+    pub(crate) fn lower_bound(&self, c: [f64; 3]) -> f64 {
         let gap = |a: usize| (self.lo[a] - c[a]).max(c[a] - self.hi[a]).max(0.0);
         squared(gap(0), gap(1), gap(2))
     }
@@ -357,7 +357,7 @@ fn update_chunk(coords: &[[f64; 3]], min_d2: &mut [f64], start: usize, centre: [
 
 /// The better of two candidates: larger squared distance, then lower index. A total order on
 /// the candidates (no NaN occurs), so any reduction order gives the same result.
-fn better(a: (f64, usize), b: (f64, usize)) -> (f64, usize) {
+pub(crate) fn better(a: (f64, usize), b: (f64, usize)) -> (f64, usize) {
     if a.0 > b.0 || (a.0 == b.0 && a.1 < b.1) { a } else { b }
 }
 
@@ -392,7 +392,7 @@ fn morton_order(points: &[Vec3]) -> Vec<usize> {
 }
 
 /// Spreads the low 21 bits of `x` to every third bit.
-fn spread_bits(x: u64) -> u64 {
+pub(crate) fn spread_bits(x: u64) -> u64 {
     let mut x = x & 0x1f_ffff;
     x = (x | x << 32) & 0x001f_0000_0000_ffff;
     x = (x | x << 16) & 0x001f_0000_ff00_00ff;
@@ -400,86 +400,4 @@ fn spread_bits(x: u64) -> u64 {
     x = (x | x << 4) & 0x10c3_0c30_c30c_30c3;
     x = (x | x << 2) & 0x1249_2492_4924_9249;
     x
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::rng::Rng;
-    use crate::strategies::box_cloud as cloud;
-
-    #[test]
-    fn better_is_a_total_order() {
-        let cands = [(1.0, 3), (1.0, 2), (2.0, 9), (f64::NEG_INFINITY, usize::MAX)];
-        for &a in &cands {
-            for &b in &cands {
-                assert_eq!(better(a, b), better(b, a));
-            }
-        }
-        assert_eq!(better((1.0, 3), (1.0, 2)), (1.0, 2));
-    }
-
-    #[test]
-    fn spread_bits_interleaves() {
-        assert_eq!(spread_bits(0b111), 0b1001001);
-        assert_eq!(spread_bits(0x1f_ffff).count_ones(), 21);
-        assert_eq!(spread_bits(1 << 20), 1 << 60);
-    }
-
-    #[test]
-    fn bound_never_exceeds_a_point_distance() {
-        let mut rng = Rng::new(8);
-        for _ in 0..200 {
-            let pts: Vec<[f64; 3]> = (0..20)
-                .map(|_| to_f64(Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)) * 1e3))
-                .collect();
-            let order: Vec<usize> = (0..20).collect();
-            let b = Bucket::new(&pts, &order);
-            let c = to_f64(Vec3::new(rng.range(-3.0, 3.0), rng.range(-3.0, 3.0), rng.range(-3.0, 3.0)) * 1e3);
-            let lb = b.lower_bound(c);
-            for p in &pts {
-                assert!(lb <= squared(p[0] - c[0], p[1] - c[1], p[2] - c[2]));
-            }
-        }
-    }
-
-    #[test]
-    fn pruned_matches_dense() {
-        let mut clouds = vec![
-            cloud(20_000, 1, [10.0, 10.0, 10.0]),
-            cloud(5_000, 2, [10.0, 10.0, 0.0]), // planar
-            cloud(3_000, 3, [100.0, 0.0, 0.0]), // a line
-        ];
-        // Far outliers stretch the Morton box.
-        let mut outliers = cloud(10_000, 4, [1.0, 1.0, 1.0]);
-        outliers.extend(cloud(30, 5, [1e5, 1e5, 1e5]));
-        clouds.push(outliers);
-        // A lattice: exact ties everywhere.
-        let mut lattice = Vec::new();
-        for z in 0..20 {
-            for y in 0..20 {
-                for x in 0..20 {
-                    lattice.push(Vec3::new(x as f32, y as f32, z as f32));
-                }
-            }
-        }
-        clouds.push(lattice);
-        // Heavy duplication: 100 distinct positions repeated.
-        let base = cloud(100, 6, [5.0, 5.0, 5.0]);
-        clouds.push((0..4_000).map(|i| base[(i * 37) % 100]).collect());
-        for (c, pts) in clouds.iter().enumerate() {
-            for k in [2, 150, 700.min(pts.len() - 1)] {
-                let dense = farthest_point_sampling_dense(pts, k).unwrap();
-                let pruned = farthest_point_sampling(pts, k).unwrap();
-                assert_eq!(pruned, dense, "cloud {c}, k = {k}");
-            }
-        }
-        // Through the duplicate phase to the end.
-        let dup = &clouds[5];
-        let all = dup.len() - 1;
-        assert_eq!(
-            farthest_point_sampling(dup, all).unwrap(),
-            farthest_point_sampling_dense(dup, all).unwrap()
-        );
-    }
 }

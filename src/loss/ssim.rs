@@ -251,7 +251,7 @@ const PARTIALS: usize = 3;
 
 /// Image and map dimensions for one call.
 #[derive(Clone, Copy, Debug)]
-struct Geometry {
+pub(crate) struct Geometry {
     w: usize,
     h: usize,
     c: usize,
@@ -264,7 +264,7 @@ struct Geometry {
 }
 
 impl Geometry {
-    fn new(w: usize, h: usize, c: usize, padding: Padding) -> Result<Self, LossError> {
+    pub(crate) fn new(w: usize, h: usize, c: usize, padding: Padding) -> Result<Self, LossError> {
         if w == 0 || h == 0 || c == 0 {
             return Err(LossError::Empty {
                 width: w,
@@ -320,7 +320,7 @@ impl Geometry {
         self.ow * self.c
     }
 
-    fn map_len(&self) -> usize {
+    pub(crate) fn map_len(&self) -> usize {
         self.ow * self.oh * self.c
     }
 }
@@ -453,7 +453,7 @@ fn ssim_value(ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64) -> f64 {
 
 /// `(A1, A2, B1, B2)` of the SSIM formula.
 #[inline]
-fn terms(ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64) -> (f64, f64, f64, f64) {
+pub(crate) fn terms(ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64) -> (f64, f64, f64, f64) {
     let (maa, mbb, mab) = (ma * ma, mb * mb, ma * mb);
     let a1 = 2.0 * mab + C1;
     let a2 = 2.0 * (sab - mab) + C2;
@@ -464,7 +464,7 @@ fn terms(ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64) -> (f64, f64, f64, f64)
 
 /// `[S, ∂S/∂μa, ∂S/∂Saa, ∂S/∂Sab]` for one map value.
 #[inline]
-fn ssim_partials(ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64) -> [f64; 4] {
+pub(crate) fn ssim_partials(ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64) -> [f64; 4] {
     let (a1, a2, b1, b2) = terms(ma, mb, saa, sbb, sab);
     let d = b1 * b2;
     // S exactly as `ssim_value` computes it, so forward-only and forward+backward agree.
@@ -479,7 +479,7 @@ fn ssim_partials(ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64) -> [f64; 4] {
 
 /// The cotangent of the map: one weight for all values (the mean) or one per value.
 #[derive(Clone, Copy)]
-enum Cotangent<'a> {
+pub(crate) enum Cotangent<'a> {
     Uniform(f64),
     Map(&'a [f32]),
 }
@@ -488,7 +488,13 @@ enum Cotangent<'a> {
 ///
 /// `partials` computes `[S, ∂S/∂μa, ∂S/∂Saa, ∂S/∂Sab]` from the moments (a parameter so that
 /// tests can inject faults).
-fn value_and_grad<P>(a: &[f32], b: &[f32], geo: &Geometry, cot: Cotangent<'_>, partials: P) -> (f64, Vec<f32>)
+pub(crate) fn value_and_grad<P>(
+    a: &[f32],
+    b: &[f32],
+    geo: &Geometry,
+    cot: Cotangent<'_>,
+    partials: P,
+) -> (f64, Vec<f32>)
 where
     P: Fn(f64, f64, f64, f64, f64) -> [f64; 4] + Sync,
 {
@@ -542,97 +548,4 @@ where
         },
     );
     (row_sums.iter().sum(), grad)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::gradcheck::{GradTolerance, StepRule, compare, numerical_gradient};
-    use crate::rng::Rng;
-
-    fn image(n: usize, seed: u64) -> Vec<f32> {
-        let mut rng = Rng::new(seed);
-        (0..n).map(|_| rng.range(0.05, 0.95)).collect()
-    }
-
-    /// FD check of `value_and_grad` with the given partials against the correct forward.
-    fn fd_check<P>(partials: P, padding: Padding, seed: u64) -> crate::gradcheck::GradReport
-    where
-        P: Fn(f64, f64, f64, f64, f64) -> [f64; 4] + Sync,
-    {
-        let (w, h, c) = (13, 12, 2);
-        let a = image(w * h * c, seed);
-        let b = image(w * h * c, seed + 100);
-        let geo = Geometry::new(w, h, c, padding).unwrap();
-        // The loss is the sum of the map (M·SSIM) so that gradients are O(1).
-        let m = geo.map_len() as f64;
-        let analytic: Vec<f64> = value_and_grad(&a, &b, &geo, Cotangent::Uniform(1.0), partials)
-            .1
-            .iter()
-            .map(|&g| g as f64)
-            .collect();
-        let idx: Vec<usize> = (0..a.len()).collect();
-        let numeric = numerical_gradient(
-            |x| ssim(x, &b, w, h, c, padding).unwrap() * m,
-            &a,
-            &idx,
-            StepRule::default(),
-        );
-        compare(&analytic, &numeric, &GradTolerance::default())
-    }
-
-    #[test]
-    fn correct_partials_pass() {
-        for padding in [Padding::Same, Padding::Valid] {
-            let r = fd_check(ssim_partials, padding, 1);
-            assert!(r.passed(), "{padding:?}: {r}");
-        }
-    }
-
-    #[test]
-    fn dropping_the_covariance_term_fails() {
-        // Forget that σab = Sab − μa·μb depends on μa (the −2μb·A1/D part of ∂S/∂μa).
-        let broken = |ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64| {
-            let [s, d_mu, d_saa, d_sab] = ssim_partials(ma, mb, saa, sbb, sab);
-            let (a1, _, b1, b2) = terms(ma, mb, saa, sbb, sab);
-            [s, d_mu + 2.0 * mb * a1 / (b1 * b2), d_saa, d_sab]
-        };
-        for padding in [Padding::Same, Padding::Valid] {
-            let r = fd_check(broken, padding, 2);
-            assert!(!r.passed(), "{padding:?}: {r}");
-        }
-    }
-
-    #[test]
-    fn dropping_the_sab_gradient_fails() {
-        let broken = |ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64| {
-            let [s, d_mu, d_saa, _] = ssim_partials(ma, mb, saa, sbb, sab);
-            [s, d_mu, d_saa, 0.0]
-        };
-        let r = fd_check(broken, Padding::Same, 3);
-        assert!(!r.passed(), "{r}");
-    }
-
-    #[test]
-    fn one_percent_scale_fails() {
-        let broken = |ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64| {
-            let [s, d_mu, d_saa, d_sab] = ssim_partials(ma, mb, saa, sbb, sab);
-            [s, 1.01 * d_mu, 1.01 * d_saa, 1.01 * d_sab]
-        };
-        for seed in 0..4 {
-            let r = fd_check(broken, Padding::Same, 10 + seed);
-            assert!(!r.passed(), "seed {seed}: {r}");
-        }
-    }
-
-    #[test]
-    fn window_is_normalised_and_symmetric() {
-        let g = gaussian_window();
-        let sum: f64 = g.iter().sum();
-        assert!((sum - 1.0).abs() < 1e-15, "{sum}");
-        for k in 0..WINDOW_SIZE {
-            assert_eq!(g[k], g[WINDOW_SIZE - 1 - k]);
-        }
-        assert!(g[5] > g[4] && g[0] > 0.0);
-    }
 }

@@ -98,7 +98,9 @@ struct Blended {
     /// front, weight, clamp flag), replayed bit for bit as the forward made it.
     blend: Blend,
     depth: f32,
-    taps: BilinearTaps,
+    /// The entry's candidate in the run ([`TileCandidates::of`] of the pixel), which holds its
+    /// taps (referred to, not copied: 72 bytes a pair).
+    candidate: u32,
     colour: Vec3,
 }
 
@@ -195,7 +197,7 @@ impl SoleEntryRows {
     #[inline]
     fn prefetch(&self, b: usize, taps: &BilinearTaps) {
         if b < self.len {
-            prefetch_taps(self.rows.wrapping_add(b * self.texels), taps);
+            prefetch_taps(self.rows.wrapping_add(b * self.texels), taps.indices());
         }
     }
 }
@@ -236,19 +238,20 @@ struct Scratch {
 /// is the sum of its contributions in pixel order, starting from the first one (assigned, not
 /// added to 0, so that a lone `−0.0` stays `−0.0`): the same sums, in the same order, as a
 /// stable sort of all contributions by (slot, texel) followed by a merge of equal keys
-/// (`texel_sums_reference`, tested). A dense `slots × TS²` index (4 bytes a cell) maps each cell
-/// to its position in a compact list of the touched cells, in first-touch order; only the
-/// touched cells are read out and reset, so a tile costs `O(contributions + touched cells)`
-/// whatever its number of entries, and the sums themselves stay in a few cache lines even when
-/// the index is sparse (a benchmark tile: 180 entries touching ~6 texels each).
+/// (`texel_sums_reference` in tests/suite/raster_backward.rs, tested). A dense `slots × TS²`
+/// index (4 bytes a cell) maps each cell to its position in a compact list of the touched
+/// cells, in first-touch order; only the touched cells are read out and reset, so a tile costs
+/// `O(contributions + touched cells)` whatever its number of entries, and the sums themselves
+/// stay in a few cache lines even when the index is sparse (a benchmark tile: 180 entries
+/// touching ~6 texels each).
 #[derive(Default)]
-struct TexelSums {
+pub(crate) struct TexelSums {
     /// Per cell `slot · texels + texel`: its position in `sums`, or [`UNTOUCHED`].
-    cell_of: Vec<u32>,
+    pub(crate) cell_of: Vec<u32>,
     /// `[∂r, ∂g, ∂b, ∂alpha]` of the touched cells, in first-touch order.
     sums: Vec<[f32; 4]>,
     /// `(slot, texel)` of the touched cells, in the order of `sums`.
-    cells: Vec<(u32, u32)>,
+    pub(crate) cells: Vec<(u32, u32)>,
     /// Cells per slot (`TS²`) of the current tile.
     texels: usize,
     /// Per-slot write cursors of [`TexelSums::finish`].
@@ -256,11 +259,11 @@ struct TexelSums {
 }
 
 /// [`TexelSums::cell_of`] of a cell not touched in the current tile.
-const UNTOUCHED: u32 = u32::MAX;
+pub(crate) const UNTOUCHED: u32 = u32::MAX;
 
 impl TexelSums {
     /// Prepares for a tile of `slots` entries with `texels` texels per channel.
-    fn start(&mut self, slots: usize, texels: usize) {
+    pub(crate) fn start(&mut self, slots: usize, texels: usize) {
         debug_assert!(self.cells.is_empty(), "the previous tile was finished");
         let cells = slots * texels;
         if self.cell_of.len() < cells {
@@ -269,9 +272,15 @@ impl TexelSums {
         self.texels = texels;
     }
 
+    /// Start of the cell index ([`TexelSums::cell_of`]), for prefetches only (never
+    /// dereferenced through this pointer; valid until the next [`TexelSums::start`]).
+    pub(crate) fn cell_index(&self) -> *const u32 {
+        self.cell_of.as_ptr()
+    }
+
     /// Adds one contribution to cell (`slot`, `texel`).
     #[inline]
-    fn add(&mut self, slot: u32, texel: u32, g: [f32; 4]) {
+    pub(crate) fn add(&mut self, slot: u32, texel: u32, g: [f32; 4]) {
         let cell = &mut self.cell_of[slot as usize * self.texels + texel as usize];
         if *cell == UNTOUCHED {
             *cell = self.sums.len() as u32;
@@ -288,7 +297,7 @@ impl TexelSums {
     /// The touched cells grouped by slot (a stable counting sort: first-touch order within a
     /// slot), resetting them for the next tile. Returns `(offsets, texels)`: the texels of slot
     /// `k` are `texels[offsets[k]..offsets[k + 1]]`.
-    fn finish(&mut self, slots: usize) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
+    pub(crate) fn finish(&mut self, slots: usize) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
         let mut offsets = vec![0u32; slots + 1];
         for &(slot, _) in &self.cells {
             offsets[slot as usize + 1] += 1;
@@ -315,35 +324,6 @@ thread_local! {
     /// Each thread's [`TexelSums`], kept across tiles and calls so that its pages are zeroed
     /// by the kernel once, not per call.
     static TEXEL_SUMS: std::cell::RefCell<TexelSums> = std::cell::RefCell::default();
-}
-
-/// Plain reference of [`TexelSums`]: stable sort of the contributions `(slot, texel, g)` by
-/// (slot, texel), then each run of equal keys summed in order. Texels come out sorted within a
-/// slot.
-#[cfg(test)]
-fn texel_sums_reference(log: &[(u32, u32, [f32; 4])], slots: usize) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
-    let mut log = log.to_vec();
-    log.sort_by_key(|&(slot, texel, _)| (slot, texel));
-    let mut counts = vec![0u32; slots + 1];
-    let mut out: Vec<(u32, [f32; 4])> = Vec::with_capacity(log.len());
-    let mut run = 0;
-    while run < log.len() {
-        let (slot, texel, mut sum) = log[run];
-        let mut next = run + 1;
-        while next < log.len() && log[next].0 == slot && log[next].1 == texel {
-            for c in 0..4 {
-                sum[c] += log[next].2[c];
-            }
-            next += 1;
-        }
-        out.push((texel, sum));
-        counts[slot as usize + 1] += 1;
-        run = next;
-    }
-    for k in 0..slots {
-        counts[k + 1] += counts[k];
-    }
-    (counts, out)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -385,9 +365,15 @@ fn backward_tile(
             .map(|(k, &b)| sole_rows.owns(bins, b, range.start + k)),
     );
     let sole: &[bool] = sole;
-    let prefetch_sole_row = |k: u32, taps: &BilinearTaps| {
+    // Where each candidate's texel gradients will go is prefetched with its texels: the
+    // billboard's gradient row for a sole entry, else the (slot, texel) cells of the sums' index
+    // (a `slots × TS²` array, a random cache line per candidate otherwise).
+    let cell_index = sums.cell_index();
+    let prefetch_gradient_cells = |k: u32, taps: &BilinearTaps| {
         if sole[k as usize] {
             sole_rows.prefetch(list[k as usize] as usize, taps);
+        } else {
+            prefetch_taps(cell_index.wrapping_add(k as usize * ts * ts), taps.indices());
         }
     };
     let rect = (i0, j0, i1, j1);
@@ -413,7 +399,7 @@ fn backward_tile(
             rect,
             first,
             blended_of,
-            prefetch_sole_row,
+            prefetch_gradient_cells,
         );
         // The pixel of `q`, advanced row-major (no division per pixel).
         let (mut i, mut j) = (i0 + (first % tw) as u32, j0 + (first / tw) as u32);
@@ -440,10 +426,10 @@ fn backward_tile(
             let ray = pixel_ray(&state.camera, px, py);
             scratch.blended.clear();
             let mut t = 1.0f32;
-            for cand in candidates {
+            for (ci, cand) in candidates.iter().enumerate() {
                 let k = cand.slot as usize;
                 let b = list[k];
-                let taps = cand.taps;
+                let taps = &cand.taps;
                 let [r, g, bl, a] = taps.sample_rgba(set.texture_of(b as usize));
                 // Only the forward's blended entries are replayed, with the same arithmetic,
                 // so each classifies as blended again.
@@ -457,7 +443,7 @@ fn backward_tile(
                     billboard: b,
                     blend,
                     depth: cand.depth,
-                    taps,
+                    candidate: ci as u32,
                     colour: Vec3::new(r, g, bl) + pr.rgb,
                 });
                 t = blend.next_transmittance;
@@ -477,15 +463,15 @@ fn backward_tile(
                 let b = bl.billboard as usize;
                 let slot = bl.slot;
                 let d_rgba = [d_colour.x, d_colour.y, d_colour.z, d_tex_alpha];
+                let taps = &candidates[bl.candidate as usize].taps;
                 let (du, dv) = if sole[slot as usize] {
                     // SAFETY: `owns` holds for entry `range.start + slot`, and this task is the
                     // only one processing it.
-                    bl.taps.vjp_rgba(set.texture_of(b), d_rgba, |texel, g| unsafe {
+                    taps.vjp_rgba(set.texture_of(b), d_rgba, |texel, g| unsafe {
                         sole_rows.add(b, texel, g)
                     })
                 } else {
-                    bl.taps
-                        .vjp_rgba(set.texture_of(b), d_rgba, |texel, g| sums.add(slot, texel, g))
+                    taps.vjp_rgba(set.texture_of(b), d_rgba, |texel, g| sums.add(slot, texel, g))
                 };
                 let pr = prepared[b].as_ref().expect("blended entries are prepared");
                 let plane = pr.view_plane();
@@ -696,74 +682,4 @@ pub fn render_backward(
         })
         .collect();
     touched.concat()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A cell's first contribution is assigned, not added to 0: a lone `−0.0` stays `−0.0`
-    /// (`0.0 + −0.0` would be `+0.0`), as in the sorting reference.
-    #[test]
-    fn texel_sums_keep_a_lone_negative_zero() {
-        let mut sums = TexelSums::default();
-        sums.start(2, 4);
-        sums.add(1, 3, [-0.0, 1.0, -0.0, 2.0]);
-        let (offsets, out) = sums.finish(2);
-        assert_eq!(offsets, [0, 0, 1]);
-        let bits = out[0].1.map(f32::to_bits);
-        assert_eq!(
-            (out[0].0, bits),
-            (
-                3,
-                [
-                    (-0.0f32).to_bits(),
-                    1.0f32.to_bits(),
-                    (-0.0f32).to_bits(),
-                    2.0f32.to_bits()
-                ]
-            )
-        );
-        let log = [(1u32, 3u32, [-0.0f32, 1.0, -0.0, 2.0])];
-        assert_eq!(texel_sums_reference(&log, 2).1[0].1.map(f32::to_bits), bits);
-    }
-
-    /// The accumulator gives, slot by slot, the same (texel, sum) set as the sort-based
-    /// reference, bit for bit.
-    #[test]
-    fn texel_sums_match_the_sorting_reference() {
-        let mut state = 0x2545f4914f6cdd1du64;
-        let mut next = |m: u64| {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state % m
-        };
-        // One accumulator across all cases: it must come back clean from every tile.
-        let mut sums = TexelSums::default();
-        for &(slots, texels, len) in &[(1usize, 4usize, 0usize), (3, 4, 50), (17, 256, 400), (40, 16, 2000)] {
-            let log: Vec<(u32, u32, [f32; 4])> = (0..len)
-                .map(|_| {
-                    let g = [0; 4].map(|_| (next(2001) as f32 - 1000.0) * 1.37e-3);
-                    (next(slots as u64) as u32, next(texels as u64) as u32, g)
-                })
-                .collect();
-            sums.start(slots, texels);
-            for &(slot, texel, g) in &log {
-                sums.add(slot, texel, g);
-            }
-            let (offsets, out) = sums.finish(slots);
-            assert!(sums.cell_of.iter().all(|&c| c == UNTOUCHED) && sums.cells.is_empty());
-            let (ref_offsets, ref_out) = texel_sums_reference(&log, slots);
-            assert_eq!(offsets, ref_offsets);
-            for k in 0..slots {
-                let r = offsets[k] as usize..offsets[k + 1] as usize;
-                let mut got: Vec<(u32, [u32; 4])> =
-                    out[r.clone()].iter().map(|&(t, g)| (t, g.map(f32::to_bits))).collect();
-                got.sort_by_key(|e| e.0);
-                let want: Vec<(u32, [u32; 4])> = ref_out[r].iter().map(|&(t, g)| (t, g.map(f32::to_bits))).collect();
-                assert_eq!(got, want, "slot {k}");
-            }
-        }
-    }
 }

@@ -5,7 +5,7 @@ use super::preprocess::{Prepared, preprocess_into};
 use super::{ActivatedRef, RenderSettings, TILE_SIZE};
 use crate::camera::Camera;
 use crate::memory::{refill, resize_for_overwrite};
-use crate::stages::bilinear::{self, BilinearTaps};
+use crate::stages::bilinear::{self, BilinearTaps, SampleTaps};
 use crate::stages::composite::{CompositeState, Step};
 use crate::stages::ray_plane::{intersect_with, pixel_ray};
 use crate::stages::splat_transform::{pixel_range, support_quad};
@@ -204,15 +204,15 @@ pub(crate) fn prefetch_ref<T>(r: &T) {
     prefetch_ptr(std::ptr::from_ref(r).cast::<u8>());
 }
 
-/// Hints the CPU to fetch the cache lines holding the texels `taps` reads from a texture (or
-/// texture-gradient row) starting at `texels`, each line once: the two taps of a row share a
-/// line unless they straddle a 64-byte boundary, and the taps come row by row, so comparing
-/// with the previous tap's line finds every repeat. No effect on results; `texels` is never
-/// dereferenced.
+/// Hints the CPU to fetch the cache lines holding the elements `indices` (a bilinear sample's
+/// tap indices) of a per-texel array starting at `texels` (a texture, a texture-gradient row, the
+/// backward's cell index), each line once: the two taps of a row share a line unless they
+/// straddle a 64-byte boundary, and the taps come row by row, so comparing with the previous
+/// tap's line finds every repeat. No effect on results; `texels` is never dereferenced.
 #[inline(always)]
-pub(crate) fn prefetch_taps(texels: *const [f32; 4], taps: &BilinearTaps) {
+pub(crate) fn prefetch_taps<T>(texels: *const T, indices: &[u32]) {
     let mut last_line = usize::MAX;
-    for &ix in taps.indices() {
+    for &ix in indices {
         let p = texels.wrapping_add(ix as usize).cast::<u8>();
         if p as usize / 64 != last_line {
             last_line = p as usize / 64;
@@ -311,7 +311,7 @@ impl TileCandidates {
                 };
                 // One 16-byte RGBA texel per tap: the two taps of a row share a cache line unless
                 // they straddle a 64-byte boundary (one row pair in four).
-                prefetch_taps(set.texture_of(b).as_ptr(), &taps);
+                prefetch_taps(set.texture_of(b).as_ptr(), taps.indices());
                 also(k, &taps);
                 self.items.push(Candidate {
                     slot: k,
@@ -351,7 +351,7 @@ pub(crate) struct SampledCandidate {
 /// L1 while its pixels are sampled), instead of once per pixel as a pixel-by-pixel walk over 10-60
 /// billboards would. Per pixel the candidates come out in tile-list (depth) order, since the
 /// entries are visited in that order. Same arithmetic per pair as [`TileCandidates`] followed by
-/// [`BilinearTaps::sample_rgba`], so the forward pass's outputs are unchanged bit for bit.
+/// [`BilinearTaps::sample_rgba`] (whose [`SampleTaps`] part it keeps), so the forward pass's outputs are unchanged bit for bit.
 /// The candidates of tile-local pixel `q` are `items[offsets[q]..ends[q]]`.
 #[derive(Default)]
 pub(crate) struct TileSamples {
@@ -360,7 +360,7 @@ pub(crate) struct TileSamples {
     items: Vec<SampledCandidate>,
     /// Candidates whose texels are being prefetched: (item, billboard, taps), sampled in runs of
     /// [`CANDIDATE_CHUNK`] (see [`TileCandidates`] for why the reads are issued ahead).
-    pending: Vec<(u32, u32, BilinearTaps)>,
+    pending: Vec<(u32, u32, SampleTaps)>,
 }
 
 impl TileSamples {
@@ -420,7 +420,9 @@ impl TileSamples {
                     let Some(taps) = bilinear::taps(hit.u, hit.v, ts) else {
                         continue;
                     };
-                    prefetch_taps(texture.as_ptr(), &taps);
+                    // Only the taps and weights are kept (sampling needs no derivatives).
+                    let taps = taps.for_sampling();
+                    prefetch_taps(texture.as_ptr(), taps.indices());
                     let end = &mut self.ends[q];
                     self.items[*end as usize] = SampledCandidate {
                         slot: k as u32,

@@ -135,23 +135,3 @@ pub fn quat_to_rotation_vjp(q: [f32; 4], d_rotation: Mat3) -> [f32; 4] {
         (gz - z * radial) * inv_norm,
     ]
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn identity_quaternion_is_identity() {
-        assert_eq!(quat_to_rotation([3.0, 0.0, 0.0, 0.0]), Mat3::IDENTITY);
-    }
-
-    #[test]
-    fn threshold_is_a_clean_switch() {
-        let below = (QUAT_NORM_SQ_MIN * 0.9).sqrt();
-        let above = (QUAT_NORM_SQ_MIN * 1.1).sqrt();
-        assert_eq!(quat_to_rotation([0.0, below, 0.0, 0.0]), Mat3::IDENTITY);
-        let r = quat_to_rotation([0.0, above, 0.0, 0.0]);
-        // 180° about x.
-        assert!((r.y_axis + Vec3::Y).length() < 1e-6 && (r.z_axis + Vec3::Z).length() < 1e-6);
-    }
-}

@@ -375,15 +375,19 @@ pub fn sh_colour_vjp_clamped(
 // x86-64 the SSE kernels of `sh_sse` (bit-identical to the scalar references below, tested),
 // elsewhere those references.
 #[cfg(target_arch = "x86_64")]
-use super::sh_sse::{coefficient_pass, raw_colours};
+pub(crate) use super::sh_sse::{coefficient_pass, raw_colours};
 #[cfg(not(target_arch = "x86_64"))]
-use {coefficient_pass_scalar as coefficient_pass, raw_colours_scalar as raw_colours};
+pub(crate) use {coefficient_pass_scalar as coefficient_pass, raw_colours_scalar as raw_colours};
 
 /// The plain scalar reference of the batched raw colours (the SSE `raw_colours` on x86-64): per
 /// primitive and channel `0.5 + Σₖ basis[k]·coeffs[3k + c]`, in increasing `k`, the primitives'
 /// sums advancing together.
 #[cfg_attr(target_arch = "x86_64", allow(dead_code))]
-fn raw_colours_scalar<const L: usize>(n: usize, coeffs: [&[f32]; L], basis: &[[f32; 16]; L]) -> [[f32; 3]; L] {
+pub(crate) fn raw_colours_scalar<const L: usize>(
+    n: usize,
+    coeffs: [&[f32]; L],
+    basis: &[[f32; 16]; L],
+) -> [[f32; 3]; L] {
     for c in &coeffs {
         assert!(c.len() >= 3 * n, "need 3·(degree + 1)² coefficients");
     }
@@ -404,7 +408,7 @@ fn raw_colours_scalar<const L: usize>(n: usize, coeffs: [&[f32]; L], basis: &[[f
 /// x86-64, which also uses it for the basis functions left over after its groups of four):
 /// adds `Yₖ·g_c` to `d_coeffs[3k + c]` and sets `d_basis[k] = (g₀·coeffs[3k] +
 /// g₁·coeffs[3k + 1]) + g₂·coeffs[3k + 2]` for `k < n`.
-pub(super) fn coefficient_pass_scalar(
+pub(crate) fn coefficient_pass_scalar(
     n: usize,
     coeffs: &[f32],
     basis: &[f32],
@@ -451,103 +455,4 @@ fn colour_vjp(
     let d_dir = sh_basis_vjp(degree, dir, &d_basis);
     // dir = d/|d|: ∂dir/∂d = (I − dir dirᵀ)/|d|.
     (d_dir - dir * dir.dot(d_dir)) / len
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::rng::Rng;
-
-    /// A float drawn to exercise rounding and the special values: mostly ordinary magnitudes of
-    /// both signs, sometimes ±0, a subnormal, a huge value, ±∞ or a NaN with a payload.
-    fn any_float(rng: &mut Rng) -> f32 {
-        match rng.below(24) {
-            0 => -0.0,
-            1 => 0.0,
-            2 => f32::from_bits(0x0000_0123 | (rng.below(2) as u32) << 31),
-            3 => 3.0e38 * if rng.below(2) == 0 { 1.0 } else { -1.0 },
-            4 => f32::INFINITY,
-            5 => f32::NEG_INFINITY,
-            6 => f32::from_bits(0x7fc0_0000 | rng.below(1 << 22) as u32 | (rng.below(2) as u32) << 31),
-            _ => rng.range(-3.0, 3.0) * 10f32.powi(rng.below(7) as i32 - 3),
-        }
-    }
-
-    /// The bits of each float, every NaN mapped to one value: Rust leaves the payload of a NaN
-    /// result unspecified (the compiler may swap the operands of a commutative operation), so
-    /// only "is NaN" is comparable there.
-    fn bits(v: &[f32]) -> Vec<u32> {
-        v.iter()
-            .map(|x| if x.is_nan() { u32::MAX } else { x.to_bits() })
-            .collect()
-    }
-
-    /// The dispatched coefficient pass (SSE on x86-64) equals the scalar reference bit for bit,
-    /// for every count of basis functions (whole groups of four and remainders), on ordinary
-    /// and special inputs, and reads or writes nothing past `3n` floats.
-    #[test]
-    fn coefficient_pass_equals_the_scalar_reference_bit_for_bit() {
-        let seed = 0x5eed_c0ef;
-        let mut rng = Rng::new(seed);
-        for case in 0..4000 {
-            let n = case % 17;
-            let coeffs: Vec<f32> = (0..3 * n).map(|_| any_float(&mut rng)).collect();
-            let basis: [f32; 16] = std::array::from_fn(|_| any_float(&mut rng));
-            let g = [0; 3].map(|_| any_float(&mut rng));
-            let start: Vec<f32> = (0..3 * n + 5).map(|_| any_float(&mut rng)).collect();
-            let (mut d_fast, mut d_ref) = (start.clone(), start.clone());
-            let (mut db_fast, mut db_ref) = ([7.0f32; 16], [7.0f32; 16]);
-            coefficient_pass(n, &coeffs, &basis, g, &mut d_fast, &mut db_fast);
-            coefficient_pass_scalar(n, &coeffs, &basis, g, &mut d_ref, &mut db_ref);
-            assert_eq!(
-                bits(&d_fast),
-                bits(&d_ref),
-                "d_coeffs, case {case}, n = {n}, seed {seed:#x}"
-            );
-            assert_eq!(
-                bits(&db_fast),
-                bits(&db_ref),
-                "d_basis, case {case}, n = {n}, seed {seed:#x}"
-            );
-            assert_eq!(bits(&d_fast[3 * n..]), bits(&start[3 * n..]), "past 3n, case {case}");
-        }
-    }
-
-    /// More basis functions than the 16 of degree 3 are refused before any read (the SSE pass
-    /// loads four basis values at a time from the 16-value array).
-    #[test]
-    #[should_panic(expected = "at most 16 basis functions")]
-    fn coefficient_pass_refuses_more_than_16_basis_functions() {
-        let (coeffs, mut d) = ([0.5f32; 60], [0.0f32; 60]);
-        coefficient_pass(20, &coeffs, &[0.25; 16], [1.0; 3], &mut d, &mut [0.0; 16]);
-    }
-
-    /// The dispatched batched raw colours (SSE on x86-64) equal the scalar reference bit for
-    /// bit, for every count of basis functions, batch sizes 1 and 4, coefficient slices of
-    /// exactly `3n` floats (the last row cannot be read four floats wide) and longer ones.
-    #[test]
-    fn raw_colours_equal_the_scalar_reference_bit_for_bit() {
-        let seed = 0x5eed_c010;
-        let mut rng = Rng::new(seed);
-        for case in 0..4000 {
-            let n = case % 17;
-            let extra = rng.below(3) as usize;
-            let store: Vec<Vec<f32>> = (0..4)
-                .map(|_| (0..3 * n + extra).map(|_| any_float(&mut rng)).collect())
-                .collect();
-            let basis: [[f32; 16]; 4] = std::array::from_fn(|_| std::array::from_fn(|_| any_float(&mut rng)));
-            let coeffs = [0, 1, 2, 3].map(|l| store[l].as_slice());
-            let fast = raw_colours(n, coeffs, &basis);
-            let reference = raw_colours_scalar(n, coeffs, &basis);
-            for l in 0..4 {
-                assert_eq!(
-                    bits(&fast[l]),
-                    bits(&reference[l]),
-                    "case {case}, n = {n}, lane {l}, seed {seed:#x}"
-                );
-            }
-            let one = raw_colours(n, [coeffs[2]], &[basis[2]]);
-            assert_eq!(bits(&one[0]), bits(&reference[2]), "a batch of one, case {case}");
-        }
-    }
 }

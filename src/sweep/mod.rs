@@ -37,9 +37,9 @@
 //! ```
 
 mod grid;
-mod output;
+pub(crate) mod output;
 mod pareto;
-mod plot;
+pub(crate) mod plot;
 mod runner;
 
 pub use grid::{AXES, Setting, SweepGrid, parse_list};
@@ -176,121 +176,4 @@ pub fn run_grid(
         }
     }
     Ok(outcome)
-}
-
-#[cfg(test)]
-pub(crate) mod fake {
-    //! A deterministic stand-in for `bbsplat train` used by the tests of this module.
-    use super::*;
-    use crate::report::{CurvePoint, SUMMARY_VERSION};
-    use crate::train::TextureMode;
-
-    /// Rounds to 1e-6 so that values survive serde_json's (not exactly round-tripping) float
-    /// parser bit for bit.
-    fn r6(x: f64) -> f64 {
-        (x * 1e6).round() / 1e6
-    }
-
-    /// More billboards and iterations: slower, bigger and better, with diminishing returns;
-    /// `gaussian` mode is faster, smaller and 1.5 dB worse. Model size does not depend on the
-    /// iterations.
-    pub fn summary(s: &Setting) -> TrainSummary {
-        let it = s.iterations.unwrap_or(1000);
-        let bb = s.billboards.unwrap_or(1000);
-        let ts = s.texture_size.unwrap_or(16);
-        let gaussian = s.texture_mode == Some(TextureMode::Gaussian);
-        let texels = if gaussian { 0 } else { ts * ts * 4 };
-        let seconds = it as f64 * bb as f64 * (1.0 + texels as f64 / 256.0) * 1e-6;
-        let psnr = 25.0 + 2.0 * (bb as f64 / 500.0).log2() + 1.5 * (it as f64 / 250.0).log2()
-            - if gaussian { 1.5 } else { 0.0 }
-            + 0.01 * s.seed.unwrap_or(0) as f64;
-        let curve = (1..=4)
-            .map(|k| CurvePoint {
-                step: it * k / 4,
-                seconds: r6(seconds * k as f64 / 4.0),
-                psnr: r6(psnr - 4.0 / k as f64 + 1.0),
-                ssim: 0.5 + 0.1 * k as f64,
-            })
-            .collect();
-        TrainSummary {
-            version: SUMMARY_VERSION,
-            scene: "fake".into(),
-            iterations: it,
-            billboards: bb,
-            alive: bb * 9 / 10,
-            texture_size: ts,
-            sh_degree: 3,
-            resolution: [s.max_width.unwrap_or(200), s.max_width.unwrap_or(200) * 3 / 4],
-            train_seconds: r6(seconds),
-            render_ms_per_frame: bb as f64 * 1e-3,
-            test_psnr: r6(psnr),
-            test_ssim: 0.9,
-            test_views: 4,
-            model_bytes: (bb * (64 + 4 * (48 + texels))) as u64,
-            peak_rss_bytes: 100_000_000 + bb as u64 * 1000,
-            seed: s.seed.unwrap_or(0),
-            threads: 2,
-            curve,
-            command: Vec::new(),
-        }
-    }
-
-    /// A small grid of 2 × 2 × 2 settings.
-    pub fn grid() -> SweepGrid {
-        let mut g = SweepGrid::default();
-        g.set_axis("iterations", "500,2000").unwrap();
-        g.set_axis("billboards", "1000,3000").unwrap();
-        g.set_axis("texture-mode", "full,gaussian").unwrap();
-        g
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn run_grid_collects_in_order_and_keeps_going_after_failures() {
-        let grid = fake::grid();
-        let mut calls = Vec::new();
-        let outcome = run_grid(&grid, |s| {
-            calls.push(s.slug());
-            if s.billboards == Some(3000) && s.iterations == Some(2000) {
-                Err(SweepError::Other("out of memory".into()))
-            } else {
-                Ok(fake::summary(s))
-            }
-        })
-        .unwrap();
-        assert_eq!(calls.len(), 8);
-        assert_eq!(outcome.records.len(), 6);
-        assert_eq!(outcome.failures.len(), 2);
-        let expected: Vec<String> = grid
-            .settings()
-            .unwrap()
-            .iter()
-            .filter(|s| !(s.billboards == Some(3000) && s.iterations == Some(2000)))
-            .map(Setting::slug)
-            .collect();
-        let got: Vec<String> = outcome.records.iter().map(|r| r.setting.slug()).collect();
-        assert_eq!(got, expected);
-        assert_eq!(outcome.failures[0].error.to_string(), "out of memory");
-    }
-
-    #[test]
-    fn run_grid_refuses_an_invalid_grid_without_running() {
-        let grid = SweepGrid {
-            billboards: vec![0],
-            ..Default::default()
-        };
-        let mut ran = false;
-        assert!(
-            run_grid(&grid, |s| {
-                ran = true;
-                Ok(fake::summary(s))
-            })
-            .is_err()
-        );
-        assert!(!ran);
-    }
 }

@@ -45,7 +45,7 @@ pub(crate) fn size_cost(bytes: u64) -> f64 {
 }
 
 /// Pareto flags per record: (PSNR vs training time, PSNR vs model size).
-fn fronts(records: &[SweepRecord]) -> (Vec<bool>, Vec<bool>) {
+pub(crate) fn fronts(records: &[SweepRecord]) -> (Vec<bool>, Vec<bool>) {
     let flags = |points: Vec<(f64, f64)>| {
         let mut on = vec![false; points.len()];
         for i in pareto_front(&points) {
@@ -128,7 +128,7 @@ fn mb(bytes: u64, decimals: usize) -> String {
     }
 }
 
-fn csv_field(f: &str) -> String {
+pub(crate) fn csv_field(f: &str) -> String {
     if f.contains([',', '"', '\n', '\r']) {
         format!("\"{}\"", f.replace('"', "\"\""))
     } else {
@@ -263,143 +263,4 @@ pub fn write_outputs(dir: &Path, records: &[SweepRecord]) -> Result<SweepFiles, 
         with_path(&files.curves, plot_curves_svg(records))?.as_bytes(),
     )?;
     Ok(files)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::report::TrainSummary;
-    use crate::sweep::{Setting, fake, run_grid};
-
-    fn records() -> Vec<SweepRecord> {
-        run_grid(&fake::grid(), |s| Ok(fake::summary(s))).unwrap().records
-    }
-
-    fn temp_dir(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("bbsplat-sweep-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        dir
-    }
-
-    #[test]
-    fn csv_has_one_parsable_row_per_record_and_marks_fronts() {
-        let recs = records();
-        let csv = csv_table(&recs);
-        let lines: Vec<&str> = csv.lines().collect();
-        assert_eq!(lines[0], CSV_HEADER);
-        assert_eq!(lines.len(), recs.len() + 1);
-        let header: Vec<&str> = CSV_HEADER.split(',').collect();
-        let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
-        let time_points: Vec<(f64, f64)> = recs
-            .iter()
-            .map(|r| (r.summary.train_seconds, r.summary.test_psnr))
-            .collect();
-        let front = pareto_front(&time_points);
-        for (i, (line, r)) in lines[1..].iter().zip(&recs).enumerate() {
-            let f: Vec<&str> = line.split(',').collect();
-            assert_eq!(f.len(), header.len());
-            assert_eq!(f[col("slug")], r.setting.slug());
-            assert_eq!(f[col("test_psnr")].parse::<f64>().unwrap(), r.summary.test_psnr);
-            assert_eq!(f[col("model_bytes")].parse::<u64>().unwrap(), r.summary.model_bytes);
-            assert_eq!(f[col("texture_mode")], r.setting.texture_mode.unwrap().as_str());
-            assert_eq!(f[col("max_width")], "");
-            assert_eq!(f[col("pareto_time")] == "1", front.contains(&i));
-        }
-    }
-
-    #[test]
-    fn csv_quotes_fields_that_need_it() {
-        assert_eq!(csv_field("a,b"), "\"a,b\"");
-        assert_eq!(csv_field("say \"hi\""), "\"say \"\"hi\"\"\"");
-        assert_eq!(csv_field("plain"), "plain");
-    }
-
-    #[test]
-    fn markdown_table_rows_and_pareto_column() {
-        let recs = records();
-        let table = markdown_table(&recs);
-        let lines: Vec<&str> = table.lines().collect();
-        assert_eq!(lines.len(), recs.len() + 2);
-        // Every row has the header's column count.
-        let cols = lines[0].matches('|').count();
-        assert!(lines.iter().all(|l| l.matches('|').count() == cols));
-        // The fastest run is on the time front; it has the smallest model, but so has the longer
-        // run with the same budget, which is better: only that one is on the size front.
-        let row = |slug: &str| *lines.iter().find(|l| l.starts_with(&format!("| {slug} |"))).unwrap();
-        assert!(row("it500_bb1000_gaussian").ends_with("| time |"), "{table}");
-        assert!(row("it2000_bb1000_gaussian").ends_with("size |"), "{table}");
-        // A run that is slower and worse than another is not on the time front.
-        let get = |slug: &str| &recs.iter().find(|r| r.setting.slug() == slug).unwrap().summary;
-        let (slow, fast) = (get("it2000_bb1000_full"), get("it500_bb3000_full"));
-        assert!(fast.train_seconds < slow.train_seconds && fast.test_psnr > slow.test_psnr);
-        assert!(!row("it2000_bb1000_full").contains("time"), "{table}");
-        // PSNR with two decimals, model size in MB.
-        let r = get("it2000_bb3000_full");
-        assert!(row("it2000_bb3000_full").contains(&format!("| {:.2} |", r.test_psnr)));
-        assert!(row("it2000_bb3000_full").contains(&format!("| {:.2} |", r.model_bytes as f64 / 1e6)));
-    }
-
-    #[test]
-    fn unknown_model_size_is_on_no_size_front() {
-        let mut recs = records();
-        // The best run by PSNR saved no model.
-        let best = (0..recs.len())
-            .max_by(|&a, &b| recs[a].summary.test_psnr.total_cmp(&recs[b].summary.test_psnr))
-            .unwrap();
-        recs[best].summary.model_bytes = 0;
-        recs[best].summary.peak_rss_bytes = 0;
-        let (time, size) = fronts(&recs);
-        assert!(time[best] && !size[best]);
-        let table = markdown_table(&recs);
-        let row = table.lines().nth(best + 2).unwrap();
-        assert!(row.ends_with("| n/a | n/a | time |"), "{row}");
-    }
-
-    #[test]
-    fn write_outputs_writes_every_file_atomically() {
-        let dir = temp_dir("outputs");
-        let recs = records();
-        let files = write_outputs(&dir.join("report"), &recs).unwrap();
-        for p in [
-            &files.csv,
-            &files.json,
-            &files.markdown,
-            &files.psnr_vs_time,
-            &files.psnr_vs_size,
-            &files.curves,
-        ] {
-            assert!(std::fs::metadata(p).unwrap().len() > 100, "{}", p.display());
-        }
-        let leftovers: Vec<_> = std::fs::read_dir(dir.join("report"))
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .filter(|n| n.ends_with(".tmp"))
-            .collect();
-        assert!(leftovers.is_empty(), "{leftovers:?}");
-        assert_eq!(std::fs::read_to_string(&files.csv).unwrap(), csv_table(&recs));
-        assert_eq!(std::fs::read_to_string(&files.markdown).unwrap(), markdown_table(&recs));
-        // The JSON reads back into the same records.
-        let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&files.json).unwrap()).unwrap();
-        let rows = v["records"].as_array().unwrap();
-        assert_eq!(rows.len(), recs.len());
-        for (row, r) in rows.iter().zip(&recs) {
-            assert_eq!(row["slug"], r.setting.slug());
-            let setting: Setting = serde_json::from_value(row["setting"].clone()).unwrap();
-            let summary: TrainSummary = serde_json::from_value(row["summary"].clone()).unwrap();
-            assert_eq!(&setting, &r.setting);
-            assert_eq!(&summary, &r.summary);
-        }
-        std::fs::remove_dir_all(&dir).unwrap();
-    }
-
-    #[test]
-    fn write_errors_name_the_file() {
-        let dir = temp_dir("blocked");
-        std::fs::create_dir_all(&dir).unwrap();
-        // A directory where the CSV's temp file should go makes the write fail.
-        std::fs::create_dir_all(dir.join("sweep.csv.tmp")).unwrap();
-        let err = write_outputs(&dir, &records()).unwrap_err().to_string();
-        assert!(err.contains("sweep.csv.tmp"), "{err}");
-        std::fs::remove_dir_all(&dir).unwrap();
-    }
 }

@@ -17,7 +17,7 @@ fn plot_error(name: &str, e: Box<dyn std::error::Error>) -> SweepError {
 
 /// `lo..hi` covering the finite values with 5 % padding; `0..1` when there are none, `±1` around
 /// a single value.
-fn padded_range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
+pub(crate) fn padded_range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
     let (lo, hi) = values
         .filter(|v| v.is_finite())
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
@@ -171,78 +171,4 @@ pub fn plot_curves_svg(records: &[SweepRecord]) -> Result<String, SweepError> {
         Ok(svg)
     };
     draw().map_err(|e| plot_error("curves.svg", e))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::sweep::{fake, run_grid};
-
-    fn records() -> Vec<SweepRecord> {
-        run_grid(&fake::grid(), |s| Ok(fake::summary(s))).unwrap().records
-    }
-
-    #[test]
-    fn padded_range_handles_degenerate_input() {
-        assert_eq!(padded_range([].into_iter()), 0.0..1.0);
-        assert_eq!(padded_range([f64::NAN, f64::INFINITY].into_iter()), 0.0..1.0);
-        assert_eq!(padded_range([3.0].into_iter()), 2.0..4.0);
-        let r = padded_range([0.0, 10.0, f64::NAN].into_iter());
-        assert!((r.start + 0.5).abs() < 1e-12 && (r.end - 10.5).abs() < 1e-12);
-    }
-
-    #[test]
-    fn scatter_marks_every_run_and_the_front() {
-        let recs = records();
-        let svg = plot_psnr_vs_time_svg(&recs).unwrap();
-        assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
-        assert!(svg.contains("training time (s)") && svg.contains("Pareto front"));
-        let points: Vec<(f64, f64)> = recs
-            .iter()
-            .map(|r| (r.summary.train_seconds, r.summary.test_psnr))
-            .collect();
-        let front = pareto_front(&points).len();
-        // One hollow circle per run plus the legend's, one filled circle per front point.
-        assert_eq!(svg.matches("<circle").count(), recs.len() + 1 + front);
-        assert!(front >= 2 && front < recs.len());
-        // Front points are labelled with their slugs, the others are not.
-        for (i, r) in recs.iter().enumerate() {
-            let on = pareto_front(&points).contains(&i);
-            assert_eq!(
-                svg.contains(&format!("\n{}\n", r.setting.slug())),
-                on,
-                "{}",
-                r.setting.slug()
-            );
-        }
-        let svg = plot_psnr_vs_size_svg(&recs).unwrap();
-        assert!(svg.contains("model size (MB)"));
-    }
-
-    #[test]
-    fn curves_have_one_line_per_run_and_skip_nan() {
-        let mut recs = records();
-        recs[0].summary.curve[1].psnr = f64::NAN;
-        recs[1].summary.curve.clear();
-        let svg = plot_curves_svg(&recs).unwrap();
-        // Run 1 has no curve: not in the legend.
-        assert!(!svg.contains(&recs[1].setting.slug()));
-        for r in recs.iter().skip(2) {
-            assert!(svg.contains(&r.setting.slug()));
-        }
-        // Four points per curve, one NaN left out.
-        assert_eq!(svg.matches("<circle").count(), 4 * (recs.len() - 1) - 1);
-        assert!(!svg.contains("NaN"));
-    }
-
-    #[test]
-    fn empty_sweeps_still_plot() {
-        for svg in [
-            plot_psnr_vs_time_svg(&[]).unwrap(),
-            plot_psnr_vs_size_svg(&[]).unwrap(),
-            plot_curves_svg(&[]).unwrap(),
-        ] {
-            assert!(svg.starts_with("<svg"));
-        }
-    }
 }

@@ -5,7 +5,9 @@ use bbsplat::init::fps::{
     DENSE_CHUNK, FpsError, PARALLEL_MIN_POINTS, farthest_point_sampling, farthest_point_sampling_dense,
 };
 use bbsplat::rng::Rng;
+use bbsplat::strategies::box_cloud as cloud;
 use bbsplat::strategies::{point_cloud, seeded_config};
+use bbsplat::testing_internals::fps::{better, bucket_lower_bound, spread_bits, squared, to_f64};
 use glam::Vec3;
 use proptest::prelude::*;
 
@@ -252,4 +254,78 @@ proptest! {
         }
         prop_assert_eq!(farthest_point_sampling(&points, k).unwrap(), farthest_point_sampling_dense(&points, k).unwrap());
     }
+}
+
+#[test]
+fn better_is_a_total_order() {
+    let cands = [(1.0, 3), (1.0, 2), (2.0, 9), (f64::NEG_INFINITY, usize::MAX)];
+    for &a in &cands {
+        for &b in &cands {
+            assert_eq!(better(a, b), better(b, a));
+        }
+    }
+    assert_eq!(better((1.0, 3), (1.0, 2)), (1.0, 2));
+}
+
+#[test]
+fn spread_bits_interleaves() {
+    assert_eq!(spread_bits(0b111), 0b1001001);
+    assert_eq!(spread_bits(0x1f_ffff).count_ones(), 21);
+    assert_eq!(spread_bits(1 << 20), 1 << 60);
+}
+
+#[test]
+fn bound_never_exceeds_a_point_distance() {
+    let mut rng = Rng::new(8);
+    for _ in 0..200 {
+        let pts: Vec<[f64; 3]> = (0..20)
+            .map(|_| to_f64(Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)) * 1e3))
+            .collect();
+        let order: Vec<usize> = (0..20).collect();
+        let c = to_f64(Vec3::new(rng.range(-3.0, 3.0), rng.range(-3.0, 3.0), rng.range(-3.0, 3.0)) * 1e3);
+        let lb = bucket_lower_bound(&pts, &order, c);
+        for p in &pts {
+            assert!(lb <= squared(p[0] - c[0], p[1] - c[1], p[2] - c[2]));
+        }
+    }
+}
+
+#[test]
+fn pruned_matches_dense() {
+    let mut clouds = vec![
+        cloud(20_000, 1, [10.0, 10.0, 10.0]),
+        cloud(5_000, 2, [10.0, 10.0, 0.0]), // planar
+        cloud(3_000, 3, [100.0, 0.0, 0.0]), // a line
+    ];
+    // Far outliers stretch the Morton box.
+    let mut outliers = cloud(10_000, 4, [1.0, 1.0, 1.0]);
+    outliers.extend(cloud(30, 5, [1e5, 1e5, 1e5]));
+    clouds.push(outliers);
+    // A lattice: exact ties everywhere.
+    let mut lattice = Vec::new();
+    for z in 0..20 {
+        for y in 0..20 {
+            for x in 0..20 {
+                lattice.push(Vec3::new(x as f32, y as f32, z as f32));
+            }
+        }
+    }
+    clouds.push(lattice);
+    // Heavy duplication: 100 distinct positions repeated.
+    let base = cloud(100, 6, [5.0, 5.0, 5.0]);
+    clouds.push((0..4_000).map(|i| base[(i * 37) % 100]).collect());
+    for (c, pts) in clouds.iter().enumerate() {
+        for k in [2, 150, 700.min(pts.len() - 1)] {
+            let dense = farthest_point_sampling_dense(pts, k).unwrap();
+            let pruned = farthest_point_sampling(pts, k).unwrap();
+            assert_eq!(pruned, dense, "cloud {c}, k = {k}");
+        }
+    }
+    // Through the duplicate phase to the end.
+    let dup = &clouds[5];
+    let all = dup.len() - 1;
+    assert_eq!(
+        farthest_point_sampling(dup, all).unwrap(),
+        farthest_point_sampling_dense(dup, all).unwrap()
+    );
 }

@@ -8,11 +8,12 @@ use bbsplat::gradcheck::{
 use bbsplat::loss::l1::{l1, l1_vjp};
 use bbsplat::loss::psnr::{psnr, psnr_u8, quantize_u8};
 use bbsplat::loss::ssim::{
-    C1, C2, Padding, gaussian_window, map_size, ssim, ssim_map, ssim_map_vjp, ssim_vjp, ssim_with_grad,
+    C1, C2, Padding, WINDOW_SIZE, gaussian_window, map_size, ssim, ssim_map, ssim_map_vjp, ssim_vjp, ssim_with_grad,
 };
 use bbsplat::loss::{LossError, TrainingLoss, training_loss};
 use bbsplat::rng::Rng;
 use bbsplat::strategies::seeded_config;
+use bbsplat::testing_internals::ssim::{map_len_and_sum_grad, ssim_partials, terms};
 use proptest::prelude::*;
 use proptest::test_runner::TestRunner;
 use std::sync::Mutex;
@@ -769,4 +770,86 @@ fn training_loss_lambda_extremes() {
         pure_ssim.d_render,
         ssim_vjp(&render, &gt, w, h, 3, Padding::Valid, -1.0).unwrap()
     );
+}
+
+fn image(n: usize, seed: u64) -> Vec<f32> {
+    let mut rng = Rng::new(seed);
+    (0..n).map(|_| rng.range(0.05, 0.95)).collect()
+}
+
+/// FD check of `value_and_grad` with the given partials against the correct forward.
+fn fd_check<P>(partials: P, padding: Padding, seed: u64) -> GradReport
+where
+    P: Fn(f64, f64, f64, f64, f64) -> [f64; 4] + Sync,
+{
+    let (w, h, c) = (13, 12, 2);
+    let a = image(w * h * c, seed);
+    let b = image(w * h * c, seed + 100);
+    let (map_len, grad) = map_len_and_sum_grad(&a, &b, w, h, c, padding, partials).unwrap();
+    // The loss is the sum of the map (M·SSIM) so that gradients are O(1).
+    let m = map_len as f64;
+    let analytic: Vec<f64> = grad.iter().map(|&g| g as f64).collect();
+    let idx: Vec<usize> = (0..a.len()).collect();
+    let numeric = numerical_gradient(
+        |x| ssim(x, &b, w, h, c, padding).unwrap() * m,
+        &a,
+        &idx,
+        StepRule::default(),
+    );
+    compare(&analytic, &numeric, &GradTolerance::default())
+}
+
+#[test]
+fn correct_partials_pass() {
+    for padding in [Padding::Same, Padding::Valid] {
+        let r = fd_check(ssim_partials, padding, 1);
+        assert!(r.passed(), "{padding:?}: {r}");
+    }
+}
+
+#[test]
+fn dropping_the_covariance_term_fails() {
+    // Forget that σab = Sab − μa·μb depends on μa (the −2μb·A1/D part of ∂S/∂μa).
+    let broken = |ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64| {
+        let [s, d_mu, d_saa, d_sab] = ssim_partials(ma, mb, saa, sbb, sab);
+        let (a1, _, b1, b2) = terms(ma, mb, saa, sbb, sab);
+        [s, d_mu + 2.0 * mb * a1 / (b1 * b2), d_saa, d_sab]
+    };
+    for padding in [Padding::Same, Padding::Valid] {
+        let r = fd_check(broken, padding, 2);
+        assert!(!r.passed(), "{padding:?}: {r}");
+    }
+}
+
+#[test]
+fn dropping_the_sab_gradient_fails() {
+    let broken = |ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64| {
+        let [s, d_mu, d_saa, _] = ssim_partials(ma, mb, saa, sbb, sab);
+        [s, d_mu, d_saa, 0.0]
+    };
+    let r = fd_check(broken, Padding::Same, 3);
+    assert!(!r.passed(), "{r}");
+}
+
+#[test]
+fn one_percent_scale_fails() {
+    let broken = |ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64| {
+        let [s, d_mu, d_saa, d_sab] = ssim_partials(ma, mb, saa, sbb, sab);
+        [s, 1.01 * d_mu, 1.01 * d_saa, 1.01 * d_sab]
+    };
+    for seed in 0..4 {
+        let r = fd_check(broken, Padding::Same, 10 + seed);
+        assert!(!r.passed(), "seed {seed}: {r}");
+    }
+}
+
+#[test]
+fn window_is_normalised_and_symmetric() {
+    let g = gaussian_window();
+    let sum: f64 = g.iter().sum();
+    assert!((sum - 1.0).abs() < 1e-15, "{sum}");
+    for k in 0..WINDOW_SIZE {
+        assert_eq!(g[k], g[WINDOW_SIZE - 1 - k]);
+    }
+    assert!(g[5] > g[4] && g[0] > 0.0);
 }

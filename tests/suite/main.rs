@@ -4,30 +4,46 @@
 #![allow(clippy::needless_range_loop)]
 
 mod bench_scene;
+mod camera;
 #[cfg(feature = "cli")]
 mod cli;
 #[cfg(feature = "cli")]
 mod cli_export;
 #[cfg(feature = "cli")]
 mod cli_reliability;
+mod demo;
+mod eval;
 mod export;
 mod export_blender;
 mod export_browser;
 mod export_fixtures;
 mod external_tool;
 mod f64_reference;
+mod gradcheck;
 mod init_fibonacci;
 mod init_fps;
+mod init_hull;
 mod init_scene;
 mod loss_ssim;
+mod memory;
 mod mesh;
+mod model;
 mod model_file;
+mod model_file_npz;
+mod model_file_ply;
 mod model_knn;
 mod raster;
+mod raster_backward;
+mod raster_binning;
+mod raster_preprocess;
+mod raster_workload;
+mod report;
+mod rng;
 mod scene_bad_input;
 mod scene_colmap_roundtrip;
 mod scene_distortion;
 mod scene_fuzz;
+mod scene_image_io;
 mod scene_load;
 mod scene_real_data;
 #[allow(dead_code)]
@@ -39,10 +55,15 @@ mod stage_ray_plane;
 mod stage_rotation;
 mod stage_sh;
 mod stage_splat_transform;
+mod strategies;
+mod sweep;
+mod train_adam;
 mod train_checkpoint;
 mod train_demo;
+mod train_finite;
 mod train_grow;
 mod train_regularise;
 mod train_relocate;
 mod train_run;
+mod train_texture_step;
 mod train_time_budget;

@@ -3,10 +3,13 @@
 //! Run with `--nocapture` to see the bytes-per-billboard report.
 
 use bbsplat::model::RawBillboards;
+use bbsplat::model::{alpha_asset, sigmoid};
 use bbsplat::model_file::{
-    ALPHA_FILE, COLOUR_FILE, META_FILE, ModelFileError, ModelMeta, PLY_FILE, load_model, save_model,
+    ALPHA_FILE, COLOUR_FILE, META_FILE, ModelFileError, ModelMeta, PLY_FILE, decode_alpha, decode_colour, encode_alpha,
+    encode_colour, load_model, save_model,
 };
 use bbsplat::rng::Rng;
+use bbsplat::testing_internals::model_file::stable_logit;
 use glam::{Vec2, Vec3};
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -510,4 +513,37 @@ fn a_texture_larger_than_the_loader_reads_is_never_saved() {
     );
     assert!(!dir.join("model").exists());
     fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn quantisation_is_the_reference_one() {
+    // Masked texels (G = 0, alpha 0) store 128 (127.5 rounds half to even).
+    assert_eq!(encode_alpha(0.0, 0.0), 128);
+    assert_eq!(encode_alpha(1.0, 0.0), 255);
+    assert_eq!(encode_alpha(0.0, 1.0), 0);
+    assert_eq!(encode_colour(0.5), 128);
+    assert_eq!(encode_colour(0.1), 26);
+    assert_eq!(decode_alpha(0, 0.5), 0.0);
+    assert_eq!(decode_alpha(255, 0.5), 1.0);
+    assert!((decode_alpha(128, 0.0) - 1.0 / 255.0).abs() < 1e-7);
+}
+
+#[test]
+fn stable_logit_reencodes_every_byte() {
+    for g in alpha_asset(16) {
+        for q in 0..=255u8 {
+            let a = decode_alpha(q, g);
+            // Only bytes a real alpha in [0, 1] can produce need to be stable.
+            let reachable = (0..=1000).any(|k| encode_alpha(k as f32 / 1000.0, g) == q);
+            let l = stable_logit(a, q, |x| encode_alpha(x, g));
+            if reachable {
+                assert_eq!(encode_alpha(sigmoid(l), g), q, "g {g}, q {q}");
+            }
+        }
+    }
+    for q in 0..=255u8 {
+        let l = stable_logit(decode_colour(q), q, encode_colour);
+        assert_eq!(encode_colour(sigmoid(l)), q);
+        assert!(l.abs() < 14.0);
+    }
 }

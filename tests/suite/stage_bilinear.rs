@@ -566,3 +566,53 @@ fn measure_tolerances() {
     }
     println!("bilinear, probe atol 1e-5 rtol 1e-4: {worst:?}");
 }
+
+fn planes(rgba: &[[f32; 4]]) -> Vec<f32> {
+    (0..4).flat_map(|c| rgba.iter().map(move |t| t[c])).collect()
+}
+
+/// RGBA sampling equals planar sampling channel by channel, bit for bit, and its VJP equals
+/// the dense planar VJP (texel gradients exactly, `(u, v)` up to the order of additions).
+#[test]
+fn rgba_matches_the_planar_sample_and_vjp() {
+    let ts = 5;
+    let rgba: Vec<[f32; 4]> = (0..ts * ts)
+        .map(|i| {
+            let x = i as f32;
+            [
+                (x * 0.61).cos().abs(),
+                (x * 0.23).sin().abs(),
+                (x * 0.91).cos().abs(),
+                (x * 0.37).sin().abs(),
+            ]
+        })
+        .collect();
+    let planar = planes(&rgba);
+    for &(u, v) in &[
+        (0.13f32, -0.42f32),
+        (-1.05, 0.3),
+        (0.999, 1.02),
+        (0.5, 0.5),
+        (1.1, -1.1),
+    ] {
+        let taps = taps(u, v, ts).unwrap();
+        let mut want = [0.0f32; 4];
+        taps.sample(&planar, 4, &mut want);
+        assert_eq!(
+            taps.sample_rgba(&rgba).map(f32::to_bits),
+            want.map(f32::to_bits),
+            "({u}, {v})"
+        );
+        let d = [0.2f32, -0.9, 0.4, 0.7];
+        let mut dense = vec![0.0; 4 * ts * ts];
+        let (ud, vd) = taps.accumulate_vjp(&planar, 4, &d, &mut dense);
+        let mut sparse = vec![0.0; 4 * ts * ts];
+        let (du, dv) = taps.vjp_rgba(&rgba, d, |i, g| {
+            for c in 0..4 {
+                sparse[c * ts * ts + i as usize] += g[c];
+            }
+        });
+        assert!((du - ud).abs() < 1e-5 && (dv - vd).abs() < 1e-5, "({u}, {v})");
+        assert_eq!(sparse, dense);
+    }
+}

@@ -8,6 +8,7 @@ use bbsplat::gradcheck::{GradReport, GradTolerance, StepRule, check_vjp};
 use bbsplat::stages::rotation::{QUAT_NORM_SQ_MIN, quat_to_rotation, quat_to_rotation_vjp};
 use bbsplat::strategies::{quaternion, seeded_config, unit_quaternion};
 use glam::Mat3;
+use glam::Vec3;
 use proptest::prelude::*;
 use proptest::strategy::ValueTree;
 use proptest::test_runner::{RngSeed, TestRunner};
@@ -295,4 +296,19 @@ fn measure_tolerances() {
              |bias| {bias:.3e}; orthonormality {ortho:.3e}, |det-1| {det:.3e}"
         );
     }
+}
+
+#[test]
+fn identity_quaternion_is_identity() {
+    assert_eq!(quat_to_rotation([3.0, 0.0, 0.0, 0.0]), Mat3::IDENTITY);
+}
+
+#[test]
+fn threshold_is_a_clean_switch() {
+    let below = (QUAT_NORM_SQ_MIN * 0.9).sqrt();
+    let above = (QUAT_NORM_SQ_MIN * 1.1).sqrt();
+    assert_eq!(quat_to_rotation([0.0, below, 0.0, 0.0]), Mat3::IDENTITY);
+    let r = quat_to_rotation([0.0, above, 0.0, 0.0]);
+    // 180° about x.
+    assert!((r.y_axis + Vec3::Y).length() < 1e-6 && (r.z_axis + Vec3::Z).length() < 1e-6);
 }

@@ -3,6 +3,8 @@
 
 use bbsplat::model::{RawBillboards, sigmoid};
 use bbsplat::raster::SH_FLOATS;
+use bbsplat::rng::Rng;
+use bbsplat::train::relocate::{plan_relocation, split_alpha_logit};
 use bbsplat::train::{TextureMode, TrainConfig, Trainer, group};
 use glam::Vec3;
 
@@ -201,4 +203,43 @@ fn relocation_resets_the_moments_of_sources_and_dead_slots_only() {
     let alpha_group = &tr.adam()[group::ALPHA];
     let untouched = (0..tr.model.len()).find(|i| !reset.contains(i)).unwrap();
     assert!(alpha_group.steps[untouched] > 0, "untouched rows keep their state");
+}
+
+#[test]
+fn split_composes_back_to_the_original_alpha() {
+    for &x in &[-25.0f32, -8.0, -2.0, 0.0, 1.5, 4.0, 9.0] {
+        for copies in 1..6u32 {
+            let a = sigmoid(x) as f64;
+            let a_split = 1.0 / (1.0 + (-(split_alpha_logit(x, copies) as f64)).exp());
+            let recomposed = 1.0 - (1.0 - a_split).powi(copies as i32);
+            assert!(
+                (recomposed - a).abs() <= 1e-6 * a.max(1e-6),
+                "x {x}, copies {copies}: {recomposed} vs {a}"
+            );
+        }
+    }
+    // One copy is the identity (up to f32 rounding).
+    assert!((split_alpha_logit(0.7, 1) - 0.7).abs() < 1e-6);
+}
+
+#[test]
+fn nothing_alive_or_nothing_dead_plans_nothing() {
+    let mut rng = Rng::new(1);
+    assert!(plan_relocation(&[0.0, 0.001], &mut rng).is_empty());
+    assert!(plan_relocation(&[0.3, 0.1], &mut rng).is_empty());
+    assert_eq!(rng, Rng::new(1), "no draw when there is nothing to do");
+}
+
+#[test]
+fn sources_follow_the_weights() {
+    // Alive weights 0.1 and 0.3: source 2 should be drawn about 3 times as often.
+    let mut alpha = vec![0.0f32; 4000];
+    alpha[1] = 0.1;
+    alpha[2] = 0.3;
+    let plan = plan_relocation(&alpha, &mut Rng::new(9));
+    assert_eq!(plan.moves.len(), 3998);
+    let n1 = plan.moves.iter().filter(|m| m.1 == 1).count() as f64;
+    let ratio = (plan.moves.len() as f64 - n1) / n1;
+    assert!((2.6..3.4).contains(&ratio), "{ratio}");
+    assert!(plan.moves.iter().all(|m| m.1 == 1 || m.1 == 2));
 }

@@ -1,0 +1,243 @@
+//! Crate-private helpers reached by the test suite (`tests/suite`) only (feature `testing`).
+//!
+//! The suite checks some internal kernels and their references directly (bit-exactness of a
+//! SIMD path, a private bound, a chunk boundary). These wrappers call the `pub(crate)` items
+//! unchanged, so that the items stay out of the public API. Not for use outside the tests: no
+//! stability promise.
+
+/// Farthest-point sampling internals (`init::fps`).
+pub mod fps {
+    use glam::Vec3;
+
+    /// The better of two candidates (larger squared distance, then lower index).
+    pub fn better(a: (f64, usize), b: (f64, usize)) -> (f64, usize) {
+        crate::init::fps::better(a, b)
+    }
+
+    /// Spreads the low 21 bits of `x` to every third bit (the Morton code's interleave).
+    pub fn spread_bits(x: u64) -> u64 {
+        crate::init::fps::spread_bits(x)
+    }
+
+    /// The point in double precision, as the sampler converts it.
+    pub fn to_f64(p: Vec3) -> [f64; 3] {
+        crate::init::fps::to_f64(p)
+    }
+
+    /// The sampler's squared distance expression.
+    pub fn squared(dx: f64, dy: f64, dz: f64) -> f64 {
+        crate::init::fps::squared(dx, dy, dz)
+    }
+
+    /// The lower bound on the squared distance from `c` to the points `order` of `coords`, as
+    /// the bucket of those points computes it.
+    pub fn bucket_lower_bound(coords: &[[f64; 3]], order: &[usize], c: [f64; 3]) -> f64 {
+        crate::init::fps::Bucket::new(coords, order).lower_bound(c)
+    }
+}
+
+/// Visual hull internals (`init::hull`).
+pub mod hull {
+    /// The square max filter of radius `radius` applied to a `width × height` mask.
+    pub fn dilate_mask(coverage: &[u8], width: usize, height: usize, radius: usize) -> Vec<u8> {
+        crate::init::hull::dilate_mask(coverage, width, height, radius)
+    }
+}
+
+/// SSIM internals (`loss::ssim`).
+pub mod ssim {
+    use crate::loss::LossError;
+    use crate::loss::ssim::{Cotangent, Geometry, Padding};
+
+    /// `(A1, A2, B1, B2)` of the SSIM formula.
+    pub fn terms(ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64) -> (f64, f64, f64, f64) {
+        crate::loss::ssim::terms(ma, mb, saa, sbb, sab)
+    }
+
+    /// `[S, ∂S/∂μa, ∂S/∂Saa, ∂S/∂Sab]` for one map value.
+    pub fn ssim_partials(ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64) -> [f64; 4] {
+        crate::loss::ssim::ssim_partials(ma, mb, saa, sbb, sab)
+    }
+
+    /// The length of the SSIM map and `∂(Σ S over the map)/∂a`, computed by the loss's own
+    /// forward and backward with `partials` in place of [`ssim_partials`] (to inject faults).
+    pub fn map_len_and_sum_grad<P>(
+        a: &[f32],
+        b: &[f32],
+        w: usize,
+        h: usize,
+        c: usize,
+        padding: Padding,
+        partials: P,
+    ) -> Result<(usize, Vec<f32>), LossError>
+    where
+        P: Fn(f64, f64, f64, f64, f64) -> [f64; 4] + Sync,
+    {
+        let geo = Geometry::new(w, h, c, padding)?;
+        let (_, grad) = crate::loss::ssim::value_and_grad(a, b, &geo, Cotangent::Uniform(1.0), partials);
+        Ok((geo.map_len(), grad))
+    }
+}
+
+/// Spherical-harmonics kernels (`stages::sh`): the dispatched ones (SSE on x86-64) and their
+/// scalar references.
+pub mod sh {
+    /// The dispatched coefficient pass of the colour VJP.
+    pub fn coefficient_pass(
+        n: usize,
+        coeffs: &[f32],
+        basis: &[f32; 16],
+        g: [f32; 3],
+        d_coeffs: &mut [f32],
+        d_basis: &mut [f32; 16],
+    ) {
+        crate::stages::sh::coefficient_pass(n, coeffs, basis, g, d_coeffs, d_basis)
+    }
+
+    /// The scalar reference of [`coefficient_pass`].
+    pub fn coefficient_pass_scalar(
+        n: usize,
+        coeffs: &[f32],
+        basis: &[f32; 16],
+        g: [f32; 3],
+        d_coeffs: &mut [f32],
+        d_basis: &mut [f32; 16],
+    ) {
+        crate::stages::sh::coefficient_pass_scalar(n, coeffs, basis, g, d_coeffs, d_basis)
+    }
+
+    /// The dispatched batched raw colours.
+    pub fn raw_colours<const L: usize>(n: usize, coeffs: [&[f32]; L], basis: &[[f32; 16]; L]) -> [[f32; 3]; L] {
+        crate::stages::sh::raw_colours(n, coeffs, basis)
+    }
+
+    /// The scalar reference of [`raw_colours`].
+    pub fn raw_colours_scalar<const L: usize>(n: usize, coeffs: [&[f32]; L], basis: &[[f32; 16]; L]) -> [[f32; 3]; L] {
+        crate::stages::sh::raw_colours_scalar(n, coeffs, basis)
+    }
+}
+
+/// Model folder internals (`model_file`).
+pub mod model_file {
+    use crate::model_file::ModelFileError;
+    use std::path::Path;
+
+    /// The logit of a decoded probability `p` whose re-encoding by `encode` gives back `q`.
+    pub fn stable_logit(p: f32, q: u8, encode: impl Fn(f32) -> u8) -> f32 {
+        crate::model_file::stable_logit(p, q, encode)
+    }
+
+    /// A `.npy` file of `u8` values with the given shape.
+    pub fn npy_u8(shape: &[usize], data: &[u8]) -> Vec<u8> {
+        crate::model_file::npz::npy_u8(shape, data)
+    }
+
+    /// The shape and data offset of a `.npy` file of `u8` values.
+    pub fn parse_npy_header(npy: &[u8]) -> Result<(Vec<usize>, usize), String> {
+        crate::model_file::npz::parse_npy_header(npy)
+    }
+
+    /// The model PLY header for `count` vertices.
+    pub fn ply_header(count: usize) -> String {
+        crate::model_file::ply::header(count)
+    }
+
+    /// Parses a model PLY into its vertex rows.
+    pub fn parse_ply(path: &Path, bytes: &[u8]) -> Result<Vec<f32>, ModelFileError> {
+        crate::model_file::ply::parse(path, bytes)
+    }
+}
+
+/// Rasterizer internals (`raster`).
+pub mod raster {
+    use crate::raster::preprocess::Prepared;
+
+    /// Billboards per chunk of the parallel binning.
+    pub const MIN_BIN_CHUNK: usize = crate::raster::binning::MIN_BIN_CHUNK;
+
+    /// Billboards per task of the preprocess.
+    pub const PREPROCESS_CHUNK: usize = crate::raster::preprocess::PREPROCESS_CHUNK;
+
+    /// The first and last tile `[x, y]` covered by a prepared billboard.
+    pub fn tile_rect(p: &Prepared) -> ([u32; 2], [u32; 2]) {
+        crate::raster::binning::tile_rect(p)
+    }
+
+    /// A `u32` whose unsigned order is [`f32::total_cmp`]'s order of `x`.
+    pub fn total_order_key(x: f32) -> u32 {
+        crate::raster::binning::total_order_key(x)
+    }
+
+    /// Nearest-rank quantile `q` of sorted `values` (0 when empty).
+    pub fn quantile<T: Copy + Default>(sorted: &[T], q: f64) -> T {
+        crate::raster::workload::quantile(sorted, q)
+    }
+
+    /// The backward pass's per-tile texture-gradient accumulator.
+    #[derive(Default)]
+    pub struct TexelSums(crate::raster::backward::TexelSums);
+
+    impl TexelSums {
+        /// Prepares for a tile of `slots` entries with `texels` texels per channel.
+        pub fn start(&mut self, slots: usize, texels: usize) {
+            self.0.start(slots, texels)
+        }
+
+        /// Adds `g` to the cell (`slot`, `texel`).
+        pub fn add(&mut self, slot: u32, texel: u32, g: [f32; 4]) {
+            self.0.add(slot, texel, g)
+        }
+
+        /// The per-slot offsets and the (texel, sum) lists of the tile, resetting the cells.
+        pub fn finish(&mut self, slots: usize) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
+            self.0.finish(slots)
+        }
+
+        /// Whether every cell is untouched and no touched cell is listed (the state `finish`
+        /// must leave for the next tile).
+        pub fn is_clean(&self) -> bool {
+            let sums = &self.0;
+            sums.cell_of.iter().all(|&c| c == crate::raster::backward::UNTOUCHED) && sums.cells.is_empty()
+        }
+    }
+}
+
+/// Training internals (`train`).
+pub mod train {
+    /// Elements per parallel task of the non-finite scans.
+    pub const FINITE_SCAN_CHUNK: usize = crate::train::finite::CHUNK;
+}
+
+/// Sweep tool internals (`sweep`, feature `tools`).
+#[cfg(feature = "tools")]
+pub mod sweep {
+    use crate::sweep::SweepRecord;
+
+    /// Pareto flags per record: (PSNR vs training time, PSNR vs model size).
+    pub fn fronts(records: &[SweepRecord]) -> (Vec<bool>, Vec<bool>) {
+        crate::sweep::output::fronts(records)
+    }
+
+    /// A CSV field, quoted when it needs to be.
+    pub fn csv_field(f: &str) -> String {
+        crate::sweep::output::csv_field(f)
+    }
+
+    /// The padded plot range of the finite values.
+    pub fn padded_range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
+        crate::sweep::plot::padded_range(values)
+    }
+}
+
+/// Scene input internals (`scene`).
+pub mod scene {
+    /// Area-average resize of an interleaved RGB image from `w × h` to `nw × nh`.
+    pub fn resize_area(src: &[f32], w: usize, h: usize, nw: usize, nh: usize) -> Vec<f32> {
+        crate::scene::image_io::resize_area(src, w, h, nw, nh)
+    }
+
+    /// The loaded size of a `w × h` image for a downscale `factor` and an optional maximum width.
+    pub fn target_size(w: u32, h: u32, factor: u32, max_width: Option<u32>) -> (u32, u32) {
+        crate::scene::image_io::target_size(w, h, factor, max_width)
+    }
+}
