@@ -106,10 +106,8 @@ pub fn keep_largest(mesh: &mut TriangleMesh, keep: usize, min_triangles: u32) ->
             new_index[v as usize] = 0;
         }
     }
-    let mut next = 0u32;
-    for slot in new_index.iter_mut().filter(|s| **s == 0) {
-        *slot = next;
-        next += 1;
+    for (next, slot) in new_index.iter_mut().filter(|s| **s == 0).enumerate() {
+        *slot = next as u32;
     }
     let keep_vertex = |i: &usize| new_index[*i] != u32::MAX;
     let pick = |v: &[glam::Vec3]| (0..v.len()).filter(keep_vertex).map(|i| v[i]).collect::<Vec<_>>();

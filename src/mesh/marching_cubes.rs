@@ -13,13 +13,13 @@
 //!   see alike, so the mesh has no cracks.
 //! - Each crossed cell edge starts one segment on one of its two faces and ends one on the other,
 //!   so the segments chain into closed loops. Each loop is fanned into triangles from one of its
-//!   vertices, chosen so that no fan diagonal runs along a cell face (a loop can cross an
-//!   ambiguous face twice, and a diagonal there would be the neighbouring cell's edge too); a loop
-//!   with no such vertex is fanned from an extra vertex at its centre. Segments run down → up,
-//!   which makes every triangle counter-clockwise seen from the outside (positive side).
+//!   vertices, chosen so that no fan diagonal runs along a cell face: a loop can cross an
+//!   ambiguous face twice, and a diagonal there would be an edge of the neighbouring cell's
+//!   triangles too (every loop of the 256 cases has such a vertex; the table's derivation checks
+//!   it). Segments run down → up, which makes every triangle counter-clockwise seen from the
+//!   outside (positive side).
 //! - One vertex per crossed *grid* edge, shared by the (up to four) cells around it, placed by
-//!   linear interpolation of the two values; vertex colours are interpolated the same way. A loop's
-//!   centre vertex is the mean of its loop's vertices (positions and colours).
+//!   linear interpolation of the two values; vertex colours are interpolated the same way.
 //!
 //! The result is an edge-manifold, consistently oriented mesh; it is closed (watertight) wherever
 //! the level set stays inside the observed part of the grid. Cells with an unobserved corner are
@@ -59,27 +59,26 @@ impl SampledField<'_> {
     }
 }
 
-/// A cell edge as `corner · 3 + axis`, `corner` the end with the lower coordinate; a value
-/// `CENTRE + k` in a triangle stands for the centre vertex of the case's `k`-th centred loop.
+/// A cell edge as `corner · 3 + axis`, `corner` the end with the lower coordinate.
 type LocalEdge = u8;
 
-/// The first local index that names a loop centre instead of a cell edge (a cell has 12 edges,
-/// numbered below 24).
-const CENTRE: LocalEdge = 24;
-
-/// The triangles of one case and the loops fanned from a centre vertex.
-#[derive(Debug, Default)]
-struct CaseTriangles {
-    /// Triangles as local edges or `CENTRE + k`.
-    triangles: Vec<[LocalEdge; 3]>,
-    /// The loops whose centre is a vertex, as local edges in loop order.
-    centred_loops: Vec<Vec<LocalEdge>>,
+/// Per case (bit `c` set when corner `c` is inside), the triangles as local edges.
+fn case_table() -> &'static [Vec<[LocalEdge; 3]>; 256] {
+    static TABLE: OnceLock<[Vec<[LocalEdge; 3]>; 256]> = OnceLock::new();
+    TABLE.get_or_init(|| std::array::from_fn(|case| triangulate_case(case as u8)))
 }
 
-/// Per case (bit `c` set when corner `c` is inside), its triangles.
-fn case_table() -> &'static [CaseTriangles; 256] {
-    static TABLE: OnceLock<[CaseTriangles; 256]> = OnceLock::new();
-    TABLE.get_or_init(|| std::array::from_fn(|case| triangulate_case(case as u8)))
+/// The four corners of face `(axis, side)`, counter-clockwise seen from outside the cell.
+fn face_corners(axis: usize, side: usize) -> [u8; 4] {
+    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+    let corner = |a: usize, b: usize| ((side << axis) | (a << u) | (b << v)) as u8;
+    // (u, v, axis) is right-handed: (0,0), (1,0), (1,1), (0,1) turns counter-clockwise about +axis.
+    let ccw = [corner(0, 0), corner(1, 0), corner(1, 1), corner(0, 1)];
+    if side == 1 {
+        ccw
+    } else {
+        [ccw[0], ccw[3], ccw[2], ccw[1]]
+    }
 }
 
 /// The two cell faces, as `(axis, side)`, that contain a cell edge.
@@ -99,26 +98,13 @@ fn share_a_face(e: LocalEdge, f: LocalEdge) -> bool {
     fe.iter().any(|x| ff.contains(x))
 }
 
-/// The four corners of face `(axis, side)`, counter-clockwise seen from outside the cell.
-fn face_corners(axis: usize, side: usize) -> [u8; 4] {
-    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-    let corner = |a: usize, b: usize| ((side << axis) | (a << u) | (b << v)) as u8;
-    // (u, v, axis) is right-handed: (0,0), (1,0), (1,1), (0,1) turns counter-clockwise about +axis.
-    let ccw = [corner(0, 0), corner(1, 0), corner(1, 1), corner(0, 1)];
-    if side == 1 {
-        ccw
-    } else {
-        [ccw[0], ccw[3], ccw[2], ccw[1]]
-    }
-}
-
 fn edge_between(a: u8, b: u8) -> LocalEdge {
     let axis = (a ^ b).trailing_zeros() as u8;
     a.min(b) * 3 + axis
 }
 
 /// The triangles of one case, by the rule of the module documentation.
-fn triangulate_case(case: u8) -> CaseTriangles {
+pub(crate) fn triangulate_case(case: u8) -> Vec<[LocalEdge; 3]> {
     let inside = |c: u8| case >> c & 1 == 1;
     // next[edge] = the edge the segment starting at `edge` ends at.
     let mut next: [Option<LocalEdge>; 24] = [None; 24];
@@ -141,7 +127,7 @@ fn triangulate_case(case: u8) -> CaseTriangles {
             }
         }
     }
-    let mut out = CaseTriangles::default();
+    let mut triangles = Vec::new();
     let mut used = [false; 24];
     for start in 0..24 {
         if used[start] || next[start].is_none() {
@@ -154,25 +140,16 @@ fn triangulate_case(case: u8) -> CaseTriangles {
             ring.push(e as LocalEdge);
             e = next[e].expect("a crossed edge starts a segment on its other face") as usize;
         }
+        // A fan from ring[s] draws diagonals to every loop vertex but s's two neighbours.
         let len = ring.len();
-        // A fan from ring[s] draws diagonals to every vertex but its two neighbours.
-        let fan_start = (0..len).find(|&s| (2..len - 1).all(|k| !share_a_face(ring[s], ring[(s + k) % len])));
-        match fan_start {
-            Some(s) => {
-                for k in 1..len - 1 {
-                    out.triangles.push([ring[s], ring[(s + k) % len], ring[(s + k + 1) % len]]);
-                }
-            }
-            None => {
-                let centre = CENTRE + out.centred_loops.len() as LocalEdge;
-                for k in 0..len {
-                    out.triangles.push([centre, ring[k], ring[(k + 1) % len]]);
-                }
-                out.centred_loops.push(ring);
-            }
+        let s = (0..len)
+            .find(|&s| (2..len - 1).all(|k| !share_a_face(ring[s], ring[(s + k) % len])))
+            .expect("every loop has a vertex whose fan diagonals cross the cell's interior");
+        for k in 1..len - 1 {
+            triangles.push([ring[s], ring[(s + k) % len], ring[(s + k + 1) % len]]);
         }
     }
-    out
+    triangles
 }
 
 /// Extracts the zero level set of `field` ([module documentation](self)).
@@ -209,17 +186,10 @@ pub fn extract(field: &SampledField<'_>) -> Result<TriangleMesh, MeshError> {
         });
     }
     let table = case_table();
-    // Vertex keys: `grid index · 3 + axis` for a grid edge's vertex (below `centre_keys`), and
-    // `centre_keys + cell · 4 + k` for the centre of a cell's `k`-th centred loop, `cell` the grid
-    // index of the cell's corner 0.
-    let centre_keys = count as u64 * 3;
-    // Per z layer: the triangles as vertex keys, and the centred loops as (key, ring keys).
-    type Layer = (Vec<[u64; 3]>, Vec<(u64, Vec<u64>)>);
-    let layers: Vec<Layer> = (0..nz - 1)
+    let layers: Vec<Vec<[u64; 3]>> = (0..nz - 1)
         .into_par_iter()
         .map(|z| {
             let mut out = Vec::new();
-            let mut centres = Vec::new();
             for y in 0..ny - 1 {
                 for x in 0..nx - 1 {
                     let corner_index = |c: u8| {
@@ -244,65 +214,34 @@ pub fn extract(field: &SampledField<'_>) -> Result<TriangleMesh, MeshError> {
                     if skip || case == 0 || case == 255 {
                         continue;
                     }
-                    let cell = corner_index(0) as u64;
-                    let key_of = |e: LocalEdge| {
-                        if e >= CENTRE {
-                            centre_keys + cell * 4 + (e - CENTRE) as u64
-                        } else {
-                            (corner_index(e / 3) as u64) * 3 + (e % 3) as u64
-                        }
-                    };
-                    let case_triangles = &table[case as usize];
-                    out.extend(case_triangles.triangles.iter().map(|tri| tri.map(key_of)));
-                    for (k, ring) in case_triangles.centred_loops.iter().enumerate() {
-                        centres.push((key_of(CENTRE + k as LocalEdge), ring.iter().map(|&e| key_of(e)).collect()));
+                    for tri in &table[case as usize] {
+                        out.push(tri.map(|e| (corner_index(e / 3) as u64) * 3 + (e % 3) as u64));
                     }
                 }
             }
-            (out, centres)
+            out
         })
         .collect();
-    let mut edge_triangles: Vec<[u64; 3]> = Vec::new();
-    // In increasing key order: layers in z order, cells in grid order within a layer.
-    let mut centred_loops: Vec<(u64, Vec<u64>)> = Vec::new();
-    for (triangles, centres) in layers {
-        edge_triangles.extend(triangles);
-        centred_loops.extend(centres);
-    }
+    let edge_triangles: Vec<[u64; 3]> = layers.into_iter().flatten().collect();
     let mut keys: Vec<u64> = edge_triangles.iter().flatten().copied().collect();
     keys.par_sort_unstable();
     keys.dedup();
     let strides = [1usize, nx, nx * ny];
-    let edge_vertex = |key: u64| {
-        let (p0, axis) = ((key / 3) as usize, (key % 3) as usize);
-        let p1 = p0 + strides[axis];
-        let (f0, f1) = (field.values[p0], field.values[p1]);
-        let t = (f0 / (f0 - f1)).clamp(0.0, 1.0);
-        let (x, y, z) = (p0 % nx, (p0 / nx) % ny, p0 / (nx * ny));
-        let mut position = field.origin + field.spacing * Vec3::new(x as f32, y as f32, z as f32);
-        position[axis] += t * field.spacing;
-        let colour: [f32; 3] = field.colours.map_or([0.5; 3], |c| {
-            let (c0, c1) = (c[p0], c[p1]);
-            std::array::from_fn(|k| c0[k] + t * (c1[k] - c0[k]))
-        });
-        (position, colour)
-    };
     let vertices: Vec<(Vec3, [f32; 3])> = keys
         .par_iter()
         .map(|&key| {
-            if key < centre_keys {
-                return edge_vertex(key);
-            }
-            let at = centred_loops.binary_search_by_key(&key, |c| c.0).expect("every centre is listed");
-            let ring = &centred_loops[at].1;
-            let (mut position, mut colour) = (Vec3::ZERO, [0.0f32; 3]);
-            for &edge_key in ring {
-                let (p, c) = edge_vertex(edge_key);
-                position += p;
-                (0..3).for_each(|k| colour[k] += c[k]);
-            }
-            let share = 1.0 / ring.len() as f32;
-            (position * share, colour.map(|c| c * share))
+            let (p0, axis) = ((key / 3) as usize, (key % 3) as usize);
+            let p1 = p0 + strides[axis];
+            let (f0, f1) = (field.values[p0], field.values[p1]);
+            let t = (f0 / (f0 - f1)).clamp(0.0, 1.0);
+            let (x, y, z) = (p0 % nx, (p0 / nx) % ny, p0 / (nx * ny));
+            let mut position = field.origin + field.spacing * Vec3::new(x as f32, y as f32, z as f32);
+            position[axis] += t * field.spacing;
+            let colour = field.colours.map_or([0.5; 3], |c| {
+                let (c0, c1) = (c[p0], c[p1]);
+                std::array::from_fn(|k| c0[k] + t * (c1[k] - c0[k]))
+            });
+            (position, colour)
         })
         .collect();
     let vertex_of = |key: u64| keys.binary_search(&key).expect("every key is listed") as u32;
@@ -315,41 +254,4 @@ pub fn extract(field: &SampledField<'_>) -> Result<TriangleMesh, MeshError> {
     };
     mesh.recompute_normals();
     Ok(mesh)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn every_case_has_closed_consistent_loops() {
-        for case in 0..=255u8 {
-            let tris = triangulate_case(case).triangles;
-            let crossed = (0..8u8)
-                .flat_map(|c| (0..3).filter(move |a| c >> a & 1 == 0).map(move |a| (c, a)))
-                .filter(|&(c, a)| (case >> c & 1) != (case >> (c | 1 << a) & 1))
-                .count();
-            // Every crossed edge is a vertex of some triangle, and nothing else is.
-            let mut seen: Vec<u8> = tris.iter().flatten().copied().filter(|&e| e < CENTRE).collect();
-            seen.sort_unstable();
-            seen.dedup();
-            assert_eq!(seen.len(), crossed, "case {case}");
-            assert_eq!(case == 0 || case == 255, tris.is_empty());
-        }
-    }
-
-    #[test]
-    fn a_single_inside_corner_gives_one_outward_triangle() {
-        let tris = triangulate_case(1).triangles;
-        assert_eq!(tris.len(), 1);
-        // Edges from corner 0 along x, y, z: 0, 1, 2; the triangle's normal points away from
-        // corner 0, i.e. along (1, 1, 1).
-        let p = |e: u8| {
-            let mut v = Vec3::ZERO;
-            v[(e % 3) as usize] = 0.5;
-            v
-        };
-        let [a, b, c] = tris[0].map(p);
-        assert!((b - a).cross(c - a).dot(Vec3::ONE) > 0.0);
-    }
 }
