@@ -26,6 +26,7 @@ mod init_hull;
 mod init_scene;
 mod loss_ssim;
 mod memory;
+mod mesh;
 mod model;
 mod model_file;
 mod model_file_npz;
