@@ -563,27 +563,12 @@ fn blender_imports_the_ply_with_its_counts() {
 #[cfg(feature = "cli")]
 #[test]
 fn the_mesh_command_writes_a_ply_and_names_bad_input() {
-    use super::cli::{export_demo, run, run_ok, temp};
+    use super::cli::{export_demo, run, run_ok, temp, train_five_steps};
     let root = temp("mesh");
     let data = export_demo(&root, 24, 200);
     let out = root.join("out");
-    let (data_s, out_s) = (data.to_str().unwrap(), out.to_str().unwrap());
-    run_ok(&[
-        "train",
-        data_s,
-        "-o",
-        out_s,
-        "--iterations",
-        "5",
-        "--billboards",
-        "200",
-        "--texture-size",
-        "4",
-        "--eval-every",
-        "0",
-        "--quiet",
-    ]);
-    let model = out.join("model");
+    let data_s = data.to_str().unwrap();
+    let model = train_five_steps(&data, &out, 200);
     let ply = root.join("mesh.ply");
     let printed = run_ok(&[
         "mesh",
