@@ -14,6 +14,8 @@ use crate::camera::Camera;
 use crate::rng::Rng;
 use glam::Vec3;
 
+pub mod surface;
+
 /// One rendered view of the demo scene.
 #[derive(Clone, Debug)]
 pub struct DemoView {

@@ -123,6 +123,7 @@ pub mod gradcheck;
 pub mod init;
 pub mod loss;
 pub mod memory;
+pub mod mesh;
 pub mod model;
 pub mod model_file;
 pub mod raster;

@@ -52,6 +52,9 @@ enum Command {
     Eval(cli::render::EvalArgs),
     /// Export a saved model as textured planes: OBJ + MTL + PNG (as the reference) or glTF binary.
     Export(cli::export::ExportArgs),
+    /// Extract a triangle mesh (PLY) by fusing the model's rendered depth of the training views
+    /// into a TSDF volume (marching cubes, largest components kept).
+    Mesh(cli::mesh::MeshArgs),
     /// Write a self-contained WebGL2 viewer page of a saved model (optionally serve it locally).
     View(cli::view::ViewArgs),
 }
@@ -76,6 +79,7 @@ fn main() -> Result<()> {
         Command::Render(args) => cli::render::render(args),
         Command::Eval(args) => cli::render::eval(args),
         Command::Export(args) => cli::export::run(args),
+        Command::Mesh(args) => cli::mesh::run(args),
         Command::View(args) => cli::view::run(args),
     }
 }

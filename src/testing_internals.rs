@@ -241,3 +241,12 @@ pub mod scene {
         crate::scene::image_io::target_size(w, h, factor, max_width)
     }
 }
+
+/// Marching-cubes internals (`mesh::marching_cubes`).
+pub mod marching_cubes {
+    /// The triangles of one case (bit `c` set when corner `c` is inside), as local cell edges
+    /// (`corner · 3 + axis`, `corner` the edge's end with the lower coordinate).
+    pub fn case_triangles(case: u8) -> Vec<[u8; 3]> {
+        crate::mesh::marching_cubes::triangulate_case(case)
+    }
+}

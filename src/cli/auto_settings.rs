@@ -99,8 +99,8 @@ pub fn resolve(args: &TrainArgs, scene: &Scene, background: &BackgroundChoice) -
             let resolved = PointlessInit::Auto(hull).resolve(scene);
             let (value, reason) = if has_points {
                 (
-                    "sfm",
-                    "the scene has SfM points: farthest-point sample of them plus a sky sphere",
+                    "sfm+shell",
+                    "the scene has SfM points: farthest-point sample of them plus a sky sphere, the rest of the budget on a background shell",
                 )
             } else if matches!(resolved, PointlessInit::Hull(_)) {
                 (

@@ -5,6 +5,7 @@ pub mod auto_settings;
 pub mod common;
 pub mod demo;
 pub mod export;
+pub mod mesh;
 pub mod preflight;
 pub mod render;
 pub mod resume;

@@ -173,6 +173,28 @@ pub(crate) fn export_demo(root: &std::path::Path, resolution: u32, billboards: u
     data
 }
 
+/// Trains a model on `data` for 5 steps (`billboards` billboards, TS 4, no evaluation) into
+/// `out`; returns the model folder `out/model`.
+pub(crate) fn train_five_steps(data: &std::path::Path, out: &std::path::Path, billboards: usize) -> std::path::PathBuf {
+    let billboards = billboards.to_string();
+    run_ok(&[
+        "train",
+        data.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--iterations",
+        "5",
+        "--billboards",
+        &billboards,
+        "--texture-size",
+        "4",
+        "--eval-every",
+        "0",
+        "--quiet",
+    ]);
+    out.join("model")
+}
+
 pub(crate) fn tiny_train_args<'a>(data: &'a str, out: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
     let mut args = vec![
         "train",

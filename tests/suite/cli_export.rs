@@ -1,30 +1,15 @@
 //! `bbsplat export`, `bbsplat view` and `bbsplat render --orbit` through the built binary, on a
 //! model trained for a few steps on the exported demo scene.
 
-use super::cli::{export_demo, run, run_ok, temp};
+use super::cli::{export_demo, run, run_ok, temp, train_five_steps};
 
 #[test]
 fn export_view_and_orbit_write_their_files() {
     let root = temp("export");
     let data = export_demo(&root, 24, 100);
     let out = root.join("out");
-    let (data_s, out_s) = (data.to_str().unwrap(), out.to_str().unwrap());
-    run_ok(&[
-        "train",
-        data_s,
-        "-o",
-        out_s,
-        "--iterations",
-        "5",
-        "--billboards",
-        "80",
-        "--texture-size",
-        "4",
-        "--eval-every",
-        "0",
-        "--quiet",
-    ]);
-    let model = out.join("model");
+    let data_s = data.to_str().unwrap();
+    let model = train_five_steps(&data, &out, 80);
     let model_s = model.to_str().unwrap();
 
     // OBJ: the three files, sizes printed, the kept count no more than the model's.

@@ -212,11 +212,7 @@ fn budget_is_monotonic_and_bounded() {
         let pts = (rng.below(3) > 0).then(|| 1 + rng.below(400_000) as usize);
         let b = budget_for(&inputs(views, w, h, pts)).billboards;
         let seed_info = format!("views {views}, {w}x{h}, points {pts:?}");
-        assert!(b <= MAX_BUDGET, "{seed_info}");
-        match pts {
-            None => assert!(b >= MIN_BUDGET, "{seed_info}"),
-            Some(m) => assert!(b >= MIN_BUDGET.min(m) && b <= m + 10_000, "{seed_info}"),
-        }
+        assert!((MIN_BUDGET..=MAX_BUDGET).contains(&b), "{seed_info}");
         // More pixels, more views or more points never lower the budget.
         assert!(
             budget_for(&inputs(views, w + 1 + rng.below(500), h, pts)).billboards >= b,
@@ -224,11 +220,13 @@ fn budget_is_monotonic_and_bounded() {
         );
         assert!(budget_for(&inputs(views + 1, w, h, pts)).billboards >= b, "{seed_info}");
         if let Some(m) = pts {
-            assert!(budget_for(&inputs(views, w, h, Some(m + 1 + rng.below(20_000) as usize))).billboards >= b);
-            assert!(
-                budget_for(&inputs(views, w, h, None)).billboards >= b,
-                "points only bound from above"
+            // The budget is the pixel bound: the points decide where billboards start (beyond
+            // them a background shell), not how many.
+            assert_eq!(
+                budget_for(&inputs(views, w, h, Some(m + 1 + rng.below(20_000) as usize))).billboards,
+                b
             );
+            assert_eq!(budget_for(&inputs(views, w, h, None)).billboards, b, "{seed_info}");
         }
     }
     // Strictly growing with resolution between the clamps.
@@ -239,9 +237,19 @@ fn budget_is_monotonic_and_bounded() {
     assert_eq!(budget_for(&inputs(100, 4000, 3000, None)).billboards, MAX_BUDGET);
     // The reason states the numbers.
     let r = budget_for(&inputs(62, 225, 400, Some(4_414)));
-    assert_eq!(r.billboards, 4_414);
+    assert_eq!(r.billboards, 5_625);
     assert!(
-        r.reason.contains("4414 SfM points") && r.reason.contains("90000 px"),
+        r.reason
+            .contains("4414 on 4414 SfM points and 0 sky, 1211 on a background shell")
+            && r.reason.contains("90000 px"),
+        "{}",
+        r.reason
+    );
+    // More points than the bound: farthest-point sampled, with the sky of the supplement's rule.
+    let r = budget_for(&inputs(100, 400, 400, Some(50_000)));
+    assert!(
+        r.reason
+            .contains("10000 on 50000 SfM points and 2000 sky, 0 on a background shell"),
         "{}",
         r.reason
     );
@@ -264,7 +272,7 @@ fn budgets_and_initialisation_of_the_real_scenes() {
         ..opts.clone()
     };
     for (name, options, budget) in [
-        ("beer_colmap", &opts, 4_414),
+        ("beer_colmap", &opts, 5_443),
         ("fox", &opts, 5_495),
         ("lego", &white, 10_000),
     ] {
@@ -273,9 +281,22 @@ fn budgets_and_initialisation_of_the_real_scenes() {
         let b = default_budget(&s);
         println!("{name}: {}", b.reason);
         assert_eq!(b.billboards, budget, "{name}: {}", b.reason);
-        let init = init_points(&s, b.billboards, 0).unwrap();
+        // beer_colmap with the CLI's default (points, then a background shell for the rest of
+        // the budget); the others with the library default (the reference's random points;
+        // lego's hull is tested elsewhere).
+        let pointless = if name == "beer_colmap" {
+            PointlessInit::Auto(HullConfig::default())
+        } else {
+            PointlessInit::Random
+        };
+        let init = init_points_with(&s, b.billboards, 0, &pointless).unwrap();
         println!("{name}: {}", init.report);
         assert_eq!(init.report.total(), b.billboards, "{name}");
+        if name == "beer_colmap" {
+            assert_eq!((init.report.sfm, init.report.sky, init.report.shell), (4_414, 0, 1_029));
+            // The reference's rule places the points alone.
+            assert_eq!(init_points(&s, b.billboards, 0).unwrap().report.total(), 4_414);
+        }
         if name == "lego" {
             // The camera rule, were it used on lego, lands near the spec's box (half side 1.3).
             let cams: Vec<Camera> = s.train.iter().map(|v| v.camera).collect();
@@ -339,6 +360,53 @@ fn a_camera_ring_far_from_the_origin_initialises_where_the_cameras_look() {
             .points
             .iter()
             .all(|p| (*p - target).abs().max_element() <= h + 1e-3)
+    );
+}
+
+/// An SfM scene with fewer points than the budget: the automatic initialisation keeps every
+/// point (after the sky) and puts the rest on the background shell, the one a scene without
+/// points gets; the reference's rule (`Random`) places the points alone.
+#[test]
+fn auto_init_fills_an_sfm_budget_beyond_the_points_with_the_background_shell() {
+    let target = Vec3::new(2.0, 0.5, -1.0);
+    let mut points = cloud(700, 5, 0.5);
+    points.positions.iter_mut().for_each(|p| *p += target);
+    let s = scene(
+        SceneFormat::Colmap,
+        ring(12, target, 5.0, 64, 48, 60.0),
+        Some(points.clone()),
+    );
+    let auto = PointlessInit::Auto(HullConfig::default());
+    let init = init_points_with(&s, 1_000, 3, &auto).unwrap();
+    let r = &init.report;
+    assert_eq!((r.sfm, r.sky, r.random, r.shell, r.total()), (700, 0, 0, 300, 1_000));
+    // Points first, in file order (all of them kept), then the shell beyond every camera.
+    assert_eq!(&init.points[..700], &points.positions[..]);
+    assert_eq!(&init.colours[..700], &points.colours[..]);
+    let cams: Vec<Camera> = s.train.iter().map(|v| v.camera).collect();
+    let (c, _) = camera_box(&cams);
+    let far = cams.iter().map(|cam| (cam.centre() - c).length()).fold(0.0, f32::max);
+    for p in &init.points[700..] {
+        let d = (*p - c).length();
+        assert!((d - SHELL_RADIUS_FACTOR * far).abs() < 1e-2 * d, "{d} vs {far}");
+    }
+    assert!((r.shell_radius - SHELL_RADIUS_FACTOR * far).abs() < 1e-3 * far);
+    assert!(
+        init.colours[700..]
+            .iter()
+            .all(|c| c.iter().all(|v| (0.49..0.51).contains(v)))
+    );
+    // A budget the points fill: no shell.
+    let full = init_points_with(&s, 600, 3, &auto).unwrap();
+    assert_eq!(
+        (full.report.sfm, full.report.shell, full.report.shell_radius),
+        (600, 0, 0.0)
+    );
+    // The reference's rule: the points alone.
+    let reference = init_points_with(&s, 1_000, 3, &PointlessInit::Random).unwrap();
+    assert_eq!(
+        (reference.report.sfm, reference.report.shell, reference.report.total()),
+        (700, 0, 700)
     );
 }
 

@@ -27,6 +27,7 @@ mod init_scene;
 mod loss_normal_consistency;
 mod loss_ssim;
 mod memory;
+mod mesh;
 mod model;
 mod model_file;
 mod model_file_npz;
