@@ -50,6 +50,8 @@ fn bench(c: &mut Criterion) {
                 rgb: &d_rgb,
                 alpha: None,
                 depth: None,
+                normal: None,
+                distortion: None,
             };
             group.bench_function(format!("fwd_bwd/{size}/{n}"), |b| {
                 b.iter(|| {
@@ -97,6 +99,8 @@ fn bench_scene(c: &mut Criterion, group_name: &str, name: &str, scene: &Activate
         rgb: &d_rgb,
         alpha: None,
         depth: None,
+        normal: None,
+        distortion: None,
     };
     group.bench_function(format!("{name}/fwd_bwd"), |b| {
         b.iter(|| {

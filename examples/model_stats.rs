@@ -108,6 +108,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 rgb: &d_rgb,
                 alpha: None,
                 depth: None,
+                normal: None,
+                distortion: None,
             };
             let touched = render_backward(&set, &out, &ig, &mut grads);
             both_ms += start.elapsed().as_secs_f64() * 1e3;

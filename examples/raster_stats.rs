@@ -81,6 +81,8 @@ fn main() {
                 rgb: &d_rgb,
                 alpha: None,
                 depth: None,
+                normal: None,
+                distortion: None,
             };
             let touched = render_backward(&set, &out, &ig, &mut grads).len();
             if recycle {
@@ -96,6 +98,8 @@ fn main() {
             rgb: &d_rgb,
             alpha: None,
             depth: None,
+            normal: None,
+            distortion: None,
         };
         render_backward(&set, &out, &ig, &mut g1);
         let mut h = 0xcbf29ce484222325u64;
@@ -153,6 +157,8 @@ fn main() {
                 rgb: &d_rgb,
                 alpha: None,
                 depth: None,
+                normal: None,
+                distortion: None,
             },
             &mut grads,
         );

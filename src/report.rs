@@ -66,6 +66,21 @@ pub struct RecordedSettings {
     /// was recorded (the only one used then).
     #[serde(default = "exact")]
     pub clamp_gradient: String,
+    /// Weight of the normal-consistency regulariser
+    /// ([`crate::train::geometry::GeometryRegularisers`]); 0 (off) in summaries written before
+    /// it existed.
+    #[serde(default)]
+    pub lambda_normal: f32,
+    /// Weight of the depth-distortion regulariser; 0 (off) in older summaries.
+    #[serde(default)]
+    pub lambda_distortion: f32,
+    /// Fraction of the run after which normal consistency was on (recorded with its weight;
+    /// absent when the weight is 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub normal_from: Option<f32>,
+    /// Fraction of the run after which depth distortion was on (absent when its weight is 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub distortion_from: Option<f32>,
 }
 
 fn exact() -> String {

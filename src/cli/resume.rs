@@ -50,7 +50,18 @@ pub fn record_of(args: &TrainArgs, scene: &Scene) -> RunRecord {
     ]
     .into_iter()
     .map(|(k, v)| (k.to_string(), v))
-    .collect();
+    .collect::<std::collections::BTreeMap<String, String>>();
+    // The geometry regularisers are recorded only when on, so that a run without them keeps
+    // the record of checkpoints written before they existed.
+    let mut arguments = arguments;
+    if args.lambda_normal != 0.0 {
+        arguments.insert("--lambda-normal".into(), args.lambda_normal.to_string());
+        arguments.insert("--normal-from".into(), args.normal_from.to_string());
+    }
+    if args.lambda_dist != 0.0 {
+        arguments.insert("--lambda-dist".into(), args.lambda_dist.to_string());
+        arguments.insert("--dist-from".into(), args.dist_from.to_string());
+    }
     let views = scene
         .train
         .iter()

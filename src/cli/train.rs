@@ -9,6 +9,7 @@ use bbsplat::init::scene_init::init_model_with;
 use bbsplat::report::RunReport;
 use bbsplat::train::RunError;
 use bbsplat::train::footprint::{output_bytes, training_bytes};
+use bbsplat::train::geometry::GeometryRegularisers;
 use bbsplat::train::resolution::ResolutionSchedule;
 use bbsplat::train::time_budget::TimePlan;
 use bbsplat::train::{
@@ -145,6 +146,32 @@ pub struct TrainArgs {
     /// rasterizer does). See docs/training.md.
     #[arg(long, value_enum, default_value_t = ClampGradientArg::Exact)]
     pub clamp_gradient: ClampGradientArg,
+    /// Weight of the 2DGS normal-consistency regulariser (0: off, the reference's default; its
+    /// DTU scripts use 0.05): the rendered normals are pulled toward the normals of the rendered
+    /// depth. See docs/training.md.
+    #[arg(long, default_value_t = 0.0, value_parser = non_negative)]
+    pub lambda_normal: f32,
+    /// Weight of the 2DGS depth-distortion regulariser (0: off, the reference's default; its DTU
+    /// scripts use 100 to 1000): concentrates each pixel's blending weights in depth.
+    #[arg(long, default_value_t = 0.0, value_parser = non_negative)]
+    pub lambda_dist: f32,
+    /// Fraction of the run (0-1) after which `--lambda-normal` applies (default 7000/32000, the
+    /// reference's iteration 7000; with `--minutes`, of the planned steps).
+    #[arg(long, default_value_t = bbsplat::train::geometry::NORMAL_FROM, value_parser = fraction)]
+    pub normal_from: f32,
+    /// Fraction of the run (0-1) after which `--lambda-dist` applies (default 3000/32000, the
+    /// reference's iteration 3000; with `--minutes`, of the planned steps).
+    #[arg(long, default_value_t = bbsplat::train::geometry::DISTORTION_FROM, value_parser = fraction)]
+    pub dist_from: f32,
+}
+
+/// A number in `[0, 1]` (the regularisers' start fractions).
+fn fraction(text: &str) -> Result<f32, String> {
+    match text.parse::<f32>() {
+        Ok(x) if (0.0..=1.0).contains(&x) => Ok(x),
+        Ok(x) => Err(format!("{x} is not a fraction in [0, 1]")),
+        Err(e) => Err(format!("{text:?} is not a number: {e}")),
+    }
 }
 
 /// `--minutes`: a finite number > 0.
@@ -184,6 +211,16 @@ impl TrainArgs {
             sh: self.lr_sh.unwrap_or(all),
             shape: self.lr_shape.unwrap_or(all),
             texture: self.lr_texture.unwrap_or(all),
+        }
+    }
+
+    /// The geometry regularisers of the flags.
+    pub fn geometry(&self) -> GeometryRegularisers {
+        GeometryRegularisers {
+            lambda_normal: self.lambda_normal,
+            lambda_distortion: self.lambda_dist,
+            normal_from: self.normal_from,
+            distortion_from: self.dist_from,
         }
     }
 
@@ -389,6 +426,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
                 lr_scales: args.lr_scales(),
                 lr_by_run_length: args.lr_by_run_length(),
                 clamp_gradient: args.clamp_gradient.into(),
+                geometry: args.geometry(),
                 ..TrainConfig::default()
             };
             let mut trainer = Trainer::new(model, config);

@@ -28,7 +28,9 @@
 //! assert!((psnr(&render, &gt).unwrap() - 26.0206).abs() < 1e-3); // MSE = 0.0025
 //! ```
 
+pub mod distortion;
 pub mod l1;
+pub mod normal_consistency;
 pub mod psnr;
 pub mod ssim;
 

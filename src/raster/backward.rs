@@ -24,6 +24,7 @@ use super::{ActivatedRef, SH_FLOATS};
 use crate::camera::offset_from;
 use crate::stages::bilinear::BilinearTaps;
 use crate::stages::composite::{Blend, CompositeBackState, Step, classify};
+use crate::stages::depth_distortion::{DistortionTotals, depth_gradient, mapped_depth, weight_gradient};
 use crate::stages::ray_plane::{intersect_vjp_with, pixel_ray};
 use crate::stages::sh::sh_colour_vjp_clamped;
 use crate::stages::splat_transform::{SplatTransform, project_splat_vjp_visible};
@@ -79,7 +80,10 @@ impl RenderGradients {
 }
 
 /// Upstream gradients of the loss with respect to the render's images.
-#[derive(Clone, Copy, Debug)]
+///
+/// With [`ImageGradients::normal`] and [`ImageGradients::distortion`] both `None` the backward
+/// pass does exactly the work (and gives exactly the bits) it did before they existed.
+#[derive(Clone, Copy, Debug, Default)]
 pub struct ImageGradients<'a> {
     /// `∂L/∂rgb`, interleaved like [`RenderOutput::rgb`].
     pub rgb: &'a [f32],
@@ -87,6 +91,22 @@ pub struct ImageGradients<'a> {
     pub alpha: Option<&'a [f32]>,
     /// `∂L/∂depth` per pixel (of the alpha-weighted depth map), if the loss uses it.
     pub depth: Option<&'a [f32]>,
+    /// `∂L/∂normal` per pixel, interleaved xyz like [`RenderOutput::normal`] (the alpha-weighted
+    /// view-space normal map), if the loss uses it. Reaches the alphas (hence the textures and,
+    /// through `(u, v)`, the geometry) and each billboard's rotation through its facing normal
+    /// (the flip to face the camera is a constant sign).
+    pub normal: Option<&'a [f32]>,
+    /// `∂L/∂distortion` per pixel ([`RenderOutput::distortion`]), if the loss uses it. The
+    /// render need not have computed the map: the backward pass rebuilds what it needs.
+    pub distortion: Option<&'a [f32]>,
+}
+
+impl ImageGradients<'_> {
+    /// True when a gradient of the normal or distortion map is given (the backward pass then
+    /// carries four more channels per entry).
+    fn has_aux(&self) -> bool {
+        self.normal.is_some() || self.distortion.is_some()
+    }
 }
 
 /// One blended entry of a pixel, rebuilt for the backward pass.
@@ -333,6 +353,7 @@ fn backward_tile(
     grads_in: &ImageGradients<'_>,
     tile: usize,
     records: &mut [EntryRecord],
+    normal_records: &mut [Vec3],
     sole_rows: &SoleEntryRows,
     scratch: &mut Scratch,
     sums: &mut TexelSums,
@@ -352,6 +373,10 @@ fn backward_tile(
         tile: tile as u32,
         ..EMPTY_RECORD
     });
+    let aux = grads_in.has_aux();
+    // Per-entry normal gradients: one per slot when a normal or distortion gradient is given.
+    debug_assert_eq!(normal_records.len(), if aux { list.len() } else { 0 });
+    normal_records.fill(Vec3::ZERO);
     let mut background = Vec3::ZERO;
     sums.start(list.len(), ts * ts);
     let bg = settings.background;
@@ -448,18 +473,9 @@ fn backward_tile(
                 });
                 t = blend.next_transmittance;
             }
-            // Back to front with the stage's [`CompositeBackState`]: features (r, g, b, 1, depth),
-            // the colour behind starting at the background (its opacity and depth are 0); the
-            // stage applies the clamp's gradient rule of `params`.
-            let mut back = CompositeBackState::new(&[bg.x, bg.y, bg.z, 0.0, 0.0]);
-            let d_out = [g_rgb.x, g_rgb.y, g_rgb.z, g_alpha, g_depth];
-            for e in (0..scratch.blended.len()).rev() {
-                let bl = scratch.blended[e];
-                let c = bl.colour;
-                let grad = back.pop(&bl.blend, &[c.x, c.y, c.z, 1.0, bl.depth], &d_out, params);
-                let d_tex_alpha = grad.d_alpha;
-                let [dr, dg, db, _, d_depth] = grad.d_features;
-                let d_colour = Vec3::new(dr, dg, db);
+            // The gradients of one blended entry, given its alpha, colour and depth gradients:
+            // into the textures, the transform (through the hit) and the entry's record.
+            let mut apply = |bl: &Blended, d_tex_alpha: f32, d_colour: Vec3, d_depth: f32| {
                 let b = bl.billboard as usize;
                 let slot = bl.slot;
                 let d_rgba = [d_colour.x, d_colour.y, d_colour.z, d_tex_alpha];
@@ -480,6 +496,61 @@ fn backward_tile(
                 add_transform(&mut rec.transform, &d_t);
                 rec.rgb += d_colour;
                 rec.blended = true;
+            };
+            if !aux {
+                // Back to front with the stage's [`CompositeBackState`]: features (r, g, b, 1,
+                // depth), the colour behind starting at the background (its opacity and depth
+                // are 0); the stage applies the clamp's gradient rule of `params`.
+                let mut back = CompositeBackState::new(&[bg.x, bg.y, bg.z, 0.0, 0.0]);
+                let d_out = [g_rgb.x, g_rgb.y, g_rgb.z, g_alpha, g_depth];
+                for e in (0..scratch.blended.len()).rev() {
+                    let bl = scratch.blended[e];
+                    let c = bl.colour;
+                    let grad = back.pop(&bl.blend, &[c.x, c.y, c.z, 1.0, bl.depth], &d_out, params);
+                    let [dr, dg, db, _, d_depth] = grad.d_features;
+                    apply(&bl, grad.d_alpha, Vec3::new(dr, dg, db), d_depth);
+                }
+                continue;
+            }
+            // With the normal and distortion maps: four more channels, the facing normal (3,
+            // 0 behind everything) and the distortion's weight gradient (1, see
+            // [`weight_gradient`]: as a feature whose upstream gradient is ∂L/∂distortion, the
+            // stage's recursion gives the distortion's share of ∂L/∂α). The distortion also
+            // moves each hit's depth ([`depth_gradient`]).
+            let g_normal = grads_in
+                .normal
+                .map_or(Vec3::ZERO, |n| Vec3::from_slice(&n[3 * p..3 * p + 3]));
+            let g_distortion = grads_in.distortion.map_or(0.0, |d| d[p]);
+            let mut totals = DistortionTotals::default();
+            for bl in &scratch.blended {
+                totals.add(mapped_depth(bl.depth), bl.blend.weight);
+            }
+            let mut back = CompositeBackState::new(&[bg.x, bg.y, bg.z, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+            let d_out = [
+                g_rgb.x,
+                g_rgb.y,
+                g_rgb.z,
+                g_alpha,
+                g_depth,
+                g_normal.x,
+                g_normal.y,
+                g_normal.z,
+                g_distortion,
+            ];
+            for e in (0..scratch.blended.len()).rev() {
+                let bl = scratch.blended[e];
+                let c = bl.colour;
+                let n = prepared[bl.billboard as usize]
+                    .as_ref()
+                    .expect("blended entries are prepared")
+                    .normal;
+                let m = mapped_depth(bl.depth);
+                let features = [c.x, c.y, c.z, 1.0, bl.depth, n.x, n.y, n.z, weight_gradient(m, &totals)];
+                let grad = back.pop(&bl.blend, &features, &d_out, params);
+                let [dr, dg, db, _, d_depth, dnx, dny, dnz, _] = grad.d_features;
+                let d_depth = d_depth + depth_gradient(bl.depth, m, bl.blend.weight, &totals, g_distortion);
+                apply(&bl, grad.d_alpha, Vec3::new(dr, dg, db), d_depth);
+                normal_records[bl.slot as usize] += Vec3::new(dnx, dny, dnz);
             }
         }
         first = end;
@@ -518,6 +589,14 @@ pub fn render_backward(
         image_grads.depth.is_none_or(|d| d.len() == n_pix),
         "one depth gradient per pixel"
     );
+    assert!(
+        image_grads.normal.is_none_or(|n| n.len() == 3 * n_pix),
+        "one normal gradient (3 values) per pixel"
+    );
+    assert!(
+        image_grads.distortion.is_none_or(|d| d.len() == n_pix),
+        "one distortion gradient per pixel"
+    );
     assert_eq!(
         grads.positions.len(),
         set.len(),
@@ -553,12 +632,19 @@ pub fn render_backward(
         texels,
         len: set.len(),
     };
+    // Per-entry normal gradients, only when a normal or distortion gradient is given (each tile
+    // fills its own range; without them every tile gets an empty range).
+    let aux = image_grads.has_aux();
+    let mut normal_records = vec![Vec3::ZERO; if aux { bins.entries.len() } else { 0 }];
+    let normal_lengths = (0..n_tiles).map(|t| if aux { bins.tile_range(t).len() } else { 0 });
     let tiles: Vec<TileGrads> = split_by_lengths(&mut records, (0..n_tiles).map(|t| bins.tile_range(t).len()))
         .into_par_iter()
+        .zip(split_by_lengths(&mut normal_records, normal_lengths))
         .enumerate()
-        .map_init(Scratch::default, |scratch, (t, records)| {
-            TEXEL_SUMS
-                .with_borrow_mut(|sums| backward_tile(set, out, image_grads, t, records, &sole_rows, scratch, sums))
+        .map_init(Scratch::default, |scratch, (t, (records, normals))| {
+            TEXEL_SUMS.with_borrow_mut(|sums| {
+                backward_tile(set, out, image_grads, t, records, normals, &sole_rows, scratch, sums)
+            })
         })
         .collect();
     for tg in &tiles {
@@ -571,6 +657,17 @@ pub fn render_backward(
     let entry_records = |b: usize| {
         let r = bins.billboard_offsets[b] as usize..bins.billboard_offsets[b + 1] as usize;
         bins.billboard_entries[r].iter().map(|&e| &records[e as usize])
+    };
+    // `∂L/∂normal_view` of billboard `b`: its entries' normal gradients summed in tile order
+    // (zero without a normal or distortion gradient).
+    let normal_gradient = |b: usize| {
+        if !aux {
+            return Vec3::ZERO;
+        }
+        let r = bins.billboard_offsets[b] as usize..bins.billboard_offsets[b + 1] as usize;
+        bins.billboard_entries[r]
+            .iter()
+            .fold(Vec3::ZERO, |acc, &e| acc + normal_records[e as usize])
     };
     let texels_of = |rec: &EntryRecord| &tiles[rec.tile as usize].texels[rec.texels.0 as usize..rec.texels.1 as usize];
     // Billboards are reduced in chunks, each chunk in index order by one task. The entry records
@@ -660,7 +757,7 @@ pub fn render_backward(
                     normal_sign,
                     camera,
                     &d_t,
-                    Vec3::ZERO,
+                    normal_gradient(b),
                 );
                 let d_sh = &mut d_sh[lb * SH_FLOATS..(lb + 1) * SH_FLOATS];
                 let d_pos_sh = sh_colour_vjp_clamped(

@@ -7,6 +7,7 @@ use crate::camera::Camera;
 use crate::memory::{refill, resize_for_overwrite};
 use crate::stages::bilinear::{self, BilinearTaps, SampleTaps};
 use crate::stages::composite::{CompositeState, Step};
+use crate::stages::depth_distortion::{DistortionState, mapped_depth};
 use crate::stages::ray_plane::{intersect_with, pixel_ray};
 use crate::stages::splat_transform::{pixel_range, support_quad};
 use glam::Vec3;
@@ -67,6 +68,9 @@ pub struct RenderOutput {
     pub median_depth: Vec<f32>,
     /// Alpha-weighted view-space normal `Σ α·T·n`, interleaved xyz, normals facing the camera.
     pub normal: Vec<f32>,
+    /// Depth-distortion map per pixel ([`crate::stages::depth_distortion`]) when
+    /// [`RenderSettings::distortion`] asked for it; empty otherwise.
+    pub distortion: Vec<f32>,
     /// Per billboard: `Σ α·T` over all pixels of this view (the "impact"); 0 when culled.
     pub impact: Vec<f32>,
     /// Per billboard: true when it was not culled by preprocessing (it touches the screen).
@@ -120,10 +124,12 @@ const FORWARD_FEATURES: usize = 8;
 /// compositing stage ([`CompositeState`]: the clamp, skip and stop decisions and the weighted
 /// sums are the stage's own code, the code its property tests prove); adds `α·T` of each
 /// blended entry to `impact` and appends its slot to `blended_slots`. `own` is the pixel's
-/// entry list (for the work counters).
+/// entry list (for the work counters). With `DISTORTION` the pixel's depth distortion
+/// ([`DistortionState`]) is accumulated too and written to `distortion`; without it (the default
+/// render) that code is not compiled in and `distortion` is untouched.
 #[inline]
 #[allow(clippy::too_many_arguments)]
-fn shade_pixel(
+fn shade_pixel<const DISTORTION: bool>(
     settings: &RenderSettings,
     prepared: &[Option<Prepared>],
     list: &[u32],
@@ -131,9 +137,11 @@ fn shade_pixel(
     candidates: &[SampledCandidate],
     impact: &mut [f32],
     blended_slots: &mut Vec<u32>,
+    distortion: &mut f32,
 ) -> PixelOut {
     let params = &settings.composite;
     let mut state = CompositeState::<FORWARD_FEATURES>::new();
+    let mut spread = DistortionState::default();
     let mut median = 0.0;
     let mut evaluated = own.len() as u32;
     let mut blended = 0;
@@ -162,9 +170,15 @@ fn shade_pixel(
         if blend.transmittance > 0.5 && blend.alpha > 0.05 {
             median = cand.depth;
         }
+        if DISTORTION {
+            spread.add(mapped_depth(cand.depth), blend.weight, blend.transmittance);
+        }
         impact[k] += blend.weight;
         blended += 1;
         blended_slots.push(k as u32);
+    }
+    if DISTORTION {
+        *distortion = spread.distortion;
     }
     let bg = settings.background;
     let [r, g, b, alpha, depth, nx, ny, nz] = state.finish(&[bg.x, bg.y, bg.z, 0.0, 0.0, 0.0, 0.0, 0.0]);
@@ -633,8 +647,8 @@ pub fn render(set: &ActivatedRef<'_>, camera: &Camera, settings: &RenderSettings
 /// harness and none in another (`docs/perf-log.md`). Recycled buffers do not fault in either.
 #[derive(Clone, Debug, Default)]
 pub struct RenderBuffers {
-    /// rgb, alpha, depth, median depth, normal, final transmittance.
-    images: [Vec<f32>; 6],
+    /// rgb, alpha, depth, median depth, normal, final transmittance, distortion.
+    images: [Vec<f32>; 7],
     impact: Vec<f32>,
     visible: Vec<bool>,
     prepared: Vec<Option<Prepared>>,
@@ -653,6 +667,8 @@ pub(crate) struct ForwardSpare {
     entry_impact: Vec<f32>,
     /// Per tile: its pixels' outputs and the slots they blended.
     tiles: Vec<(Vec<PixelOut>, Vec<u32>)>,
+    /// Per tile: its pixels' distortion (empty unless [`RenderSettings::distortion`]).
+    tile_distortion: Vec<Vec<f32>>,
     tile_blended_base: Vec<u32>,
 }
 
@@ -668,6 +684,7 @@ impl RenderOutput {
                 self.median_depth,
                 self.normal,
                 state.final_transmittance,
+                self.distortion,
             ],
             impact: self.impact,
             visible: self.visible,
@@ -715,6 +732,7 @@ pub fn render_with(
                 mut median_depth,
                 mut normal,
                 mut final_transmittance,
+                mut distortion,
             ],
         mut impact,
         mut visible,
@@ -735,13 +753,18 @@ pub fn render_with(
     let impact_chunks = split_by_lengths(&mut spare.entry_impact, (0..n_tiles).map(|t| bins.tile_range(t).len()));
     let tiles = &mut spare.tiles;
     tiles.resize_with(n_tiles, Default::default);
+    // Per tile a distortion buffer, left empty unless the map is asked for.
+    let with_distortion = settings.distortion;
+    let tile_distortion = &mut spare.tile_distortion;
+    tile_distortion.resize_with(n_tiles, Default::default);
     impact_chunks
         .into_par_iter()
         .zip(tiles.par_iter_mut())
+        .zip(tile_distortion.par_iter_mut())
         .enumerate()
         .for_each_init(
             TileScratch::default,
-            |scratch, (t, (impact, (pixels, blended_slots)))| {
+            |scratch, (t, ((impact, (pixels, blended_slots)), tile_distortion))| {
                 let list = &bins.entries[bins.tile_range(t)];
                 let rect @ (i0, j0, i1, j1) = tile_pixels(&bins, t, w, h);
                 let tw = (i1 - i0) as usize;
@@ -752,16 +775,36 @@ pub fn render_with(
                 samples.build(camera, set, &prepared, list, rect, spans, lists);
                 pixels.clear();
                 blended_slots.clear();
-                for q in 0..n_q {
-                    pixels.push(shade_pixel(
-                        settings,
-                        &prepared,
-                        list,
-                        lists.of(q),
-                        samples.of(lists, q),
-                        impact,
-                        blended_slots,
-                    ));
+                if with_distortion {
+                    tile_distortion.clear();
+                    for q in 0..n_q {
+                        let mut d = 0.0;
+                        pixels.push(shade_pixel::<true>(
+                            settings,
+                            &prepared,
+                            list,
+                            lists.of(q),
+                            samples.of(lists, q),
+                            impact,
+                            blended_slots,
+                            &mut d,
+                        ));
+                        tile_distortion.push(d);
+                    }
+                } else {
+                    let mut unused = 0.0;
+                    for q in 0..n_q {
+                        pixels.push(shade_pixel::<false>(
+                            settings,
+                            &prepared,
+                            list,
+                            lists.of(q),
+                            samples.of(lists, q),
+                            impact,
+                            blended_slots,
+                            &mut unused,
+                        ));
+                    }
                 }
             },
         );
@@ -843,6 +886,27 @@ pub fn render_with(
                 }
             }
         });
+    // The distortion map, when asked for: as the images above, one band of tile rows per task.
+    if with_distortion {
+        resize_for_overwrite(&mut distortion, n_pix, 0.0);
+        let tile_distortion = &spare.tile_distortion;
+        distortion
+            .par_chunks_mut(band)
+            .enumerate()
+            .for_each(|(ty, distortion)| {
+                for tx in 0..bins.tiles_x as usize {
+                    let t = ty * bins.tiles_x as usize + tx;
+                    let (i0, _, i1, _) = tile_pixels(&bins, t, w, h);
+                    let tw = (i1 - i0) as usize;
+                    for (row, values) in tile_distortion[t].chunks(tw).enumerate() {
+                        let p = row * w as usize + i0 as usize;
+                        distortion[p..p + values.len()].copy_from_slice(values);
+                    }
+                }
+            });
+    } else {
+        distortion.clear();
+    }
     // Per-billboard impact: entries summed in tile order (fixed, thread-independent).
     resize_for_overwrite(&mut impact, set.len(), 0.0);
     resize_for_overwrite(&mut visible, set.len(), false);
@@ -868,6 +932,7 @@ pub fn render_with(
         depth,
         median_depth,
         normal,
+        distortion,
         impact,
         visible,
         stats: RenderStats {

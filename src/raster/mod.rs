@@ -115,6 +115,10 @@ pub struct RenderSettings {
     pub sh_degree: u32,
     /// Compositing thresholds (alpha clamp, alpha cut-off, transmittance stop).
     pub composite: CompositeParams,
+    /// Also render the depth-distortion map ([`RenderOutput::distortion`],
+    /// [`crate::stages::depth_distortion`]); off by default (the forward then does no extra
+    /// work and the map is empty).
+    pub distortion: bool,
 }
 
 impl Default for RenderSettings {
@@ -123,6 +127,7 @@ impl Default for RenderSettings {
             background: Vec3::ZERO,
             sh_degree: 3,
             composite: CompositeParams::default(),
+            distortion: false,
         }
     }
 }

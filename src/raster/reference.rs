@@ -11,6 +11,7 @@ use crate::billboards::planar_textures;
 use crate::camera::Camera;
 use crate::stages::bilinear;
 use crate::stages::composite::composite;
+use crate::stages::depth_distortion::mapped_depth;
 use crate::stages::ray_plane::{ViewPlane, intersect_with, pixel_ray};
 use crate::stages::sh::sh_colour;
 use crate::stages::splat_transform::{splat_frame, view_plane};
@@ -24,6 +25,12 @@ pub struct ReferenceOutput {
     pub alpha: Vec<f32>,
     /// Alpha-weighted depth per pixel.
     pub depth: Vec<f32>,
+    /// Alpha-weighted facing view-space normal per pixel, interleaved xyz.
+    pub normal: Vec<f32>,
+    /// Depth distortion per pixel, as the pairwise sum `Σ_i Σ_{j<i} w_i w_j (m_i − m_j)²` of
+    /// the blended entries' weights and mapped depths ([`mapped_depth`]), not the running
+    /// formula of the rasterizer; computed whatever [`RenderSettings::distortion`] says.
+    pub distortion: Vec<f32>,
     /// Per billboard `Σ α·T` over all pixels.
     pub impact: Vec<f32>,
 }
@@ -59,25 +66,32 @@ pub fn render_reference(set: &ActivatedRef<'_>, camera: &Camera, settings: &Rend
         rgb: vec![0.0; 3 * n_pix],
         alpha: vec![0.0; n_pix],
         depth: vec![0.0; n_pix],
+        normal: vec![0.0; 3 * n_pix],
+        distortion: vec![0.0; n_pix],
         impact: vec![0.0; set.len()],
     };
-    // Features per entry: r, g, b, 1 (opacity), depth; background (bg, 0, 0).
+    // Features per entry: r, g, b, 1 (opacity), depth, normal; background (bg, 0, 0, 0).
     let background = [
         settings.background.x,
         settings.background.y,
         settings.background.z,
         0.0,
         0.0,
+        0.0,
+        0.0,
+        0.0,
     ];
     let mut alphas = Vec::new();
     let mut features = Vec::new();
     let mut ids = Vec::new();
+    let mut depths = Vec::new();
     for j in 0..camera.height {
         for i in 0..camera.width {
             let (px, py) = (i as f32 + 0.5, j as f32 + 0.5);
             alphas.clear();
             features.clear();
             ids.clear();
+            depths.clear();
             for &(b, _) in &order {
                 let (p, plane) = projected[b].as_ref().expect("sorted billboards are projected");
                 let ray = pixel_ray(camera, px, py);
@@ -95,14 +109,27 @@ pub fn render_reference(set: &ActivatedRef<'_>, camera: &Camera, settings: &Rend
                     c[2] + sh_rgb[b].z,
                     1.0,
                     hit.depth,
+                    plane.normal.x,
+                    plane.normal.y,
+                    plane.normal.z,
                 ]);
                 ids.push(b);
+                depths.push(hit.depth);
             }
-            let r = composite(&alphas, &features, 5, &background, &settings.composite);
+            let r = composite(&alphas, &features, 8, &background, &settings.composite);
             let pix = (j * camera.width + i) as usize;
             out.rgb[3 * pix..3 * pix + 3].copy_from_slice(&r.features[..3]);
             out.alpha[pix] = r.features[3];
             out.depth[pix] = r.features[4];
+            out.normal[3 * pix..3 * pix + 3].copy_from_slice(&r.features[5..8]);
+            let mut distortion = 0.0f64;
+            for i in 0..ids.len() {
+                for j in 0..i {
+                    let dm = f64::from(mapped_depth(depths[i])) - f64::from(mapped_depth(depths[j]));
+                    distortion += f64::from(r.weights[i]) * f64::from(r.weights[j]) * dm * dm;
+                }
+            }
+            out.distortion[pix] = distortion as f32;
             for (k, &b) in ids.iter().enumerate() {
                 out.impact[b] += r.weights[k];
             }

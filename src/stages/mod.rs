@@ -6,6 +6,7 @@
 
 pub mod bilinear;
 pub mod composite;
+pub mod depth_distortion;
 pub mod ray_plane;
 pub mod rotation;
 pub mod sh;

@@ -1,13 +1,13 @@
 //! Training checkpoints: everything needed to continue a run bit for bit.
 //!
-//! # Format (version 4)
+//! # Format (version 5)
 //!
 //! Little-endian, no padding. `T = TS²`, `n` = number of billboards.
 //!
 //! | field | type | notes |
 //! |---|---|---|
 //! | magic | 8 bytes | `BBSPLCKP` |
-//! | version | u32 | 4 (versions 1 to 3 are still read, see [`OLDEST_VERSION`]) |
+//! | version | u32 | 5 (versions 1 to 4 are still read, see [`OLDEST_VERSION`]) |
 //! | file length | u64 | total bytes including the checksum |
 //! | iterations | u64 | [`TrainConfig::iterations`] |
 //! | sh_degree | u32 | ≤ 3 |
@@ -21,6 +21,7 @@
 //! | relocate_every | u64 | |
 //! | learning-rate multipliers | 4 × f32 | [`super::LearningRateScales`] in field order; absent in version 1 (read as all 1) |
 //! | clamp gradient | u8 | [`super::ClampGradient`]: 0 exact, 1 pass-through (straight-through); absent in versions 1-2 (read as exact, what they trained with) |
+//! | geometry regularisers | 4 × f32 | [`super::geometry::GeometryRegularisers`]: `lambda_normal`, `lambda_distortion`, `normal_from`, `distortion_from`; absent in versions 1-4 (read as off, the default) |
 //! | step | u64 | steps done |
 //! | RNG state | 4 × u64 | [`crate::rng::Rng::state`] |
 //! | order length `k`, order | u64, `k` × u64 | view indices still on the shuffled stack (popped from the end) |
@@ -58,6 +59,7 @@
 //! allocates more than the file's size.
 
 use super::adam::AdamGroup;
+use super::geometry::GeometryRegularisers;
 use super::run_record::RunRecord;
 use super::time_budget::TimePlan;
 use super::{AdamMode, ClampGradient, LearningRateScales, TextureMode, TrainConfig, Trainer, adam_groups, group};
@@ -72,13 +74,14 @@ use thiserror::Error;
 /// File magic.
 pub const MAGIC: [u8; 8] = *b"BBSPLCKP";
 /// Format version written (and the newest read).
-pub const VERSION: u32 = 4;
+pub const VERSION: u32 = 5;
 
 /// Oldest format version still read. Version 1 lacks the learning-rate multipliers, read as
 /// [`super::LearningRateScales::REFERENCE`]; versions 1 and 2 lack the clamp gradient, read as
 /// [`ClampGradient::Exact`] (the only one the trainer used before it became a setting); versions
 /// 1 to 3 lack the growth and time-budget section, read as no growth and no budget, and the run
-/// record, read as empty ([`RunRecord::default`]).
+/// record, read as empty ([`RunRecord::default`]); versions 1 to 4 lack the geometry
+/// regularisers, read as off ([`super::geometry::GeometryRegularisers::default`]).
 pub const OLDEST_VERSION: u32 = 1;
 
 /// What went wrong reading or writing a checkpoint; every variant names the file.
@@ -362,6 +365,8 @@ fn encode_into<S: Sink>(tr: &Trainer, len: u64, sink: &mut S) {
         ClampGradient::Exact => 0,
         ClampGradient::PassThrough => 1,
     });
+    let g = &c.geometry;
+    w.f32s(&[g.lambda_normal, g.lambda_distortion, g.normal_from, g.distortion_from]);
     w.u64(tr.step as u64);
     for s in tr.rng.state() {
         w.u64(s);
@@ -564,6 +569,21 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
     } else {
         ClampGradient::Exact
     };
+    let geometry = if version >= 5 {
+        let what = "geometry regularisers";
+        let g = GeometryRegularisers {
+            lambda_normal: r.f32(what)?,
+            lambda_distortion: r.f32(what)?,
+            normal_from: r.f32(what)?,
+            distortion_from: r.f32(what)?,
+        };
+        if let Some(problem) = g.problem() {
+            return Err(r.inconsistent(problem));
+        }
+        g
+    } else {
+        GeometryRegularisers::default()
+    };
     let mut config = TrainConfig {
         iterations,
         sh_degree,
@@ -581,6 +601,7 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
         lr_by_run_length: false,
         lr_scales,
         clamp_gradient,
+        geometry,
     };
     let step = r.u64("step")? as usize;
     let rng = Rng::from_state([r.u64("RNG")?, r.u64("RNG")?, r.u64("RNG")?, r.u64("RNG")?]);

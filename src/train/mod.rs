@@ -29,6 +29,7 @@ pub mod checkpoint;
 pub mod error;
 pub mod finite;
 pub mod footprint;
+pub mod geometry;
 pub mod grow;
 pub mod regularise;
 pub mod relocate;
@@ -44,7 +45,6 @@ use crate::camera::Camera;
 use crate::loss::TrainingLoss;
 use crate::loss::psnr::psnr_u8;
 use crate::model::{RawBillboards, clamped_logit, initial_alpha, logit, sigmoid};
-use crate::raster::backward::ImageGradients;
 use crate::raster::{RenderBuffers, RenderGradients, RenderSettings, SH_FLOATS, render_backward, render_with};
 use crate::rng::Rng;
 pub use crate::stages::composite::ClampGradient;
@@ -52,6 +52,7 @@ use adam::{AdamGroup, AdamParams};
 pub use checkpoint::CheckpointError;
 pub use error::TrainError;
 pub use finite::{NonFinite, ParamGroup};
+use geometry::GeometryLoss;
 use glam::Vec3;
 use regularise::{gaussian_opacity_grad, opacity_regulariser, texture_regulariser};
 use relocate::{apply_relocation, plan_relocation, split_alpha_logit};
@@ -215,6 +216,9 @@ pub struct TrainConfig {
     /// reference rasterizer does, so that an alpha texel above the clamp still learns). Only the
     /// backward pass depends on it; renders are the same.
     pub clamp_gradient: ClampGradient,
+    /// The 2DGS normal-consistency and depth-distortion regularisers ([`geometry`]; off by
+    /// default).
+    pub geometry: geometry::GeometryRegularisers,
 }
 
 impl TrainConfig {
@@ -242,7 +246,7 @@ impl TrainConfig {
         if self.sh_degree > 3 {
             return Some(format!("SH degree {} > 3", self.sh_degree));
         }
-        None
+        self.geometry.problem()
     }
 }
 
@@ -312,6 +316,7 @@ impl Default for TrainConfig {
             lr_scales: LearningRateScales::REFERENCE,
             lr_by_run_length: false,
             clamp_gradient: ClampGradient::Exact,
+            geometry: geometry::GeometryRegularisers::default(),
         }
     }
 }
@@ -437,7 +442,8 @@ pub fn relocation_due(step: usize, iterations: usize, every: usize) -> bool {
 pub struct StepLog {
     /// Steps done, this one included.
     pub step: usize,
-    /// Total loss of the step: photometric + texture + opacity regularisers.
+    /// Total loss of the step: photometric + texture + opacity regularisers (+ the geometry
+    /// regularisers when on).
     pub loss: f64,
     /// Photometric loss `0.8·L1 + 0.2·(1 − SSIM)` of the step's view.
     pub photometric: f64,
@@ -445,6 +451,10 @@ pub struct StepLog {
     pub texture_reg: f64,
     /// Opacity regulariser value.
     pub opacity_reg: f64,
+    /// Weighted normal-consistency loss (0 when off, [`geometry`]).
+    pub normal_reg: f64,
+    /// Weighted depth-distortion loss (0 when off, [`geometry`]).
+    pub distortion_reg: f64,
     /// PSNR of the step's render against its view (float images).
     pub psnr: f64,
     /// Billboards the optimiser updated in the step.
@@ -737,7 +747,15 @@ impl Trainer {
         let vi = self.next_view(views.len());
         let view = &views[vi];
         let cam = &view.camera;
-        let settings = self.settings();
+        let mut settings = self.settings();
+        let geometry = &self.config.geometry;
+        let lambda_normal = geometry
+            .normal_active(self.step, self.config.iterations)
+            .then_some(geometry.lambda_normal);
+        let lambda_distortion = geometry
+            .distortion_active(self.step, self.config.iterations)
+            .then_some(geometry.lambda_distortion);
+        settings.distortion = lambda_distortion.is_some();
         let buffers = std::mem::take(&mut self.render_buffers);
         let out = render_with(&self.activated.borrowed(), cam, &settings, buffers);
         // An 8-bit view is converted to floats here, into a buffer recycled from step to step.
@@ -748,11 +766,9 @@ impl Trainer {
             .expect("sizes validated above");
         let psnr = crate::loss::psnr::psnr(&out.rgb, target).unwrap_or(f64::NAN);
         self.target = target_buffer;
-        let ig = ImageGradients {
-            rgb: &loss.d_render,
-            alpha: None,
-            depth: None,
-        };
+        // Both geometry terms off: no map gradient (the plain backward pass).
+        let geometry_loss = GeometryLoss::evaluate(&out, cam, lambda_normal, lambda_distortion);
+        let ig = geometry_loss.image_gradients(&loss.d_render);
         let touched = render_backward(&self.activated.borrowed(), &out, &ig, &mut self.grads);
         let texture_reg = if self.config.texture_reg_weight != 0.0 {
             texture_regulariser(
@@ -776,7 +792,11 @@ impl Trainer {
             0.0
         };
         self.render_buffers = out.into_buffers();
-        let total = loss.loss + texture_reg + opacity_reg;
+        let total = if lambda_normal.is_some() || lambda_distortion.is_some() {
+            loss.loss + texture_reg + opacity_reg + geometry_loss.normal + geometry_loss.distortion
+        } else {
+            loss.loss + texture_reg + opacity_reg
+        };
         let bad = if total.is_finite() {
             finite::non_finite_gradient(&self.grads).map(NonFinite::Gradient)
         } else {
@@ -845,6 +865,8 @@ impl Trainer {
             photometric: loss.loss,
             texture_reg,
             opacity_reg,
+            normal_reg: geometry_loss.normal,
+            distortion_reg: geometry_loss.distortion,
             psnr,
             updated,
             relocated,

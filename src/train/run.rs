@@ -713,6 +713,10 @@ pub fn run(
             summary,
             settings: RecordedSettings {
                 clamp_gradient: clamp_gradient_name(tc.clamp_gradient).to_string(),
+                lambda_normal: tc.geometry.lambda_normal,
+                lambda_distortion: tc.geometry.lambda_distortion,
+                normal_from: (tc.geometry.lambda_normal != 0.0).then_some(tc.geometry.normal_from),
+                distortion_from: (tc.geometry.lambda_distortion != 0.0).then_some(tc.geometry.distortion_from),
             },
             warnings,
             record,

@@ -20,20 +20,22 @@ fn settings(background: Vec3) -> RenderSettings {
         background,
         sh_degree: 3,
         composite: CompositeParams::default(),
+        distortion: false,
     }
 }
 
 /// Compositing without the three discontinuities (alpha cut-off, clamp, transmittance stop),
 /// for finite-difference checks: the renderer is then smooth apart from texel-border kinks.
-fn smooth_settings(background: Vec3) -> RenderSettings {
+pub(crate) fn smooth_settings(background: Vec3) -> RenderSettings {
     RenderSettings {
         background,
         sh_degree: 3,
         composite: CompositeParams::smooth(),
+        distortion: false,
     }
 }
 
-fn small_scene(
+pub(crate) fn small_scene(
     n: usize,
     w: u32,
     h: u32,
@@ -113,7 +115,7 @@ impl WeightedLoss {
 
 /// Parameter groups of a billboard set, flattened for the checker.
 #[derive(Clone, Copy, Debug)]
-enum Group {
+pub(crate) enum Group {
     Positions,
     LogScales,
     Quaternions,
@@ -122,7 +124,7 @@ enum Group {
     Colour,
 }
 
-fn flatten(b: &ActivatedBillboards, g: Group) -> Vec<f32> {
+pub(crate) fn flatten(b: &ActivatedBillboards, g: Group) -> Vec<f32> {
     match g {
         Group::Positions => b.positions.iter().flat_map(|p| p.to_array()).collect(),
         Group::LogScales => b.log_scales.iter().flat_map(|p| p.to_array()).collect(),
@@ -133,7 +135,7 @@ fn flatten(b: &ActivatedBillboards, g: Group) -> Vec<f32> {
     }
 }
 
-fn unflatten(b: &mut ActivatedBillboards, g: Group, x: &[f32]) {
+pub(crate) fn unflatten(b: &mut ActivatedBillboards, g: Group, x: &[f32]) {
     match g {
         Group::Positions => b.positions = x.chunks(3).map(Vec3::from_slice).collect(),
         Group::LogScales => b.log_scales = x.chunks(2).map(Vec2::from_slice).collect(),
@@ -148,7 +150,7 @@ fn unflatten(b: &mut ActivatedBillboards, g: Group, x: &[f32]) {
     }
 }
 
-fn analytic(g: &RenderGradients, group: Group) -> Vec<f64> {
+pub(crate) fn analytic(g: &RenderGradients, group: Group) -> Vec<f64> {
     let v: Vec<f32> = match group {
         Group::Positions => g.positions.iter().flat_map(|p| p.to_array()).collect(),
         Group::LogScales => g.log_scales.iter().flat_map(|p| p.to_array()).collect(),
@@ -172,6 +174,8 @@ fn gradients(scene: &ActivatedBillboards, cam: &Camera, s: &RenderSettings, loss
         rgb: &rgb,
         alpha: Some(&alpha),
         depth: Some(&depth),
+        normal: None,
+        distortion: None,
     };
     render_backward(&scene.borrowed(), &out, &ig, &mut g);
     g
@@ -374,6 +378,8 @@ fn banded_report(
                 rgb: &rgb,
                 alpha: Some(&alpha),
                 depth: Some(&depth),
+                normal: None,
+                distortion: None,
             },
             &mut g,
         );
@@ -411,7 +417,7 @@ fn image_tolerance() -> GradTolerance {
 /// [`check_group`]: measured worst 9.3e-6 over the same 64 seeds, bound 10×.
 const DIRECTION_TOLERANCE: f64 = 9.3e-5;
 
-fn fd_scene(seed: u64) -> (ActivatedBillboards, Camera) {
+pub(crate) fn fd_scene(seed: u64) -> (ActivatedBillboards, Camera) {
     fd_scene_with_footprint(seed, 14.0)
 }
 
@@ -696,6 +702,8 @@ fn add_weighted_backward(
         rgb: &rgb,
         alpha: Some(&alpha),
         depth: None,
+        normal: None,
+        distortion: None,
     };
     render_backward(&scene.borrowed(), out, &ig, g)
 }
@@ -978,6 +986,8 @@ fn backward_refuses_overlapping_tile_ranges() {
         rgb: &d_rgb,
         alpha: None,
         depth: None,
+        normal: None,
+        distortion: None,
     };
     render_backward(&scene.borrowed(), &out, &grads_in, &mut g);
 }
@@ -1072,6 +1082,8 @@ fn non_finite_parameters_never_render_as_plausible_values() {
             rgb: &d_rgb,
             alpha: None,
             depth: None,
+            normal: None,
+            distortion: None,
         },
         &mut g,
     );

@@ -37,6 +37,10 @@ fn summary_round_trips_through_json() {
         summary: s.clone(),
         settings: RecordedSettings {
             clamp_gradient: "straight-through".into(),
+            lambda_normal: 0.05,
+            lambda_distortion: 100.0,
+            normal_from: Some(0.25),
+            distortion_from: Some(0.125),
         },
         warnings: vec!["a warning".into()],
         record: RunReport {
@@ -57,6 +61,8 @@ fn summary_round_trips_through_json() {
     };
     let text = serde_json::to_string(&file).unwrap();
     assert!(text.contains(r#""clamp_gradient":"straight-through""#), "{text}");
+    assert!(text.contains(r#""lambda_normal":0.05"#), "{text}");
+    assert!(text.contains(r#""distortion_from":0.125"#), "{text}");
     assert_eq!(serde_json::from_str::<SummaryFile>(&text).unwrap(), file);
     assert_eq!(serde_json::from_str::<TrainSummary>(&text).unwrap(), s);
     // An older summary without the settings reads as exact.
@@ -67,6 +73,17 @@ fn summary_round_trips_through_json() {
             .settings
             .clamp_gradient,
         "exact"
+    );
+    // ... and without the geometry regularisers (off).
+    let settings = serde_json::from_str::<SummaryFile>(&old).unwrap().settings;
+    assert_eq!(
+        (
+            settings.lambda_normal,
+            settings.lambda_distortion,
+            settings.normal_from,
+            settings.distortion_from
+        ),
+        (0.0, 0.0, None, None)
     );
 }
 

@@ -137,6 +137,16 @@ const LR_SCALES_AT: usize = 8 + 4 + 8 + 8 + 4 + 12 + 8 + 4 + 12 + 3 + 8;
 /// Byte offset of the clamp-gradient byte (version ≥ 3), right after the multipliers.
 const CLAMP_AT: usize = LR_SCALES_AT + 16;
 
+/// Byte offset of the geometry regularisers (version ≥ 5: four f32), right after the clamp byte.
+const GEOMETRY_AT: usize = CLAMP_AT + 1;
+
+/// A current checkpoint as format version 4 wrote it (without the geometry regularisers;
+/// version not changed, not resealed).
+fn as_version_4(mut bytes: Vec<u8>) -> Vec<u8> {
+    bytes.drain(GEOMETRY_AT..GEOMETRY_AT + 16);
+    bytes
+}
+
 /// A checkpoint without its run-record section (the trailing length and JSON before the
 /// checksum); not resealed.
 fn strip_record(mut bytes: Vec<u8>) -> Vec<u8> {
@@ -171,7 +181,7 @@ fn without_growth_section(mut bytes: Vec<u8>) -> Vec<u8> {
 /// A current checkpoint as format version 3 ended (without the run record and the growth and
 /// time-budget section; version not changed, not resealed).
 fn as_version_3(bytes: Vec<u8>) -> Vec<u8> {
-    without_growth_section(strip_record(bytes))
+    without_growth_section(strip_record(as_version_4(bytes)))
 }
 
 /// `bytes` with the header's length and the checksum recomputed.
@@ -348,7 +358,7 @@ fn corrupted_files_give_typed_errors() {
 
     // A huge billboard count with a valid checksum does not allocate or panic.
     let mut bad = bytes.clone();
-    let order_len_at = CLAMP_AT + 1 + 8 + 32;
+    let order_len_at = GEOMETRY_AT + 16 + 8 + 32;
     let k = u64::from_le_bytes(bad[order_len_at..order_len_at + 8].try_into().unwrap()) as usize;
     let n_at = order_len_at + 8 + 8 * k;
     bad[n_at..n_at + 8].copy_from_slice(&u64::MAX.to_le_bytes());
@@ -435,7 +445,7 @@ fn the_run_record_is_checkpointed_and_version_3_reads_as_empty() {
     };
     tr.set_run_record(record.clone());
     let v4 = tr.checkpoint_bytes();
-    assert_eq!(u32::from_le_bytes(v4[8..12].try_into().unwrap()), 4);
+    assert_eq!(u32::from_le_bytes(v4[8..12].try_into().unwrap()), VERSION);
     let path = PathBuf::from("r.ckpt");
     let back = Trainer::from_checkpoint_bytes(&v4, &path).unwrap();
     assert_eq!(back.run_record(), &record);
@@ -501,6 +511,47 @@ fn version_3_reads_as_no_growth_and_the_growth_section_round_trips() {
         .expect("must fail");
     assert!(
         matches!(&err, CheckpointError::Inconsistent { what, .. } if what.contains("time plan")),
+        "{err}"
+    );
+}
+
+/// Version 5 stores the geometry regularisers (weights and start fractions) and reads them
+/// back; a version-4 file reads with them off; out-of-range values are refused by name.
+#[test]
+fn the_geometry_regularisers_are_checkpointed_and_version_4_reads_as_off() {
+    use bbsplat::train::geometry::GeometryRegularisers;
+    let (mut tr, views) = setup(AdamMode::Dense, TextureMode::Full);
+    tr.step(&views).unwrap();
+    let plain = tr.checkpoint_bytes();
+    let geometry = GeometryRegularisers {
+        lambda_normal: 0.05,
+        lambda_distortion: 100.0,
+        normal_from: 0.25,
+        distortion_from: 0.125,
+    };
+    let mut bytes = plain.clone();
+    for (k, v) in [0.05f32, 100.0, 0.25, 0.125].into_iter().enumerate() {
+        bytes[GEOMETRY_AT + 4 * k..GEOMETRY_AT + 4 * k + 4].copy_from_slice(&v.to_le_bytes());
+    }
+    let bytes = resealed(bytes);
+    let path = PathBuf::from("g.ckpt");
+    let back = Trainer::from_checkpoint_bytes(&bytes, &path).unwrap();
+    assert_eq!(back.config().geometry, geometry);
+    assert!(back.checkpoint_bytes() == bytes);
+    // Version 4: no geometry section, read as off.
+    let mut v4 = as_version_4(bytes.clone());
+    v4[8..12].copy_from_slice(&4u32.to_le_bytes());
+    let old = Trainer::from_checkpoint_bytes(&resealed(v4), &path).unwrap();
+    assert_eq!(old.config().geometry, GeometryRegularisers::default());
+    assert!(old.checkpoint_bytes() == plain);
+    // A negative weight is refused by name.
+    let mut bad = bytes.clone();
+    bad[GEOMETRY_AT..GEOMETRY_AT + 4].copy_from_slice(&(-1.0f32).to_le_bytes());
+    let err = Trainer::from_checkpoint_bytes(&resealed(bad), &path)
+        .err()
+        .expect("must fail");
+    assert!(
+        matches!(&err, CheckpointError::Inconsistent { what, .. } if what.contains("lambda_normal")),
         "{err}"
     );
 }

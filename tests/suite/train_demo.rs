@@ -24,7 +24,7 @@ fn tiny_run(iterations: usize) -> (f64, f64, Vec<f64>, Trainer) {
 
 /// Trains on a demo scene; returns test PSNR before and after, the per-step losses and the
 /// trainer. `tweak` adjusts the default config.
-fn run(
+pub(crate) fn run(
     demo: &DemoConfig,
     texture_size: usize,
     iterations: usize,

@@ -40,6 +40,7 @@ fn oblique_plane_near_the_near_plane() {
         background: Vec3::new(0.1, 0.2, 0.3),
         sh_degree: 1,
         composite: CompositeParams::default(),
+        distortion: false,
     };
     let th = Thresholds::crate_values(&settings.composite);
     let (mut worst_rel, mut worst_near, mut flips, mut band, mut worst_image) = (0.0f64, 0.0f64, 0, 0, 0.0f64);
@@ -186,6 +187,7 @@ fn two_layers_at_the_clamp() {
         background: Vec3::new(0.4, 0.6, 0.0),
         sh_degree: 0,
         composite: CompositeParams::default(),
+        distortion: false,
     };
     let (out, img) = both(&b, &cam, &settings);
     let pix = 4;
@@ -251,6 +253,7 @@ fn two_interpolated_layers_at_the_clamp() {
         background: Vec3::ZERO,
         sh_degree: 0,
         composite: CompositeParams::default(),
+        distortion: false,
     };
     let (out, img) = both(&b, &cam, &settings);
     let second = 0.99 * (1.0 - 0.99f32 as f64);

@@ -77,6 +77,7 @@ fn hard_settings(rng: &mut Rng) -> RenderSettings {
         background: Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()),
         sh_degree: 3,
         composite: CompositeParams::default(),
+        distortion: false,
     }
 }
 

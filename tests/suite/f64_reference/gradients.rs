@@ -124,6 +124,8 @@ impl Loss {
             rgb: &self.rgb,
             alpha: Some(&self.alpha),
             depth: Some(&self.depth),
+            normal: None,
+            distortion: None,
         };
         render_backward(&b.borrowed(), &out, &ig, &mut g);
         g

@@ -169,6 +169,7 @@ pub fn scene(spec: &Spec) -> (ActivatedBillboards, Camera, RenderSettings) {
         background,
         sh_degree: spec.sh_degree,
         composite: CompositeParams::default(),
+        distortion: false,
     };
     (b, cam, settings)
 }
