@@ -590,3 +590,45 @@ fn a_budgeted_run_resumes_its_plan() {
     assert!((spent * 60.0 - spent_before - this_call).abs() < 1e-6, "{summary}");
     std::fs::remove_dir_all(&root).ok();
 }
+
+/// `--lambda-normal`, `--lambda-dist`, `--normal-from`, `--dist-from`: bad values are refused
+/// with the flag named; good ones train and are recorded in the summary.
+#[test]
+fn geometry_regulariser_flags_are_checked_and_recorded() {
+    let root = temp("geometry-flags");
+    let data = export_demo(&root, 24, 100);
+    let out = root.join("out");
+    let (d, o) = (data.to_str().unwrap(), out.to_str().unwrap());
+    for (flag, value, says) in [
+        ("--lambda-normal", "-1", "finite number ≥ 0"),
+        ("--lambda-dist", "nan", "finite number ≥ 0"),
+        ("--normal-from", "1.5", "fraction"),
+        ("--dist-from", "-0.1", "fraction"),
+    ] {
+        let arg = format!("{flag}={value}");
+        let (ok, err) = run(&tiny_train_args(d, o, &[arg.as_str()]));
+        assert!(!ok && err.contains(flag) && err.contains(says), "{arg}: {err}");
+        assert!(!out.exists(), "{arg}: nothing written");
+    }
+    let extra = [
+        "--lambda-normal",
+        "0.05",
+        "--lambda-dist",
+        "100",
+        "--normal-from",
+        "0",
+        "--dist-from",
+        "0.5",
+    ];
+    run_ok(&tiny_train_args(d, o, &extra));
+    let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
+    for field in [
+        "\"lambda_normal\": 0.05",
+        "\"lambda_distortion\": 100.0",
+        "\"normal_from\": 0.0",
+        "\"distortion_from\": 0.5",
+    ] {
+        assert!(summary.contains(field), "{field} in {summary}");
+    }
+    std::fs::remove_dir_all(&root).ok();
+}
