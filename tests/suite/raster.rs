@@ -302,6 +302,61 @@ fn check_group_banded(
     assert!(report.passed(), "group {group:?}, seed {seed}: {report}");
 }
 
+/// One parameter's banded central difference (the method of [`check_group_banded`]): `x[i]`
+/// moved by ±`h` (rounded to f32, the actual steps used), per-output one-sided differences at
+/// +h and −h, and the outputs where they disagree (a kink within [x − h, x + h], including one
+/// exactly at x, which h-versus-h/2 comparisons miss) left out: their weights are zeroed when
+/// `kinks` is set. Returns the weighted central difference over the other outputs, the masked
+/// weights (for the analytic side), the banded count and the count of outputs whose central
+/// difference exceeds `moved_above`.
+pub(crate) struct BandedStep {
+    pub numeric: f64,
+    pub masked_weights: Vec<f64>,
+    pub banded: usize,
+    pub moved: usize,
+}
+
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn banded_difference(
+    x: &[f32],
+    i: usize,
+    h: f64,
+    base_values: &[f32],
+    render_at: &dyn Fn(&[f32]) -> Vec<f32>,
+    weights: &[f64],
+    kinks: bool,
+    moved_above: f64,
+) -> BandedStep {
+    let at = |step: f64| {
+        let mut p = x.to_vec();
+        p[i] = (x[i] as f64 + step) as f32;
+        (render_at(&p), p[i] as f64 - x[i] as f64)
+    };
+    let ((plus, hp), (minus, hm)) = (at(h), at(-h));
+    let difference = |a: &[f32], b: &[f32], d: f64| -> Vec<f64> {
+        a.iter().zip(b).map(|(&a, &b)| (a as f64 - b as f64) / d).collect()
+    };
+    let forward = difference(&plus, base_values, hp);
+    let backward = difference(base_values, &minus, -hm);
+    let d2 = difference(&plus, &minus, hp - hm);
+    let band: Vec<bool> = forward
+        .iter()
+        .zip(&backward)
+        .map(|(a, b)| kinks && (a - b).abs() > 2e-3 * (1.0 + a.abs().max(b.abs())))
+        .collect();
+    let masked_weights: Vec<f64> = weights
+        .iter()
+        .zip(&band)
+        .map(|(&w, &b)| if b { 0.0 } else { w })
+        .collect();
+    BandedStep {
+        numeric: masked_weights.iter().zip(&d2).map(|(w, d)| w * d).sum::<f64>(),
+        masked_weights,
+        banded: band.iter().filter(|&&b| b).count(),
+        moved: d2.iter().filter(|d| d.abs() > moved_above).count(),
+    }
+}
+
 /// The comparison of [`check_group_banded`] and the band's fraction of the moved outputs, with
 /// the analytic gradient multiplied by `scale` (1 for the real check; the catch tests pass 1.01).
 fn banded_report(
@@ -328,42 +383,11 @@ fn banded_report(
     let (mut banded, mut moved) = (0usize, 0usize);
     let base_values = outputs(&base);
     for i in 0..x.len() {
-        let at = |step: f64| {
-            let mut p = x.clone();
-            p[i] = (x[i] as f64 + step) as f32;
-            (render_at(&p), p[i] as f64 - x[i] as f64)
-        };
-        let ((plus, hp), (minus, hm)) = (at(h), at(-h));
-        // One-sided differences: they agree (up to h·f'' and f32 noise) unless a kink lies in
-        // [x − h, x + h], including one exactly at x, which h-versus-h/2 comparisons miss.
-        let forward: Vec<f64> = plus
-            .iter()
-            .zip(&base_values)
-            .map(|(&a, &b)| (a as f64 - b as f64) / hp)
-            .collect();
-        let backward: Vec<f64> = base_values
-            .iter()
-            .zip(&minus)
-            .map(|(&a, &b)| (a as f64 - b as f64) / -hm)
-            .collect();
-        let d2: Vec<f64> = plus
-            .iter()
-            .zip(&minus)
-            .map(|(&a, &b)| (a as f64 - b as f64) / (hp - hm))
-            .collect();
-        let band: Vec<bool> = forward
-            .iter()
-            .zip(&backward)
-            .map(|(a, b)| (a - b).abs() > 2e-3 * (1.0 + a.abs().max(b.abs())))
-            .collect();
-        banded += band.iter().filter(|&&b| b).count();
-        moved += d2.iter().filter(|d| d.abs() > 1e-6).count();
-        let masked: Vec<f64> = weights
-            .iter()
-            .zip(&band)
-            .map(|(&w, &b)| if b { 0.0 } else { w })
-            .collect();
-        numeric_v.push(masked.iter().zip(&d2).map(|(w, d)| w * d).sum::<f64>());
+        let step = banded_difference(&x, i, h, &base_values, &render_at, &weights, true, 1e-6);
+        banded += step.banded;
+        moved += step.moved;
+        numeric_v.push(step.numeric);
+        let masked = step.masked_weights;
         let to_f32 = |r: std::ops::Range<usize>| masked[r].iter().map(|&w| w as f32).collect::<Vec<f32>>();
         let (rgb, alpha, depth) = (
             to_f32(0..3 * n_pix),

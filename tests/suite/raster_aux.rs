@@ -3,7 +3,7 @@
 //! the brute-force reference, a wrong gradient failing each check, and the default render and
 //! backward unchanged by the new options.
 
-use super::raster::{Group, analytic, fd_scene, flatten, small_scene, smooth_settings, unflatten};
+use super::raster::{Group, analytic, banded_difference, fd_scene, flatten, small_scene, smooth_settings, unflatten};
 use bbsplat::billboards::{ActivatedBillboards, random_scene_camera};
 use bbsplat::camera::Camera;
 use bbsplat::gradcheck::{GradReport, GradTolerance, compare, random_weights};
@@ -109,31 +109,15 @@ fn aux_report(
     };
     let (mut analytic_v, mut numeric_v) = (Vec::new(), Vec::new());
     let (mut banded, mut moved) = (0usize, 0usize);
+    // A texel enters every output polynomially (degree ≤ 2: no kink, and central differences
+    // are exact), so texture groups have no band.
+    let kinks = !matches!(group, Group::Alpha | Group::Colour | Group::Sh);
     for i in 0..x.len() {
-        let at = |step: f64| {
-            let mut p = x.clone();
-            p[i] = (x[i] as f64 + step) as f32;
-            (render_at(&p), p[i] as f64 - x[i] as f64)
-        };
-        let ((plus, hp), (minus, hm)) = (at(h), at(-h));
-        let one_sided = |a: &[f32], b: &[f32], d: f64| -> Vec<f64> {
-            a.iter().zip(b).map(|(&a, &b)| (a as f64 - b as f64) / d).collect()
-        };
-        let forward = one_sided(&plus, &base_values, hp);
-        let backward_d = one_sided(&base_values, &minus, -hm);
-        let d2 = one_sided(&plus, &minus, hp - hm);
-        // A texel enters every output polynomially (degree ≤ 2: no kink, and central
-        // differences are exact), so texture groups have no band.
-        let kinks = !matches!(group, Group::Alpha | Group::Colour | Group::Sh);
-        let band: Vec<bool> = forward
-            .iter()
-            .zip(&backward_d)
-            .map(|(a, b)| kinks && (a - b).abs() > 2e-3 * (1.0 + a.abs().max(b.abs())))
-            .collect();
-        banded += band.iter().filter(|&&b| b).count();
-        moved += d2.iter().filter(|d| d.abs() > 1e-9).count();
-        let masked: Vec<f64> = w.iter().zip(&band).map(|(&w, &b)| if b { 0.0 } else { w }).collect();
-        numeric_v.push(masked.iter().zip(&d2).map(|(w, d)| w * d).sum::<f64>());
+        let step = banded_difference(&x, i, h, &base_values, &render_at, &w, kinks, 1e-9);
+        banded += step.banded;
+        moved += step.moved;
+        numeric_v.push(step.numeric);
+        let masked = step.masked_weights;
         let masked_f32: Vec<f32> = masked.iter().map(|&w| (w * output_scale(aux)) as f32).collect();
         let g = backward(scene, &base, aux, &masked_f32);
         analytic_v.push(analytic(&g, group)[i] * scale);
