@@ -2,15 +2,13 @@
 
 use super::binning::{BinScratch, TileBins, bin_into};
 use super::preprocess::{Prepared, preprocess_into};
+use super::tile_forward::{PixelOut, TileComposite, composite_tile};
 use super::{ActivatedRef, RenderSettings, TILE_SIZE};
 use crate::camera::Camera;
 use crate::memory::{refill, resize_for_overwrite};
-use crate::stages::bilinear::{self, BilinearTaps, SampleTaps};
-use crate::stages::composite::{CompositeState, Step};
-use crate::stages::depth_distortion::{DistortionState, mapped_depth};
+use crate::stages::bilinear::{self, BilinearTaps};
 use crate::stages::ray_plane::{intersect_with, pixel_ray};
 use crate::stages::splat_transform::{pixel_range, support_quad};
-use glam::Vec3;
 use rayon::prelude::*;
 
 /// Everything the backward pass needs from the forward pass.
@@ -100,99 +98,6 @@ pub struct RenderStats {
     /// (pixel, billboard) pairs whose sampled alpha was NaN: skipped, as the compositing stage
     /// skips NaN alphas, and counted here.
     pub nan_alpha_pairs: u64,
-}
-
-/// Per-pixel values a tile produces.
-#[derive(Clone, Copy, Debug, Default)]
-struct PixelOut {
-    rgb: Vec3,
-    alpha: f32,
-    depth: f32,
-    median: f32,
-    normal: Vec3,
-    final_t: f32,
-    evaluated: u32,
-    blended: u32,
-    nan_alpha: u32,
-}
-
-/// Features composited per pixel by the forward pass: colour (3), opacity (the constant 1, so
-/// that its composite is `Σ α·T`), view depth of the hit (1) and the facing normal (3).
-const FORWARD_FEATURES: usize = 8;
-
-/// Composites one pixel of a tile over its sampled candidates (see [`TileSamples`]) with the
-/// compositing stage ([`CompositeState`]: the clamp, skip and stop decisions and the weighted
-/// sums are the stage's own code, the code its property tests prove); adds `α·T` of each
-/// blended entry to `impact` and appends its slot to `blended_slots`. `own` is the pixel's
-/// entry list (for the work counters). With `DISTORTION` the pixel's depth distortion
-/// ([`DistortionState`]) is accumulated too and written to `distortion`; without it (the default
-/// render) that code is not compiled in and `distortion` is untouched.
-#[inline]
-#[allow(clippy::too_many_arguments)]
-fn shade_pixel<const DISTORTION: bool>(
-    settings: &RenderSettings,
-    prepared: &[Option<Prepared>],
-    list: &[u32],
-    own: &[u32],
-    candidates: &[SampledCandidate],
-    impact: &mut [f32],
-    blended_slots: &mut Vec<u32>,
-    distortion: &mut f32,
-) -> PixelOut {
-    let params = &settings.composite;
-    let mut state = CompositeState::<FORWARD_FEATURES>::new();
-    let mut spread = DistortionState::default();
-    let mut median = 0.0;
-    let mut evaluated = own.len() as u32;
-    let mut blended = 0;
-    let mut nan_alpha = 0;
-    for cand in candidates {
-        let k = cand.slot as usize;
-        let b = list[k] as usize;
-        let [r, g, bl, a] = cand.rgba;
-        let blend = match state.step(a, params) {
-            Step::Skip => {
-                nan_alpha += u32::from(a.is_nan());
-                continue;
-            }
-            Step::Stop => {
-                // The entries up to and including this one were evaluated.
-                evaluated = own.partition_point(|&x| x as usize <= k) as u32;
-                state.stop();
-                break;
-            }
-            Step::Blend(blend) => blend,
-        };
-        let p = prepared[b].as_ref().expect("binned billboards are prepared");
-        let c = Vec3::new(r, g, bl) + p.rgb;
-        let n = p.normal;
-        state.blend(&blend, &[c.x, c.y, c.z, 1.0, cand.depth, n.x, n.y, n.z]);
-        if blend.transmittance > 0.5 && blend.alpha > 0.05 {
-            median = cand.depth;
-        }
-        if DISTORTION {
-            spread.add(mapped_depth(cand.depth), blend.weight, blend.transmittance);
-        }
-        impact[k] += blend.weight;
-        blended += 1;
-        blended_slots.push(k as u32);
-    }
-    if DISTORTION {
-        *distortion = spread.distortion;
-    }
-    let bg = settings.background;
-    let [r, g, b, alpha, depth, nx, ny, nz] = state.finish(&[bg.x, bg.y, bg.z, 0.0, 0.0, 0.0, 0.0, 0.0]);
-    PixelOut {
-        rgb: Vec3::new(r, g, b),
-        alpha,
-        depth,
-        median,
-        normal: Vec3::new(nx, ny, nz),
-        final_t: state.transmittance,
-        evaluated,
-        blended,
-        nan_alpha,
-    }
 }
 
 /// Hints the CPU to fetch the cache line holding `data[i]` (no effect on results).
@@ -351,130 +256,13 @@ impl TileCandidates {
     }
 }
 
-/// One (pixel, entry) pair of a tile whose ray hits the billboard's texture support, sampled:
-/// the entry's slot in the tile list, the view depth of the hit and the bilinear RGBA sample.
-#[derive(Clone, Copy)]
-pub(crate) struct SampledCandidate {
-    slot: u32,
-    depth: f32,
-    rgba: [f32; 4],
-}
-
-/// The sampled candidates of every pixel of a tile, computed entry by entry: each billboard's
-/// record, plane and texture are loaded once for all the pixels of its span (its texels stay in
-/// L1 while its pixels are sampled), instead of once per pixel as a pixel-by-pixel walk over 10-60
-/// billboards would. Per pixel the candidates come out in tile-list (depth) order, since the
-/// entries are visited in that order. Same arithmetic per pair as [`TileCandidates`] followed by
-/// [`BilinearTaps::sample_rgba`] (whose [`SampleTaps`] part it keeps), so the forward pass's outputs are unchanged bit for bit.
-/// The candidates of tile-local pixel `q` are `items[offsets[q]..ends[q]]`.
-#[derive(Default)]
-pub(crate) struct TileSamples {
-    rays: Vec<Vec3>,
-    ends: Vec<u32>,
-    items: Vec<SampledCandidate>,
-    /// Candidates whose texels are being prefetched: (item, billboard, taps), sampled in runs of
-    /// [`CANDIDATE_CHUNK`] (see [`TileCandidates`] for why the reads are issued ahead).
-    pending: Vec<(u32, u32, SampleTaps)>,
-}
-
-impl TileSamples {
-    /// Samples every (pixel, entry) pair of the tile `(i0, j0, i1, j1)` whose pixel lies in the
-    /// entry's span, into room reserved per pixel by `lists` (one slot per pair of its list).
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn build(
-        &mut self,
-        camera: &Camera,
-        set: &ActivatedRef<'_>,
-        prepared: &[Option<Prepared>],
-        list: &[u32],
-        (i0, j0, i1, j1): (u32, u32, u32, u32),
-        spans: &[EntrySpans],
-        lists: &PixelLists,
-    ) {
-        let ts = set.texture_size;
-        let tw = (i1 - i0) as usize;
-        let n = tw * (j1 - j0) as usize;
-        self.rays.clear();
-        for j in j0..j1 {
-            for i in i0..i1 {
-                self.rays.push(pixel_ray(camera, i as f32 + 0.5, j as f32 + 0.5));
-            }
-        }
-        self.ends.clear();
-        self.ends.extend_from_slice(&lists.offsets[..n]);
-        let pairs = lists.offsets[n] as usize;
-        resize_for_overwrite(
-            &mut self.items,
-            pairs,
-            SampledCandidate {
-                slot: 0,
-                depth: 0.0,
-                rgba: [0.0; 4],
-            },
-        );
-        for (k, (span, &b)) in spans.iter().zip(list).enumerate() {
-            if let Some(&ahead) = list.get(k + 4) {
-                prefetch_record(&prepared[ahead as usize]);
-            }
-            let Some(p) = prepared[b as usize].as_ref() else {
-                continue;
-            };
-            let plane = p.view_plane();
-            let texture = set.texture_of(b as usize);
-            for y in span.rows[0]..=span.rows[1] {
-                let [x0, x1] = span.cols[y as usize];
-                let py = (j0 + u32::from(y)) as f32 + 0.5;
-                for x in x0..=x1 {
-                    let q = y as usize * tw + x as usize;
-                    let px = (i0 + u32::from(x)) as f32 + 0.5;
-                    let ray = self.rays[q];
-                    let Some(hit) = intersect_with(&p.transform, px, py, |_, _| plane.depth(ray)) else {
-                        continue;
-                    };
-                    let Some(taps) = bilinear::taps(hit.u, hit.v, ts) else {
-                        continue;
-                    };
-                    // Only the taps and weights are kept (sampling needs no derivatives).
-                    let taps = taps.for_sampling();
-                    prefetch_taps(texture.as_ptr(), taps.indices());
-                    let end = &mut self.ends[q];
-                    self.items[*end as usize] = SampledCandidate {
-                        slot: k as u32,
-                        depth: hit.depth,
-                        rgba: [0.0; 4],
-                    };
-                    self.pending.push((*end, b, taps));
-                    *end += 1;
-                }
-            }
-            if self.pending.len() >= CANDIDATE_CHUNK {
-                self.sample_pending(set);
-            }
-        }
-        self.sample_pending(set);
-    }
-
-    /// Samples the pending candidates (their texels were prefetched when they were found).
-    fn sample_pending(&mut self, set: &ActivatedRef<'_>) {
-        for (item, b, taps) in self.pending.drain(..) {
-            self.items[item as usize].rgba = taps.sample_rgba(set.texture_of(b as usize));
-        }
-    }
-
-    /// The sampled candidates of tile-local pixel `q`, front to back.
-    #[inline]
-    pub(crate) fn of(&self, lists: &PixelLists, q: usize) -> &[SampledCandidate] {
-        &self.items[lists.offsets[q] as usize..self.ends[q] as usize]
-    }
-}
-
 /// Where one entry of a tile can contribute, in tile-local pixels: rows `rows[0]..=rows[1]` and,
 /// for each tile row `y`, the columns `cols[y][0]..=cols[y][1]` (empty when the first exceeds the
 /// second).
 #[derive(Clone, Copy)]
 pub(crate) struct EntrySpans {
-    rows: [u8; 2],
-    cols: [[u8; 2]; TILE_SIZE as usize],
+    pub(crate) rows: [u8; 2],
+    pub(crate) cols: [[u8; 2]; TILE_SIZE as usize],
 }
 
 /// Boxes narrower than this many pixel columns are not culled row by row (nothing to gain).
@@ -540,68 +328,11 @@ pub(crate) fn local_spans(
     }));
 }
 
-/// Per-pixel entry lists of one tile (per-pixel culling): the entries of tile-local pixel `q`
-/// (row-major over the tile's own width, as [`TileCandidates`] numbers them) are
-/// `items[offsets[q]..offsets[q + 1]]`, in tile-list (depth) order. Built by a counting sort over
-/// the entries' spans, `O(entries + pairs)`, so that a pixel visits only the billboards whose
-/// span contains it.
-#[derive(Default)]
-pub(crate) struct PixelLists {
-    pub(crate) offsets: Vec<u32>,
-    pub(crate) items: Vec<u32>,
-    /// Write cursors of [`PixelLists::build`].
-    cursor: Vec<u32>,
-}
-
-impl PixelLists {
-    /// The lists of a tile `width × height` pixels whose entries have the given spans (every
-    /// span inside the tile: the pixel boxes are clipped to the image).
-    pub(crate) fn build(&mut self, spans: &[EntrySpans], width: usize, height: usize) {
-        let pixels = width * height;
-        self.offsets.clear();
-        self.offsets.resize(pixels + 1, 0);
-        for e in spans {
-            for y in e.rows[0]..=e.rows[1] {
-                let [x0, x1] = e.cols[y as usize];
-                debug_assert!((y as usize) < height && (x1 < x0 || (x1 as usize) < width));
-                for x in x0..=x1 {
-                    self.offsets[y as usize * width + x as usize + 1] += 1;
-                }
-            }
-        }
-        for p in 0..pixels {
-            self.offsets[p + 1] += self.offsets[p];
-        }
-        self.items.clear();
-        self.items.resize(self.offsets[pixels] as usize, 0);
-        let cursor = &mut self.cursor;
-        cursor.clear();
-        cursor.extend_from_slice(&self.offsets[..pixels]);
-        for (k, e) in spans.iter().enumerate() {
-            for y in e.rows[0]..=e.rows[1] {
-                let [x0, x1] = e.cols[y as usize];
-                for x in x0..=x1 {
-                    let p = y as usize * width + x as usize;
-                    self.items[cursor[p] as usize] = k as u32;
-                    cursor[p] += 1;
-                }
-            }
-        }
-    }
-
-    /// The entries of tile-local pixel `q`.
-    #[inline]
-    pub(crate) fn of(&self, q: usize) -> &[u32] {
-        &self.items[self.offsets[q] as usize..self.offsets[q + 1] as usize]
-    }
-}
-
 /// Reusable per-task scratch of the forward tile pass (every field is rebuilt per tile).
 #[derive(Default)]
 struct TileScratch {
     spans: Vec<EntrySpans>,
-    lists: PixelLists,
-    samples: TileSamples,
+    composite: TileComposite,
 }
 
 /// Splits `data` into consecutive mutable chunks of the given lengths.
@@ -766,45 +497,16 @@ pub fn render_with(
             TileScratch::default,
             |scratch, (t, ((impact, (pixels, blended_slots)), tile_distortion))| {
                 let list = &bins.entries[bins.tile_range(t)];
-                let rect @ (i0, j0, i1, j1) = tile_pixels(&bins, t, w, h);
-                let tw = (i1 - i0) as usize;
-                let n_q = tw * (j1 - j0) as usize;
-                let TileScratch { spans, lists, samples } = scratch;
+                let rect @ (i0, j0, _, _) = tile_pixels(&bins, t, w, h);
+                let TileScratch { spans, composite } = scratch;
                 local_spans(&prepared, list, (i0, j0), half_side, spans);
-                lists.build(spans, tw, (j1 - j0) as usize);
-                samples.build(camera, set, &prepared, list, rect, spans, lists);
-                pixels.clear();
-                blended_slots.clear();
+                let tile = (camera, set, settings, &*prepared, list, rect, &spans[..]);
                 if with_distortion {
+                    composite_tile::<true>(composite, tile, impact, pixels, blended_slots);
                     tile_distortion.clear();
-                    for q in 0..n_q {
-                        let mut d = 0.0;
-                        pixels.push(shade_pixel::<true>(
-                            settings,
-                            &prepared,
-                            list,
-                            lists.of(q),
-                            samples.of(lists, q),
-                            impact,
-                            blended_slots,
-                            &mut d,
-                        ));
-                        tile_distortion.push(d);
-                    }
+                    tile_distortion.extend(pixels.iter().map(|px| px.distortion));
                 } else {
-                    let mut unused = 0.0;
-                    for q in 0..n_q {
-                        pixels.push(shade_pixel::<false>(
-                            settings,
-                            &prepared,
-                            list,
-                            lists.of(q),
-                            samples.of(lists, q),
-                            impact,
-                            blended_slots,
-                            &mut unused,
-                        ));
-                    }
+                    composite_tile::<false>(composite, tile, impact, pixels, blended_slots);
                 }
             },
         );

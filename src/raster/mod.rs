@@ -24,6 +24,7 @@ pub mod binning;
 pub mod forward;
 pub mod preprocess;
 pub mod reference;
+mod tile_forward;
 pub mod workload;
 
 use crate::stages::composite::CompositeParams;
