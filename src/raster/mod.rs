@@ -22,6 +22,7 @@
 pub mod backward;
 pub mod binning;
 pub mod forward;
+pub mod lanes;
 pub mod preprocess;
 pub mod reference;
 mod tile_forward;

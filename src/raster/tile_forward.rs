@@ -13,14 +13,14 @@
 //! Per (entry, pixel) pair, work stops as soon as the pixel has stopped compositing
 //! (transmittance threshold), which the pixel-by-pixel walk also did.
 
-use super::forward::{EntrySpans, prefetch_record};
+use super::forward::{EntrySpans, prefetch_ptr, prefetch_record};
 use super::preprocess::Prepared;
 use super::{ActivatedRef, RenderSettings};
 use crate::camera::Camera;
-use crate::stages::bilinear;
+use crate::stages::bilinear::taps_row;
 use crate::stages::composite::{CompositeState, Step};
 use crate::stages::depth_distortion::{DistortionState, mapped_depth};
-use crate::stages::ray_plane::{intersect_with, pixel_ray};
+use crate::stages::ray_plane::{LANES, intersect_row};
 use glam::Vec3;
 
 /// Features composited per pixel by the forward pass: colour (3), opacity (the constant 1, so
@@ -88,7 +88,6 @@ pub(crate) type TileInputs<'a, 's> = (
 /// Reusable per-task scratch of [`composite_tile`] (rebuilt per tile).
 #[derive(Default)]
 pub(crate) struct TileComposite {
-    rays: Vec<Vec3>,
     pixels: Vec<PixelState>,
     /// Per pixel: the slots it blended, front to back.
     blended: Vec<Vec<u32>>,
@@ -102,6 +101,41 @@ pub(crate) struct TileComposite {
 /// ([`DistortionState`]); without it that code is not compiled in.
 pub(crate) fn composite_tile<const DISTORTION: bool>(
     scratch: &mut TileComposite,
+    inputs: TileInputs<'_, '_>,
+    impact: &mut [f32],
+    pixels: &mut Vec<PixelOut>,
+    blended_slots: &mut Vec<u32>,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if super::lanes::wide_lanes() {
+        // SAFETY: the CPU has AVX2 and FMA (checked at run time by `wide_lanes`).
+        unsafe { composite_tile_avx2::<DISTORTION>(scratch, inputs, impact, pixels, blended_slots) };
+        return;
+    }
+    composite_tile_body::<DISTORTION>(scratch, inputs, impact, pixels, blended_slots);
+}
+
+/// [`composite_tile_body`] compiled for AVX2 and FMA (8 f32 lanes per register; the code is the
+/// same, and Rust fuses no multiply-add by itself, so the results are the same bits).
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn composite_tile_avx2<const DISTORTION: bool>(
+    scratch: &mut TileComposite,
+    inputs: TileInputs<'_, '_>,
+    impact: &mut [f32],
+    pixels: &mut Vec<PixelOut>,
+    blended_slots: &mut Vec<u32>,
+) {
+    composite_tile_body::<DISTORTION>(scratch, inputs, impact, pixels, blended_slots);
+}
+
+/// The body of [`composite_tile`], inlined into each instruction-set variant.
+#[inline(always)]
+fn composite_tile_body<const DISTORTION: bool>(
+    scratch: &mut TileComposite,
     (camera, set, settings, prepared, list, (i0, j0, i1, j1), spans): TileInputs<'_, '_>,
     impact: &mut [f32],
     pixels: &mut Vec<PixelOut>,
@@ -112,16 +146,9 @@ pub(crate) fn composite_tile<const DISTORTION: bool>(
     let tw = (i1 - i0) as usize;
     let n = tw * (j1 - j0) as usize;
     let TileComposite {
-        rays,
         pixels: states,
         blended,
     } = scratch;
-    rays.clear();
-    for j in j0..j1 {
-        for i in i0..i1 {
-            rays.push(pixel_ray(camera, i as f32 + 0.5, j as f32 + 0.5));
-        }
-    }
     states.clear();
     states.resize(n, PixelState::START);
     if blended.len() < n {
@@ -134,57 +161,74 @@ pub(crate) fn composite_tile<const DISTORTION: bool>(
         if let Some(&ahead) = list.get(k + 4) {
             prefetch_record(&prepared[ahead as usize]);
         }
+        // The texels of an entry a few ahead (their reads would otherwise miss one by one).
+        if let (Some(&ahead), Some(ahead_span)) = (list.get(k + 3), spans.get(k + 3))
+            && let Some(pa) = prepared[ahead as usize].as_ref()
+        {
+            prefetch_footprint(pa, ahead_span, (i0, j0), set.texture_of(ahead as usize), ts);
+        }
         let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
         let plane = p.view_plane();
         let texture = set.texture_of(b as usize);
         let mut entry_impact = impact[k];
         for y in span.rows[0]..=span.rows[1] {
             let [x0, x1] = span.cols[y as usize];
+            let (x0, x1) = (usize::from(x0), usize::from(x1));
             let py = (j0 + u32::from(y)) as f32 + 0.5;
-            for x in x0..=x1 {
-                let q = y as usize * tw + x as usize;
-                let state = &mut states[q];
-                if state.composite.done {
+            let row = y as usize * tw;
+            // The span's pixels of this row, `LANES` at a time: hits and taps lane-wise, then
+            // sampling and compositing pixel by pixel.
+            let mut x = x0;
+            while x <= x1 {
+                let count = LANES.min(x1 + 1 - x);
+                let lanes = row + x..row + x + count;
+                x += count;
+                if states[lanes.clone()].iter().all(|s| s.composite.done) {
                     continue;
                 }
-                state.evaluated += 1;
-                let px = (i0 + u32::from(x)) as f32 + 0.5;
-                let ray = rays[q];
-                // Hit depths by the plane equation (see `ViewPlane`), as the backward takes them.
-                let Some(hit) = intersect_with(&p.transform, px, py, |_, _| plane.depth(ray)) else {
-                    continue;
-                };
-                let Some(taps) = bilinear::taps(hit.u, hit.v, ts) else {
-                    continue;
-                };
-                // Only the taps and weights are used (sampling needs no derivatives).
-                let [r, g, bl, a] = taps.for_sampling().sample_rgba(texture);
-                let blend = match state.composite.step(a, params) {
-                    Step::Skip => {
-                        state.nan_alpha += u32::from(a.is_nan());
+                let first = i0 as usize + lanes.start - row;
+                let px: [f32; LANES] = std::array::from_fn(|l| (first + l) as f32 + 0.5);
+                let hits = intersect_row(&p.transform, &plane, camera, &px, py);
+                let taps = taps_row(&hits.u, &hits.v, ts);
+                for (lane, q) in lanes.enumerate() {
+                    let state = &mut states[q];
+                    if state.composite.done {
                         continue;
                     }
-                    Step::Stop => {
-                        state.composite.stop();
+                    state.evaluated += 1;
+                    if !hits.valid[lane] {
                         continue;
                     }
-                    Step::Blend(blend) => blend,
-                };
-                let c = Vec3::new(r, g, bl) + p.rgb;
-                let nv = p.normal;
-                state
-                    .composite
-                    .blend(&blend, &[c.x, c.y, c.z, 1.0, hit.depth, nv.x, nv.y, nv.z]);
-                if blend.transmittance > 0.5 && blend.alpha > 0.05 {
-                    state.median = hit.depth;
-                }
-                if DISTORTION {
+                    let (u, v, depth) = (hits.u[lane], hits.v[lane], hits.depth[lane]);
+                    let Some(taps) = taps.lane_for_sampling(lane, u, v) else {
+                        continue;
+                    };
+                    let [r, g, bl, a] = taps.sample_rgba(texture);
+                    let blend = match state.composite.step(a, params) {
+                        Step::Skip => {
+                            state.nan_alpha += u32::from(a.is_nan());
+                            continue;
+                        }
+                        Step::Stop => {
+                            state.composite.stop();
+                            continue;
+                        }
+                        Step::Blend(blend) => blend,
+                    };
+                    let c = Vec3::new(r, g, bl) + p.rgb;
+                    let nv = p.normal;
                     state
-                        .spread
-                        .add(mapped_depth(hit.depth), blend.weight, blend.transmittance);
+                        .composite
+                        .blend(&blend, &[c.x, c.y, c.z, 1.0, depth, nv.x, nv.y, nv.z]);
+                    if blend.transmittance > 0.5 && blend.alpha > 0.05 {
+                        state.median = depth;
+                    }
+                    if DISTORTION {
+                        state.spread.add(mapped_depth(depth), blend.weight, blend.transmittance);
+                    }
+                    entry_impact += blend.weight;
+                    blended[q].push(k as u32);
                 }
-                entry_impact += blend.weight;
-                blended[q].push(k as u32);
             }
         }
         impact[k] = entry_impact;
@@ -207,5 +251,64 @@ pub(crate) fn composite_tile<const DISTORTION: bool>(
             distortion: if DISTORTION { state.spread.distortion } else { 0.0 },
         });
         blended_slots.extend_from_slice(slots);
+    }
+}
+
+/// Hints the CPU to fetch the texels that entry `span` of the tile at `(i0, j0)` will read from
+/// `texture`: the texel rectangle holding the plane coordinates of the span's bounding box
+/// corners (a projective map sends the box into the hull of its corners' images while the plane
+/// stays in front of the camera), one cache line at a time. The textures of a view are tens of
+/// megabytes and each entry reads a few of its lines in a tile, so without the hint most texel
+/// reads wait for memory one after the other. No effect on results (the texels are not read
+/// here, and a wrong rectangle only wastes the hint).
+#[inline]
+pub(crate) fn prefetch_footprint(
+    p: &Prepared,
+    span: &EntrySpans,
+    (i0, j0): (u32, u32),
+    texture: &[[f32; 4]],
+    ts: usize,
+) {
+    let (y0, y1) = (span.rows[0], span.rows[1]);
+    let (mut x0, mut x1) = (u8::MAX, 0u8);
+    for y in y0..=y1 {
+        let [a, b] = span.cols[y as usize];
+        if a <= b {
+            x0 = x0.min(a);
+            x1 = x1.max(b);
+        }
+    }
+    if x0 > x1 {
+        return;
+    }
+    let t = &p.transform;
+    let (mut u_lo, mut u_hi, mut v_lo, mut v_hi) = (f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY);
+    for (x, y) in [(x0, y0), (x1, y0), (x0, y1), (x1, y1)] {
+        let px = (i0 + u32::from(x)) as f32 + 0.5;
+        let py = (j0 + u32::from(y)) as f32 + 0.5;
+        let k = px * t.tw - t.tu;
+        let l = py * t.tw - t.tv;
+        let h = k.cross(l);
+        let (u, v) = (h.x / h.z, h.y / h.z);
+        u_lo = u_lo.min(u);
+        u_hi = u_hi.max(u);
+        v_lo = v_lo.min(v);
+        v_hi = v_hi.max(v);
+    }
+    if !(u_lo.is_finite() && u_hi.is_finite() && v_lo.is_finite() && v_hi.is_finite()) {
+        return;
+    }
+    let last = (ts - 1) as f32;
+    let texel = |c: f32| (((c.clamp(-1.0, 1.0) + 1.0) * 0.5 * last) as usize).min(ts - 1);
+    let (c0, c1) = (texel(u_lo), (texel(u_hi) + 1).min(ts - 1));
+    let (r0, r1) = (texel(v_lo), (texel(v_hi) + 1).min(ts - 1));
+    for r in r0..=r1 {
+        let row = &texture[r * ts..(r + 1) * ts];
+        let mut c = c0;
+        while c <= c1 {
+            prefetch_ptr(std::ptr::from_ref(&row[c]).cast::<u8>());
+            c += 4;
+        }
+        prefetch_ptr(std::ptr::from_ref(&row[c1]).cast::<u8>());
     }
 }

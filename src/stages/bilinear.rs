@@ -39,6 +39,7 @@
 //! assert_eq!(d_tex, [0.25; 4]);
 //! ```
 
+use crate::stages::ray_plane::LANES;
 use glam::Vec4;
 
 /// The (at most four) texels that contribute to a bilinear sample at one `(u, v)`, with their
@@ -443,5 +444,120 @@ pub fn sample_vjp(
     match taps(u, v, ts) {
         Some(t) => t.accumulate_vjp(texels, channels, d_out, d_texels),
         None => (0.0, 0.0),
+    }
+}
+
+/// The bilinear taps of [`LANES`] `(u, v)` pairs ([`taps_row`]), lane-wise: for the lanes whose
+/// cell lies inside the texture (`interior`, the common case) the four taps `base`, `base + 1`,
+/// `base + ts`, `base + ts + 1` with their weights and weight derivatives; the other lanes go
+/// through the scalar [`taps`] ([`RowTaps::lane`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RowTaps {
+    ts: u32,
+    /// Index of the top-left tap per lane (interior lanes only).
+    base: [u32; LANES],
+    /// Weights per tap (`[tap][lane]`, taps in [`BilinearTaps`] order).
+    weight: [[f32; LANES]; 4],
+    /// `∂weight/∂u` per tap.
+    d_weight_du: [[f32; LANES]; 4],
+    /// `∂weight/∂v` per tap.
+    d_weight_dv: [[f32; LANES]; 4],
+    /// The lane's four taps are all inside the texture.
+    interior: [bool; LANES],
+}
+
+/// [`taps`] for [`LANES`] coordinate pairs at once, computed lane by lane with no branch so that
+/// the lanes run side by side in vector registers; [`RowTaps::lane`] gives lane `l`'s taps,
+/// equal to `taps(u[l], v[l], ts)` bit for bit (the same operations in the same order: the f64
+/// texel coordinates, the floor, the f32 fractions and products; tested in
+/// `tests/suite/stage_lanes.rs`). The rasterizer's tile loops call this form.
+///
+/// # Panics
+/// If `ts` is out of `2..=65536`.
+#[inline(always)]
+pub fn taps_row(u: &[f32; LANES], v: &[f32; LANES], ts: usize) -> RowTaps {
+    assert!((2..=65536).contains(&ts), "texture size must be in 2..=65536, got {ts}");
+    let n = ts as i32;
+    let s = (0.5 * (ts - 1) as f64) as f32;
+    let mut out = RowTaps {
+        ts: ts as u32,
+        base: [0; LANES],
+        weight: [[0.0; LANES]; 4],
+        d_weight_du: [[0.0; LANES]; 4],
+        d_weight_dv: [[0.0; LANES]; 4],
+        interior: [false; LANES],
+    };
+    for lane in 0..LANES {
+        let x = texel_coordinate(u[lane], ts);
+        let y = texel_coordinate(v[lane], ts);
+        // `floor_in_range` in i32, exact for the interior range (other lanes are not used):
+        // clamped first (`max` maps NaN to the bound), so the truncation needs no saturation.
+        #[allow(clippy::manual_clamp)] // `clamp` would keep NaN, which the cast must not see.
+        // SAFETY: the clamped values are finite and within i32.
+        let (tx, ty) = unsafe {
+            (
+                x.max(-2.0).min(65_537.0).to_int_unchecked::<i32>(),
+                y.max(-2.0).min(65_537.0).to_int_unchecked::<i32>(),
+            )
+        };
+        let ix = if (tx as f64) > x { tx - 1 } else { tx };
+        let iy = if (ty as f64) > y { ty - 1 } else { ty };
+        let fx = (x - ix as f64) as f32;
+        let fy = (y - iy as f64) as f32;
+        let gx = [1.0 - fx, fx];
+        let gy = [1.0 - fy, fy];
+        let dg = [-s, s];
+        // Both coordinates in [0, ts − 1): the cell's four taps are inside (false for NaN).
+        out.interior[lane] = x >= 0.0 && y >= 0.0 && x < (ts - 1) as f64 && y < (ts - 1) as f64;
+        out.base[lane] = (iy.wrapping_mul(n).wrapping_add(ix)) as u32;
+        out.weight[0][lane] = gx[0] * gy[0];
+        out.weight[1][lane] = gx[1] * gy[0];
+        out.weight[2][lane] = gx[0] * gy[1];
+        out.weight[3][lane] = gx[1] * gy[1];
+        out.d_weight_du[0][lane] = dg[0] * gy[0];
+        out.d_weight_du[1][lane] = dg[1] * gy[0];
+        out.d_weight_du[2][lane] = dg[0] * gy[1];
+        out.d_weight_du[3][lane] = dg[1] * gy[1];
+        out.d_weight_dv[0][lane] = gx[0] * dg[0];
+        out.d_weight_dv[1][lane] = gx[1] * dg[0];
+        out.d_weight_dv[2][lane] = gx[0] * dg[1];
+        out.d_weight_dv[3][lane] = gx[1] * dg[1];
+    }
+    out
+}
+
+impl RowTaps {
+    /// The taps of lane `lane`, whose coordinates were `(u, v)`: `taps(u, v, ts)`, built from
+    /// the lane's values for an interior cell and by [`taps`] itself otherwise.
+    #[inline(always)]
+    pub fn lane(&self, lane: usize, u: f32, v: f32) -> Option<BilinearTaps> {
+        if !self.interior[lane] {
+            return taps(u, v, self.ts as usize);
+        }
+        let base = self.base[lane];
+        Some(BilinearTaps {
+            ts: self.ts,
+            len: 4,
+            index: [base, base + 1, base + self.ts, base + self.ts + 1],
+            weight: [0, 1, 2, 3].map(|k| self.weight[k][lane]),
+            d_weight_du: [0, 1, 2, 3].map(|k| self.d_weight_du[k][lane]),
+            d_weight_dv: [0, 1, 2, 3].map(|k| self.d_weight_dv[k][lane]),
+        })
+    }
+
+    /// The taps and weights of lane `lane` (what sampling reads): [`RowTaps::lane`] followed by
+    /// [`BilinearTaps::for_sampling`].
+    #[inline(always)]
+    pub fn lane_for_sampling(&self, lane: usize, u: f32, v: f32) -> Option<SampleTaps> {
+        if !self.interior[lane] {
+            return taps(u, v, self.ts as usize).map(|t| t.for_sampling());
+        }
+        let base = self.base[lane];
+        Some(SampleTaps {
+            ts: self.ts,
+            len: 4,
+            index: [base, base + 1, base + self.ts, base + self.ts + 1],
+            weight: [0, 1, 2, 3].map(|k| self.weight[k][lane]),
+        })
     }
 }

@@ -1,0 +1,185 @@
+//! The lane-wise forms of the ray-plane and bilinear stages (`intersect_row`, `taps_row`), which
+//! the rasterizer's tile loops run, against the scalar forms that carry the gradient proofs:
+//! equal bit for bit, lane by lane, on random visible billboards, on pixels far outside them,
+//! on degenerate transforms (edge-on, zero, NaN, infinite), at texel borders and outside the
+//! texture. Each test runs under both instruction-set builds of this process's code paths where
+//! that matters (the rasterizer's, in `raster_lanes.rs`); here the functions are called directly.
+
+use bbsplat::camera::Camera;
+use bbsplat::stages::bilinear::{BilinearTaps, taps, taps_row};
+use bbsplat::stages::ray_plane::{LANES, ViewPlane, intersect_row, intersect_with, pixel_ray};
+use bbsplat::stages::splat_transform::{SplatTransform, splat_frame, view_plane};
+use bbsplat::strategies::{billboard_in_front, camera, seeded_config};
+use glam::Vec3;
+use proptest::prelude::*;
+
+/// Compares lane `lane` of `intersect_row` with the scalar intersection, bit for bit.
+fn check_row(t: &SplatTransform, plane: &ViewPlane, cam: &Camera, px: &[f32; LANES], py: f32) -> Result<(), String> {
+    let row = intersect_row(t, plane, cam, px, py);
+    for lane in 0..LANES {
+        let scalar = intersect_with(t, px[lane], py, |_, _| plane.depth(pixel_ray(cam, px[lane], py)));
+        match scalar {
+            None if row.valid[lane] => return Err(format!("lane {lane} ({}, {py}): valid, scalar None", px[lane])),
+            None => {}
+            Some(h) => {
+                let lane_hit = [row.u[lane], row.v[lane], row.depth[lane]].map(f32::to_bits);
+                if !row.valid[lane] || lane_hit != [h.u, h.v, h.depth].map(f32::to_bits) {
+                    return Err(format!(
+                        "lane {lane} ({}, {py}): row ({}, {}, {}, valid {}), scalar {h:?}",
+                        px[lane], row.u[lane], row.v[lane], row.depth[lane], row.valid[lane]
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The bits of every field of a tap set (indices, weights, both weight derivatives).
+fn tap_bits(t: &BilinearTaps) -> Vec<u32> {
+    let mut bits = t.indices().to_vec();
+    for part in [t.weights(), t.weight_derivatives_u(), t.weight_derivatives_v()] {
+        bits.extend(part.iter().map(|w| w.to_bits()));
+    }
+    bits
+}
+
+/// Compares every lane of `taps_row` (both accessors) with the scalar `taps`, bit for bit.
+fn check_taps(u: &[f32; LANES], v: &[f32; LANES], ts: usize) -> Result<(), String> {
+    let row = taps_row(u, v, ts);
+    for lane in 0..LANES {
+        let scalar = taps(u[lane], v[lane], ts);
+        let lane_taps = row.lane(lane, u[lane], v[lane]);
+        if scalar.as_ref().map(tap_bits) != lane_taps.as_ref().map(tap_bits) {
+            return Err(format!(
+                "lane {lane} ({}, {}): {lane_taps:?} against {scalar:?}",
+                u[lane], v[lane]
+            ));
+        }
+        let sampling = row.lane_for_sampling(lane, u[lane], v[lane]);
+        if sampling != scalar.map(|t| t.for_sampling()) {
+            return Err(format!("lane {lane} ({}, {}): sampling taps differ", u[lane], v[lane]));
+        }
+    }
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(seeded_config(256))]
+
+    /// Visible billboards, a row of pixels through them and beyond (misses included).
+    #[test]
+    fn intersect_row_equals_the_scalar_intersection(
+        (cam, pose) in camera().prop_flat_map(|c| (Just(c), billboard_in_front(c))),
+        fy in 0.0f32..1.0,
+        fx in 0.0f32..1.0,
+        spacing in prop_oneof![Just(1.0f32), 0.1f32..40.0],
+    ) {
+        let frame = splat_frame(pose.position, pose.log_scales, pose.quaternion, &cam).unwrap();
+        let (normal, offset) = view_plane(pose.position, pose.quaternion, &cam, frame.normal_sign);
+        let plane = ViewPlane { normal, offset };
+        let py = (fy * cam.height as f32).floor() + 0.5;
+        let x0 = (fx * cam.width as f32).floor() + 0.5;
+        let px: [f32; LANES] = std::array::from_fn(|l| x0 + l as f32 * spacing);
+        check_row(&frame.transform, &plane, &cam, &px, py).map_err(TestCaseError::fail)?;
+    }
+
+    /// Coordinates around and beyond the texture, with exact texel borders mixed in.
+    #[test]
+    fn taps_row_equals_the_scalar_taps(
+        u in prop::array::uniform8(prop_oneof![-1.3f32..1.3, (0u32..16).prop_map(|k| -1.0 + 2.0 * k as f32 / 15.0)]),
+        v in prop::array::uniform8(prop_oneof![-1.3f32..1.3, (0u32..16).prop_map(|k| -1.0 + 2.0 * k as f32 / 15.0)]),
+        ts in prop_oneof![Just(16usize), 2usize..40],
+    ) {
+        check_taps(&u, &v, ts).map_err(TestCaseError::fail)?;
+    }
+}
+
+/// Degenerate transforms: edge-on (p.z = 0 everywhere), all zero, NaN and infinite entries, a
+/// plane behind the camera, and a plane whose hits cross the near plane along the row.
+#[test]
+fn intersect_row_rejects_exactly_what_the_scalar_form_rejects() {
+    let cam = Camera::look_at(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, Vec3::Y, 60.0, 60.0, 64, 48);
+    let face_on = SplatTransform {
+        tu: Vec3::new(30.0, 0.0, 32.0),
+        tv: Vec3::new(0.0, 30.0, 24.0),
+        tw: Vec3::new(0.0, 0.0, 4.0),
+    };
+    let edge_on = SplatTransform {
+        tu: Vec3::new(30.0, 0.0, 32.0),
+        tv: Vec3::new(60.0, 0.0, 64.0),
+        tw: Vec3::new(0.0, 0.0, 4.0),
+    };
+    let mut nan = face_on;
+    nan.tw.x = f32::NAN;
+    let mut inf = face_on;
+    inf.tu.y = f32::INFINITY;
+    let plane = ViewPlane {
+        normal: Vec3::new(0.0, 0.0, -1.0),
+        offset: -4.0,
+    };
+    let behind = ViewPlane {
+        normal: Vec3::new(0.0, 0.0, -1.0),
+        offset: 4.0,
+    };
+    // A plane seen very obliquely: hit depths run from far to below the near plane along x.
+    let oblique = ViewPlane {
+        normal: Vec3::new(0.999, 0.0, -0.0447).normalize(),
+        offset: -0.1,
+    };
+    let nan_plane = ViewPlane {
+        normal: Vec3::new(f32::NAN, 0.0, -1.0),
+        offset: -4.0,
+    };
+    let mut checked = 0;
+    for t in [face_on, edge_on, SplatTransform::default(), nan, inf] {
+        for p in [plane, behind, oblique, nan_plane] {
+            for x0 in [0.5f32, 28.5, 60.5, -100.5, 1e30] {
+                for py in [0.5f32, 23.5, 47.5, f32::NAN] {
+                    let px: [f32; LANES] = std::array::from_fn(|l| x0 + l as f32);
+                    check_row(&t, &p, &cam, &px, py).unwrap();
+                    checked += 1;
+                }
+            }
+        }
+    }
+    assert_eq!(checked, 400);
+}
+
+/// Non-finite, huge and boundary coordinates, and the smallest and a large texture size.
+#[test]
+fn taps_row_handles_non_finite_and_boundary_coordinates() {
+    let specials = [
+        f32::NAN,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        1e30,
+        -1e30,
+        -1.0,
+        1.0,
+        1.0 + 2.0 / 15.0,
+        -1.0 - 2.0 / 15.0,
+        0.0,
+        -0.0,
+        f32::MIN_POSITIVE,
+    ];
+    for ts in [2usize, 16, 65536] {
+        for &a in &specials {
+            let u: [f32; LANES] = std::array::from_fn(|l| if l % 2 == 0 { a } else { specials[l] });
+            let v: [f32; LANES] = std::array::from_fn(|l| specials[(l + 3) % specials.len()]);
+            check_taps(&u, &v, ts).unwrap();
+            check_taps(&v, &u, ts).unwrap();
+        }
+    }
+}
+
+/// The comparison itself catches a lane that differs by one unit in the last place.
+#[test]
+fn the_bitwise_comparison_catches_a_one_ulp_difference() {
+    let (u, v) = ([0.3f32; LANES], [-0.2f32; LANES]);
+    let row = taps_row(&u, &v, 16);
+    let good = row.lane(0, u[0], v[0]).unwrap();
+    let shifted = taps(f32::from_bits(u[0].to_bits() + 1), v[0], 16).unwrap();
+    assert_ne!(tap_bits(&good), tap_bits(&shifted));
+    assert_eq!(tap_bits(&good), tap_bits(&taps(u[0], v[0], 16).unwrap()));
+}
