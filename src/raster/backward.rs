@@ -20,6 +20,7 @@ use super::forward::{
     RenderOutput, TileCandidates, prefetch, prefetch_record, prefetch_ref, prefetch_taps, split_by_lengths, tile_pixels,
 };
 use super::preprocess::Prepared;
+use super::tile_backward::{EntryScratch, backward_tile_by_entry};
 use super::{ActivatedRef, SH_FLOATS};
 use crate::camera::offset_from;
 use crate::stages::bilinear::BilinearTaps;
@@ -130,18 +131,18 @@ struct Blended {
 /// pixels and where its texel gradients are.
 #[derive(Clone, Copy)]
 #[repr(C, align(64))]
-struct EntryRecord {
-    transform: SplatTransform,
-    rgb: Vec3,
+pub(super) struct EntryRecord {
+    pub(super) transform: SplatTransform,
+    pub(super) rgb: Vec3,
     /// The tile; its texel gradients are `tiles[tile].texels[texels.0..texels.1]` (empty when
     /// the tile added them to the billboard's gradient row itself, see [`SoleEntryRows`]).
-    tile: u32,
-    texels: (u32, u32),
+    pub(super) tile: u32,
+    pub(super) texels: (u32, u32),
     /// Some pixel of the tile blended this entry (it has gradients to reduce).
-    blended: bool,
+    pub(super) blended: bool,
 }
 
-const EMPTY_RECORD: EntryRecord = EntryRecord {
+pub(super) const EMPTY_RECORD: EntryRecord = EntryRecord {
     transform: ZERO_TRANSFORM,
     rgb: Vec3::ZERO,
     tile: 0,
@@ -164,7 +165,7 @@ const EMPTY_RECORD: EntryRecord = EntryRecord {
 /// included); into a row that already holds other views' gradients, the view's contributions
 /// are added one at a time rather than as one sum. Either way the order is fixed (pixel order),
 /// so the result does not depend on the thread count.
-struct SoleEntryRows {
+pub(super) struct SoleEntryRows {
     /// Start of `RenderGradients::textures`.
     rows: *mut [f32; 4],
     /// Texels per billboard (`TS²`).
@@ -188,7 +189,7 @@ impl SoleEntryRows {
     /// (the one `billboard_entries` names), whatever the bins hold, so with disjoint tile
     /// ranges (checked by [`render_backward`]) at most one task writes each row.
     #[inline]
-    fn owns(&self, bins: &TileBins, b: u32, entry: usize) -> bool {
+    pub(super) fn owns(&self, bins: &TileBins, b: u32, entry: usize) -> bool {
         let b = b as usize;
         let (start, end) = (bins.billboard_offsets[b], bins.billboard_offsets[b + 1]);
         end.wrapping_sub(start) == 1 && bins.billboard_entries[start as usize] as usize == entry
@@ -200,7 +201,7 @@ impl SoleEntryRows {
     /// [`SoleEntryRows::owns`] holds for `b` and an entry that the caller's task alone
     /// processes, during the tile pass.
     #[inline]
-    unsafe fn add(&self, b: usize, texel: u32, value: [f32; 4]) {
+    pub(super) unsafe fn add(&self, b: usize, texel: u32, value: [f32; 4]) {
         assert!(
             b < self.len && (texel as usize) < self.texels,
             "texel gradient out of range"
@@ -210,6 +211,13 @@ impl SoleEntryRows {
         for c in 0..4 {
             d[c] += value[c];
         }
+    }
+
+    /// Start of billboard `b`'s gradient row, for prefetches only (never dereferenced through
+    /// this pointer).
+    #[inline]
+    pub(super) fn row_start(&self, b: usize) -> *const [f32; 4] {
+        self.rows.wrapping_add(b.min(self.len) * self.texels)
     }
 
     /// Hints the CPU to fetch billboard `b`'s gradients of the texels `taps` reads (no effect
@@ -228,17 +236,17 @@ const ZERO_TRANSFORM: SplatTransform = SplatTransform {
     tw: Vec3::ZERO,
 };
 
-fn add_transform(acc: &mut SplatTransform, d: &SplatTransform) {
+pub(super) fn add_transform(acc: &mut SplatTransform, d: &SplatTransform) {
     acc.tu += d.tu;
     acc.tv += d.tv;
     acc.tw += d.tw;
 }
 
 /// What one tile hands to the per-billboard reduction besides its entries' records.
-struct TileGrads {
+pub(super) struct TileGrads {
     /// (texel index, `[∂r, ∂g, ∂b, ∂alpha]`), grouped by entry (see [`EntryRecord::texels`]).
-    texels: Vec<(u32, [f32; 4])>,
-    background: Vec3,
+    pub(super) texels: Vec<(u32, [f32; 4])>,
+    pub(super) background: Vec3,
 }
 
 /// Reusable per-task scratch of the tile backward.
@@ -249,6 +257,8 @@ struct Scratch {
     /// Per tile-list slot: the tile adds the entry's texture gradients to its billboard's row
     /// itself (see [`SoleEntryRows`]).
     sole: Vec<bool>,
+    /// The scratch of the entry-by-entry tile pass.
+    by_entry: EntryScratch,
 }
 
 /// Per-tile texture-gradient sums over (entry slot, texel) cells, reused by every tile a
@@ -643,7 +653,20 @@ pub fn render_backward(
         .enumerate()
         .map_init(Scratch::default, |scratch, (t, (records, normals))| {
             TEXEL_SUMS.with_borrow_mut(|sums| {
-                backward_tile(set, out, image_grads, t, records, normals, &sole_rows, scratch, sums)
+                if aux {
+                    backward_tile(set, out, image_grads, t, records, normals, &sole_rows, scratch, sums)
+                } else {
+                    backward_tile_by_entry(
+                        set,
+                        out,
+                        image_grads,
+                        t,
+                        records,
+                        &sole_rows,
+                        &mut scratch.by_entry,
+                        sums,
+                    )
+                }
             })
         })
         .collect();

@@ -27,6 +27,10 @@ pub struct ForwardState {
     /// Tile-list slots of the blended entries of every pixel, front to back, tile by tile and
     /// within a tile in tile-local row-major pixel order; see [`ForwardState::blended_of`].
     pub blended_slots: Vec<u32>,
+    /// Per entry of [`ForwardState::blended_slots`]: the transmittance in front of it when it
+    /// was blended (`Tᵢ`), which lets the backward pass visit a tile's entries back to front
+    /// without replaying each pixel's compositing from the front.
+    pub blended_transmittance: Vec<f32>,
     /// `blended_slots[blended_offsets[r]..blended_offsets[r + 1]]` are the blended slots of the
     /// pixel with tile-major rank `r = tile_pixel_base[t] + q` (`q` tile-local, row-major).
     pub blended_offsets: Vec<u32>,
@@ -385,6 +389,7 @@ pub struct RenderBuffers {
     prepared: Vec<Option<Prepared>>,
     bins: TileBins,
     blended_slots: Vec<u32>,
+    blended_transmittance: Vec<f32>,
     blended_offsets: Vec<u32>,
     tile_pixel_base: Vec<u32>,
     spare: ForwardSpare,
@@ -397,7 +402,7 @@ pub(crate) struct ForwardSpare {
     bin_scratch: BinScratch,
     entry_impact: Vec<f32>,
     /// Per tile: its pixels' outputs and the slots they blended.
-    tiles: Vec<(Vec<PixelOut>, Vec<u32>)>,
+    tiles: Vec<(Vec<PixelOut>, Vec<u32>, Vec<f32>)>,
     /// Per tile: its pixels' distortion (empty unless [`RenderSettings::distortion`]).
     tile_distortion: Vec<Vec<f32>>,
     tile_blended_base: Vec<u32>,
@@ -422,6 +427,7 @@ impl RenderOutput {
             prepared: state.prepared,
             bins: state.bins,
             blended_slots: state.blended_slots,
+            blended_transmittance: state.blended_transmittance,
             blended_offsets: state.blended_offsets,
             tile_pixel_base: state.tile_pixel_base,
             spare: state.spare,
@@ -470,6 +476,7 @@ pub fn render_with(
         mut prepared,
         mut bins,
         mut blended_slots,
+        mut blended_transmittance,
         mut blended_offsets,
         mut tile_pixel_base,
         mut spare,
@@ -495,18 +502,18 @@ pub fn render_with(
         .enumerate()
         .for_each_init(
             TileScratch::default,
-            |scratch, (t, ((impact, (pixels, blended_slots)), tile_distortion))| {
+            |scratch, (t, ((impact, (pixels, slots, transmittance)), tile_distortion))| {
                 let list = &bins.entries[bins.tile_range(t)];
                 let rect @ (i0, j0, _, _) = tile_pixels(&bins, t, w, h);
                 let TileScratch { spans, composite } = scratch;
                 local_spans(&prepared, list, (i0, j0), half_side, spans);
                 let tile = (camera, set, settings, &*prepared, list, rect, &spans[..]);
                 if with_distortion {
-                    composite_tile::<true>(composite, tile, impact, pixels, blended_slots);
+                    composite_tile::<true>(composite, tile, impact, pixels, (slots, transmittance));
                     tile_distortion.clear();
                     tile_distortion.extend(pixels.iter().map(|px| px.distortion));
                 } else {
-                    composite_tile::<false>(composite, tile, impact, pixels, blended_slots);
+                    composite_tile::<false>(composite, tile, impact, pixels, (slots, transmittance));
                 }
             },
         );
@@ -517,7 +524,7 @@ pub fn render_with(
     let tile_blended_base = &mut spare.tile_blended_base;
     tile_blended_base.clear();
     let (mut pixel_count, mut blended_count) = (0u32, 0u32);
-    for (pixels, slots) in tiles {
+    for (pixels, slots, _) in tiles {
         tile_pixel_base.push(pixel_count);
         tile_blended_base.push(blended_count);
         pixel_count += pixels.len() as u32;
@@ -526,25 +533,31 @@ pub fn render_with(
     // Blended slots and per-pixel offsets, tile by tile in parallel (disjoint ranges).
     // Both are written in full below (the tiles cover the image): not reset first.
     resize_for_overwrite(&mut blended_slots, blended_count as usize, 0);
+    resize_for_overwrite(&mut blended_transmittance, blended_count as usize, 0.0);
     resize_for_overwrite(&mut blended_offsets, n_pix + 1, 0)[0] = 0;
-    let slot_chunks = split_by_lengths(&mut blended_slots, tiles.iter().map(|(_, s)| s.len()));
-    let offset_chunks = split_by_lengths(&mut blended_offsets[1..], tiles.iter().map(|(p, _)| p.len()));
+    let slot_chunks = split_by_lengths(&mut blended_slots, tiles.iter().map(|(_, s, _)| s.len()));
+    let transmittance_chunks = split_by_lengths(&mut blended_transmittance, tiles.iter().map(|(_, s, _)| s.len()));
+    let offset_chunks = split_by_lengths(&mut blended_offsets[1..], tiles.iter().map(|(p, _, _)| p.len()));
     let (evaluated_pairs, nan_alpha_pairs): (u64, u64) = slot_chunks
         .into_par_iter()
+        .zip(transmittance_chunks)
         .zip(offset_chunks)
         .zip(tiles)
         .zip(&*tile_blended_base)
-        .map(|(((slot_chunk, offset_chunk), (pixels, slots)), &base)| {
-            slot_chunk.copy_from_slice(slots);
-            let mut end = base;
-            for (offset, px) in offset_chunk.iter_mut().zip(pixels) {
-                end += px.blended;
-                *offset = end;
-            }
-            pixels.iter().fold((0u64, 0u64), |(e, n), px| {
-                (e + u64::from(px.evaluated), n + u64::from(px.nan_alpha))
-            })
-        })
+        .map(
+            |((((slot_chunk, transmittance_chunk), offset_chunk), (pixels, slots, transmittance)), &base)| {
+                slot_chunk.copy_from_slice(slots);
+                transmittance_chunk.copy_from_slice(transmittance);
+                let mut end = base;
+                for (offset, px) in offset_chunk.iter_mut().zip(pixels) {
+                    end += px.blended;
+                    *offset = end;
+                }
+                pixels.iter().fold((0u64, 0u64), |(e, n), px| {
+                    (e + u64::from(px.evaluated), n + u64::from(px.nan_alpha))
+                })
+            },
+        )
         .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
     // Images, one band of tile rows per task; every pixel is written (the tiles cover the
     // image), so recycled storage is not reset first.
@@ -651,6 +664,7 @@ pub fn render_with(
             bins,
             final_transmittance,
             blended_slots,
+            blended_transmittance,
             blended_offsets,
             tile_pixel_base,
             spare,

@@ -25,6 +25,7 @@ pub mod forward;
 pub mod lanes;
 pub mod preprocess;
 pub mod reference;
+mod tile_backward;
 mod tile_forward;
 pub mod workload;
 

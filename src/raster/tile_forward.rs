@@ -20,7 +20,7 @@ use crate::camera::Camera;
 use crate::stages::bilinear::taps_row;
 use crate::stages::composite::{CompositeState, Step};
 use crate::stages::depth_distortion::{DistortionState, mapped_depth};
-use crate::stages::ray_plane::{LANES, intersect_row};
+use crate::stages::ray_plane::{LANES, intersect_lanes};
 use glam::Vec3;
 
 /// Features composited per pixel by the forward pass: colour (3), opacity (the constant 1, so
@@ -89,14 +89,14 @@ pub(crate) type TileInputs<'a, 's> = (
 #[derive(Default)]
 pub(crate) struct TileComposite {
     pixels: Vec<PixelState>,
-    /// Per pixel: the slots it blended, front to back.
-    blended: Vec<Vec<u32>>,
+    /// Per pixel: the slots it blended, front to back, with the transmittance in front of each.
+    blended: Vec<Vec<(u32, f32)>>,
 }
 
 /// Composites the tile `(i0, j0, i1, j1)` whose list is `list` (with the entries' `spans`):
 /// writes one [`PixelOut`] per tile-local pixel (row-major over the tile's own width) into
 /// `pixels`, the blended slots of each pixel, pixel after pixel and front to back within a
-/// pixel, into `blended_slots`, and adds `α·T` of each blended pair to `impact[slot]` (in pixel
+/// pixel, into `blended.0` (with the transmittance in front of each in `blended.1`), and adds `α·T` of each blended pair to `impact[slot]` (in pixel
 /// order). With `DISTORTION` the depth distortion of each pixel is accumulated too
 /// ([`DistortionState`]); without it that code is not compiled in.
 pub(crate) fn composite_tile<const DISTORTION: bool>(
@@ -104,15 +104,15 @@ pub(crate) fn composite_tile<const DISTORTION: bool>(
     inputs: TileInputs<'_, '_>,
     impact: &mut [f32],
     pixels: &mut Vec<PixelOut>,
-    blended_slots: &mut Vec<u32>,
+    blended: (&mut Vec<u32>, &mut Vec<f32>),
 ) {
     #[cfg(target_arch = "x86_64")]
     if super::lanes::wide_lanes() {
         // SAFETY: the CPU has AVX2 and FMA (checked at run time by `wide_lanes`).
-        unsafe { composite_tile_avx2::<DISTORTION>(scratch, inputs, impact, pixels, blended_slots) };
+        unsafe { composite_tile_avx2::<DISTORTION>(scratch, inputs, impact, pixels, blended) };
         return;
     }
-    composite_tile_body::<DISTORTION>(scratch, inputs, impact, pixels, blended_slots);
+    composite_tile_body::<DISTORTION>(scratch, inputs, impact, pixels, blended);
 }
 
 /// [`composite_tile_body`] compiled for AVX2 and FMA (8 f32 lanes per register; the code is the
@@ -127,9 +127,9 @@ unsafe fn composite_tile_avx2<const DISTORTION: bool>(
     inputs: TileInputs<'_, '_>,
     impact: &mut [f32],
     pixels: &mut Vec<PixelOut>,
-    blended_slots: &mut Vec<u32>,
+    blended: (&mut Vec<u32>, &mut Vec<f32>),
 ) {
-    composite_tile_body::<DISTORTION>(scratch, inputs, impact, pixels, blended_slots);
+    composite_tile_body::<DISTORTION>(scratch, inputs, impact, pixels, blended);
 }
 
 /// The body of [`composite_tile`], inlined into each instruction-set variant.
@@ -139,7 +139,7 @@ fn composite_tile_body<const DISTORTION: bool>(
     (camera, set, settings, prepared, list, (i0, j0, i1, j1), spans): TileInputs<'_, '_>,
     impact: &mut [f32],
     pixels: &mut Vec<PixelOut>,
-    blended_slots: &mut Vec<u32>,
+    out_blended: (&mut Vec<u32>, &mut Vec<f32>),
 ) {
     let params = &settings.composite;
     let ts = set.texture_size;
@@ -164,8 +164,9 @@ fn composite_tile_body<const DISTORTION: bool>(
         // The texels of an entry a few ahead (their reads would otherwise miss one by one).
         if let (Some(&ahead), Some(ahead_span)) = (list.get(k + 3), spans.get(k + 3))
             && let Some(pa) = prepared[ahead as usize].as_ref()
+            && let Some(rect) = span_rect(ahead_span).and_then(|r| texel_footprint(pa, r, (i0, j0), ts))
         {
-            prefetch_footprint(pa, ahead_span, (i0, j0), set.texture_of(ahead as usize), ts);
+            prefetch_texel_rect(set.texture_of(ahead as usize).as_ptr(), ts, rect);
         }
         let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
         let plane = p.view_plane();
@@ -188,7 +189,7 @@ fn composite_tile_body<const DISTORTION: bool>(
                 }
                 let first = i0 as usize + lanes.start - row;
                 let px: [f32; LANES] = std::array::from_fn(|l| (first + l) as f32 + 0.5);
-                let hits = intersect_row(&p.transform, &plane, camera, &px, py);
+                let hits = intersect_lanes(&p.transform, &plane, camera, &px, &[py; LANES]);
                 let taps = taps_row(&hits.u, &hits.v, ts);
                 for (lane, q) in lanes.enumerate() {
                     let state = &mut states[q];
@@ -227,7 +228,7 @@ fn composite_tile_body<const DISTORTION: bool>(
                         state.spread.add(mapped_depth(depth), blend.weight, blend.transmittance);
                     }
                     entry_impact += blend.weight;
-                    blended[q].push(k as u32);
+                    blended[q].push((k as u32, blend.transmittance));
                 }
             }
         }
@@ -235,7 +236,9 @@ fn composite_tile_body<const DISTORTION: bool>(
     }
     let bg = settings.background;
     pixels.clear();
+    let (blended_slots, blended_transmittance) = out_blended;
     blended_slots.clear();
+    blended_transmittance.clear();
     for (state, slots) in states.iter().zip(&blended[..n]) {
         let [r, g, b, alpha, depth, nx, ny, nz] = state.composite.finish(&[bg.x, bg.y, bg.z, 0.0, 0.0, 0.0, 0.0, 0.0]);
         pixels.push(PixelOut {
@@ -250,25 +253,14 @@ fn composite_tile_body<const DISTORTION: bool>(
             nan_alpha: state.nan_alpha,
             distortion: if DISTORTION { state.spread.distortion } else { 0.0 },
         });
-        blended_slots.extend_from_slice(slots);
+        blended_slots.extend(slots.iter().map(|&(k, _)| k));
+        blended_transmittance.extend(slots.iter().map(|&(_, t)| t));
     }
 }
 
-/// Hints the CPU to fetch the texels that entry `span` of the tile at `(i0, j0)` will read from
-/// `texture`: the texel rectangle holding the plane coordinates of the span's bounding box
-/// corners (a projective map sends the box into the hull of its corners' images while the plane
-/// stays in front of the camera), one cache line at a time. The textures of a view are tens of
-/// megabytes and each entry reads a few of its lines in a tile, so without the hint most texel
-/// reads wait for memory one after the other. No effect on results (the texels are not read
-/// here, and a wrong rectangle only wastes the hint).
-#[inline]
-pub(crate) fn prefetch_footprint(
-    p: &Prepared,
-    span: &EntrySpans,
-    (i0, j0): (u32, u32),
-    texture: &[[f32; 4]],
-    ts: usize,
-) {
+/// The tile-local pixel rectangle `(x0, y0, x1, y1)` (inclusive) holding an entry's span, or
+/// `None` when the span is empty.
+fn span_rect(span: &EntrySpans) -> Option<(u8, u8, u8, u8)> {
     let (y0, y1) = (span.rows[0], span.rows[1]);
     let (mut x0, mut x1) = (u8::MAX, 0u8);
     for y in y0..=y1 {
@@ -278,17 +270,27 @@ pub(crate) fn prefetch_footprint(
             x1 = x1.max(b);
         }
     }
-    if x0 > x1 {
-        return;
-    }
+    (x0 <= x1).then_some((x0, y0, x1, y1))
+}
+
+/// The texel rectangle `(c0, r0, c1, r1)` (inclusive) that the pixels of the tile-local
+/// rectangle `(x0, y0, x1, y1)` of the tile at `(i0, j0)` read from the texture of `p`: the
+/// rectangle of the plane coordinates of its corners (a projective map sends the rectangle into
+/// the hull of its corners' images while the plane stays in front of the camera), widened by
+/// the second tap. For prefetches only: a wrong rectangle only wastes them. `None` when a
+/// corner has no finite plane coordinates.
+pub(crate) fn texel_footprint(
+    p: &Prepared,
+    (x0, y0, x1, y1): (u8, u8, u8, u8),
+    (i0, j0): (u32, u32),
+    ts: usize,
+) -> Option<(usize, usize, usize, usize)> {
     let t = &p.transform;
     let (mut u_lo, mut u_hi, mut v_lo, mut v_hi) = (f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY);
     for (x, y) in [(x0, y0), (x1, y0), (x0, y1), (x1, y1)] {
         let px = (i0 + u32::from(x)) as f32 + 0.5;
         let py = (j0 + u32::from(y)) as f32 + 0.5;
-        let k = px * t.tw - t.tu;
-        let l = py * t.tw - t.tv;
-        let h = k.cross(l);
+        let h = (px * t.tw - t.tu).cross(py * t.tw - t.tv);
         let (u, v) = (h.x / h.z, h.y / h.z);
         u_lo = u_lo.min(u);
         u_hi = u_hi.max(u);
@@ -296,19 +298,31 @@ pub(crate) fn prefetch_footprint(
         v_hi = v_hi.max(v);
     }
     if !(u_lo.is_finite() && u_hi.is_finite() && v_lo.is_finite() && v_hi.is_finite()) {
-        return;
+        return None;
     }
     let last = (ts - 1) as f32;
     let texel = |c: f32| (((c.clamp(-1.0, 1.0) + 1.0) * 0.5 * last) as usize).min(ts - 1);
-    let (c0, c1) = (texel(u_lo), (texel(u_hi) + 1).min(ts - 1));
-    let (r0, r1) = (texel(v_lo), (texel(v_hi) + 1).min(ts - 1));
+    Some((
+        texel(u_lo),
+        texel(v_lo),
+        (texel(u_hi) + 1).min(ts - 1),
+        (texel(v_hi) + 1).min(ts - 1),
+    ))
+}
+
+/// Hints the CPU to fetch the cache lines of the texel rectangle `(c0, r0, c1, r1)` of a
+/// row-major `ts × ts` per-texel array starting at `texels` (a texture, a gradient row, a cell
+/// index). `texels` is never dereferenced.
+#[inline]
+pub(crate) fn prefetch_texel_rect<T>(texels: *const T, ts: usize, (c0, r0, c1, r1): (usize, usize, usize, usize)) {
+    let per_line = (64 / size_of::<T>().max(1)).max(1);
     for r in r0..=r1 {
-        let row = &texture[r * ts..(r + 1) * ts];
+        let row = texels.wrapping_add(r * ts);
         let mut c = c0;
         while c <= c1 {
-            prefetch_ptr(std::ptr::from_ref(&row[c]).cast::<u8>());
-            c += 4;
+            prefetch_ptr(row.wrapping_add(c).cast::<u8>());
+            c += per_line;
         }
-        prefetch_ptr(std::ptr::from_ref(&row[c1]).cast::<u8>());
+        prefetch_ptr(row.wrapping_add(c1).cast::<u8>());
     }
 }

@@ -92,15 +92,7 @@ impl SampleTaps {
         );
         let n = self.len as usize;
         if n == 4 {
-            let [i0, i1, i2, i3] = self.index.map(|i| i as usize);
-            let w = self.weight;
-            let (t0, t1, t2, t3) = (
-                Vec4::from_array(texels[i0]),
-                Vec4::from_array(texels[i1]),
-                Vec4::from_array(texels[i2]),
-                Vec4::from_array(texels[i3]),
-            );
-            return (Vec4::ZERO + w[0] * t0 + w[1] * t1 + w[2] * t2 + w[3] * t3).to_array();
+            return sample_four(texels, self.index, self.weight);
         }
         let mut acc = Vec4::ZERO;
         for k in 0..n {
@@ -108,6 +100,45 @@ impl SampleTaps {
         }
         acc.to_array()
     }
+}
+
+/// The four-tap RGBA sample `Σ wₖ·texel[iₖ]`, summed in tap order from zero (the one copy of
+/// the sampling arithmetic: [`SampleTaps::sample_rgba`] and [`RowTaps::sample_rgba`]).
+#[inline(always)]
+fn sample_four(texels: &[[f32; 4]], index: [u32; 4], w: [f32; 4]) -> [f32; 4] {
+    let [i0, i1, i2, i3] = index.map(|i| i as usize);
+    let (t0, t1, t2, t3) = (
+        Vec4::from_array(texels[i0]),
+        Vec4::from_array(texels[i1]),
+        Vec4::from_array(texels[i2]),
+        Vec4::from_array(texels[i3]),
+    );
+    (Vec4::ZERO + w[0] * t0 + w[1] * t1 + w[2] * t2 + w[3] * t3).to_array()
+}
+
+/// The backward of an RGBA sample over the taps `index` with weights and weight derivatives
+/// `[weight, d_weight_du, d_weight_dv]`: calls `emit(texel, weight · d_rgba)` per tap in tap
+/// order and returns `(∂L/∂u, ∂L/∂v)` (the one copy of this arithmetic:
+/// [`BilinearTaps::vjp_rgba`] and [`RowTaps::vjp_rgba`]).
+#[inline(always)]
+fn vjp_taps(
+    texels: &[[f32; 4]],
+    index: &[u32],
+    [weight, d_weight_du, d_weight_dv]: [&[f32]; 3],
+    d_rgba: [f32; 4],
+    mut emit: impl FnMut(u32, [f32; 4]),
+) -> (f32, f32) {
+    let d = Vec4::from_array(d_rgba);
+    let (mut du, mut dv) = (0.0f32, 0.0f32);
+    for k in 0..index.len() {
+        let t = texels[index[k] as usize];
+        // The texel's value seen through the upstream gradient: alpha first, then r, g, b.
+        let seen = t[3] * d_rgba[3] + t[0] * d_rgba[0] + t[1] * d_rgba[1] + t[2] * d_rgba[2];
+        du += d_weight_du[k] * seen;
+        dv += d_weight_dv[k] * seen;
+        emit(index[k], (weight[k] * d).to_array());
+    }
+    (du, dv)
 }
 
 /// Continuous texel coordinate of a billboard coordinate: `(c + 1)/2 · (ts − 1)`, in f64.
@@ -389,19 +420,16 @@ impl BilinearTaps {
     /// # Panics
     /// If `texels.len() != ts²`.
     #[inline]
-    pub fn vjp_rgba(&self, texels: &[[f32; 4]], d_rgba: [f32; 4], mut emit: impl FnMut(u32, [f32; 4])) -> (f32, f32) {
+    pub fn vjp_rgba(&self, texels: &[[f32; 4]], d_rgba: [f32; 4], emit: impl FnMut(u32, [f32; 4])) -> (f32, f32) {
         self.check_texel_count(texels.len());
-        let d = Vec4::from_array(d_rgba);
-        let (mut du, mut dv) = (0.0f32, 0.0f32);
-        for k in 0..self.len as usize {
-            let t = texels[self.index[k] as usize];
-            // The texel's value seen through the upstream gradient: alpha first, then r, g, b.
-            let seen = t[3] * d_rgba[3] + t[0] * d_rgba[0] + t[1] * d_rgba[1] + t[2] * d_rgba[2];
-            du += self.d_weight_du[k] * seen;
-            dv += self.d_weight_dv[k] * seen;
-            emit(self.index[k], (self.weight[k] * d).to_array());
-        }
-        (du, dv)
+        let n = self.len as usize;
+        vjp_taps(
+            texels,
+            &self.index[..n],
+            [&self.weight[..n], &self.d_weight_du[..n], &self.d_weight_dv[..n]],
+            d_rgba,
+            emit,
+        )
     }
 
     #[inline]
@@ -543,6 +571,66 @@ impl RowTaps {
             d_weight_du: [0, 1, 2, 3].map(|k| self.d_weight_du[k][lane]),
             d_weight_dv: [0, 1, 2, 3].map(|k| self.d_weight_dv[k][lane]),
         })
+    }
+
+    /// Lane `lane`'s RGBA sample of `texels` (`ts²` RGBA texels), whose coordinates were
+    /// `(u, v)`: `taps(u, v, ts)` followed by [`BilinearTaps::sample_rgba`], bit for bit, or
+    /// `None` without taps. The weights are read from the lanes directly (building a
+    /// [`BilinearTaps`] by scalar stores and reading it back whole stalls the CPU).
+    ///
+    /// # Panics
+    /// If `texels.len() != ts²`.
+    #[inline(always)]
+    pub fn sample_rgba(&self, lane: usize, u: f32, v: f32, texels: &[[f32; 4]]) -> Option<[f32; 4]> {
+        if !self.interior[lane] {
+            return taps(u, v, self.ts as usize).map(|t| t.sample_rgba(texels));
+        }
+        assert_eq!(
+            texels.len(),
+            self.ts as usize * self.ts as usize,
+            "texels must hold ts × ts RGBA values"
+        );
+        Some(sample_four(texels, self.indices(lane), self.weight.map(|w| w[lane])))
+    }
+
+    /// Lane `lane`'s [`BilinearTaps::vjp_rgba`] (coordinates `(u, v)`), bit for bit, reading the
+    /// lanes directly; `None` without taps.
+    ///
+    /// # Panics
+    /// If `texels.len() != ts²`.
+    #[inline(always)]
+    pub fn vjp_rgba(
+        &self,
+        lane: usize,
+        (u, v): (f32, f32),
+        texels: &[[f32; 4]],
+        d_rgba: [f32; 4],
+        emit: impl FnMut(u32, [f32; 4]),
+    ) -> Option<(f32, f32)> {
+        if !self.interior[lane] {
+            return taps(u, v, self.ts as usize).map(|t| t.vjp_rgba(texels, d_rgba, emit));
+        }
+        assert_eq!(
+            texels.len(),
+            self.ts as usize * self.ts as usize,
+            "texels must hold ts × ts RGBA values"
+        );
+        let at = |w: &[[f32; LANES]; 4]| w.map(|w| w[lane]);
+        let parts = [at(&self.weight), at(&self.d_weight_du), at(&self.d_weight_dv)];
+        Some(vjp_taps(
+            texels,
+            &self.indices(lane),
+            [&parts[0], &parts[1], &parts[2]],
+            d_rgba,
+            emit,
+        ))
+    }
+
+    /// The four tap indices of an interior lane.
+    #[inline(always)]
+    fn indices(&self, lane: usize) -> [u32; 4] {
+        let base = self.base[lane];
+        [base, base + 1, base + self.ts, base + self.ts + 1]
     }
 
     /// The taps and weights of lane `lane` (what sampling reads): [`RowTaps::lane`] followed by

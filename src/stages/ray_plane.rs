@@ -214,11 +214,10 @@ pub fn intersect_vjp_with(
     }
 }
 
-/// Pixels per call of [`intersect_row`] (and of the other row-wise stage functions).
+/// Pixels per call of [`intersect_lanes`] (and of the other row-wise stage functions).
 pub const LANES: usize = 8;
 
-/// The hits of [`LANES`] pixel centres of one image row with one billboard
-/// ([`intersect_row`]): lane `l` holds what [`intersect_with`] gives for pixel `l`, with the
+/// The hits of [`LANES`] pixel centres with one billboard ([`intersect_lanes`]): lane `l` holds what [`intersect_with`] gives for pixel `l`, with the
 /// depth by the plane equation; `valid[l]` is false where it gives `None` (`u`, `v` and `depth`
 /// of such a lane are unspecified).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -234,19 +233,23 @@ pub struct RowHits {
 }
 
 /// [`intersect_with`] with the plane-equation depth ([`ViewPlane::depth`] of the pixel's
-/// [`pixel_ray`]) for the pixel centres `(px[l], py)`, `l < LANES`, of one row, computed lane by
-/// lane with no branch, so that the compiler can run the lanes side by side in vector registers.
+/// [`pixel_ray`]) for the pixel centres `(px[l], py[l])`, `l < LANES`, computed lane by lane with
+/// no branch, so that the compiler can run the lanes side by side in vector registers.
 ///
 /// Every lane does exactly the operations of the scalar functions, in the same order (no fused
 /// multiply-add, which Rust never introduces by itself), so each valid lane equals
-/// `intersect_with(t, px[l], py, |_, _| plane.depth(pixel_ray(camera, px[l], py)))` bit for
-/// bit, and `valid[l]` is true exactly where that returns `Some` (tested on random and
+/// `intersect_with(t, px[l], py[l], |_, _| plane.depth(pixel_ray(camera, px[l], py[l])))` bit
+/// for bit, and `valid[l]` is true exactly where that returns `Some` (tested on random and
 /// degenerate inputs in `tests/suite/stage_lanes.rs`). The rasterizer's forward and backward
 /// tile loops call this form; the scalar form is its reference and carries the gradient proofs.
 #[inline(always)]
-pub fn intersect_row(t: &SplatTransform, plane: &ViewPlane, camera: &Camera, px: &[f32; LANES], py: f32) -> RowHits {
-    let ray_y = (py - camera.cy) / camera.fy;
-    let (ly, lz, lx) = (py * t.tw.y - t.tv.y, py * t.tw.z - t.tv.z, py * t.tw.x - t.tv.x);
+pub fn intersect_lanes(
+    t: &SplatTransform,
+    plane: &ViewPlane,
+    camera: &Camera,
+    px: &[f32; LANES],
+    py: &[f32; LANES],
+) -> RowHits {
     let mut hits = RowHits {
         u: [0.0; LANES],
         v: [0.0; LANES],
@@ -254,9 +257,10 @@ pub fn intersect_row(t: &SplatTransform, plane: &ViewPlane, camera: &Camera, px:
         valid: [false; LANES],
     };
     for lane in 0..LANES {
-        let x = px[lane];
+        let (x, y) = (px[lane], py[lane]);
         // `guarded_lines`, lane-wise: k = x·Tw − Tu, l = y·Tw − Tv, p = k × l.
         let (kx, ky, kz) = (x * t.tw.x - t.tu.x, x * t.tw.y - t.tu.y, x * t.tw.z - t.tu.z);
+        let (lx, ly, lz) = (y * t.tw.x - t.tv.x, y * t.tw.y - t.tv.y, y * t.tw.z - t.tv.z);
         let (m, n) = (kx * ly, ky * lx);
         let (pxh, pyh, pzh) = (ky * lz - kz * ly, kz * lx - kx * lz, m - n);
         let apz = pzh.abs();
@@ -265,8 +269,8 @@ pub fn intersect_row(t: &SplatTransform, plane: &ViewPlane, camera: &Camera, px:
         let bounded = pxh.abs() < limit && pyh.abs() < limit;
         let inv = 1.0 / pzh;
         let (u, v) = (pxh * inv, pyh * inv);
-        // `ViewPlane::depth` of `pixel_ray`: offset / (n · ((x − cx)/fx, ray_y, 1)).
-        let ray_x = (x - camera.cx) / camera.fx;
+        // `ViewPlane::depth` of `pixel_ray`: offset / (n · ((x − cx)/fx, (y − cy)/fy, 1)).
+        let (ray_x, ray_y) = ((x - camera.cx) / camera.fx, (y - camera.cy) / camera.fy);
         let depth = plane.offset / (plane.normal.x * ray_x + plane.normal.y * ray_y + plane.normal.z * 1.0);
         hits.u[lane] = u;
         hits.v[lane] = v;

@@ -1,4 +1,4 @@
-//! The lane-wise forms of the ray-plane and bilinear stages (`intersect_row`, `taps_row`), which
+//! The lane-wise forms of the ray-plane and bilinear stages (`intersect_lanes`, `taps_row`), which
 //! the rasterizer's tile loops run, against the scalar forms that carry the gradient proofs:
 //! equal bit for bit, lane by lane, on random visible billboards, on pixels far outside them,
 //! on degenerate transforms (edge-on, zero, NaN, infinite), at texel borders and outside the
@@ -7,26 +7,33 @@
 
 use bbsplat::camera::Camera;
 use bbsplat::stages::bilinear::{BilinearTaps, taps, taps_row};
-use bbsplat::stages::ray_plane::{LANES, ViewPlane, intersect_row, intersect_with, pixel_ray};
+use bbsplat::stages::ray_plane::{LANES, ViewPlane, intersect_lanes, intersect_with, pixel_ray};
 use bbsplat::stages::splat_transform::{SplatTransform, splat_frame, view_plane};
 use bbsplat::strategies::{billboard_in_front, camera, seeded_config};
 use glam::Vec3;
 use proptest::prelude::*;
 
-/// Compares lane `lane` of `intersect_row` with the scalar intersection, bit for bit.
-fn check_row(t: &SplatTransform, plane: &ViewPlane, cam: &Camera, px: &[f32; LANES], py: f32) -> Result<(), String> {
-    let row = intersect_row(t, plane, cam, px, py);
+/// Compares lane `lane` of `intersect_lanes` with the scalar intersection, bit for bit.
+fn check_row(
+    t: &SplatTransform,
+    plane: &ViewPlane,
+    cam: &Camera,
+    px: &[f32; LANES],
+    py: &[f32; LANES],
+) -> Result<(), String> {
+    let row = intersect_lanes(t, plane, cam, px, py);
     for lane in 0..LANES {
-        let scalar = intersect_with(t, px[lane], py, |_, _| plane.depth(pixel_ray(cam, px[lane], py)));
+        let (x, y) = (px[lane], py[lane]);
+        let scalar = intersect_with(t, x, y, |_, _| plane.depth(pixel_ray(cam, x, y)));
         match scalar {
-            None if row.valid[lane] => return Err(format!("lane {lane} ({}, {py}): valid, scalar None", px[lane])),
+            None if row.valid[lane] => return Err(format!("lane {lane} ({x}, {y}): valid, scalar None")),
             None => {}
             Some(h) => {
                 let lane_hit = [row.u[lane], row.v[lane], row.depth[lane]].map(f32::to_bits);
                 if !row.valid[lane] || lane_hit != [h.u, h.v, h.depth].map(f32::to_bits) {
                     return Err(format!(
-                        "lane {lane} ({}, {py}): row ({}, {}, {}, valid {}), scalar {h:?}",
-                        px[lane], row.u[lane], row.v[lane], row.depth[lane], row.valid[lane]
+                        "lane {lane} ({x}, {y}): lanes ({}, {}, {}, valid {}), scalar {h:?}",
+                        row.u[lane], row.v[lane], row.depth[lane], row.valid[lane]
                     ));
                 }
             }
@@ -44,7 +51,14 @@ fn tap_bits(t: &BilinearTaps) -> Vec<u32> {
     bits
 }
 
-/// Compares every lane of `taps_row` (both accessors) with the scalar `taps`, bit for bit.
+/// A `ts × ts` RGBA texture of values in [0, 1) (fixed by `seed`).
+fn texture(ts: usize, seed: u64) -> Vec<[f32; 4]> {
+    let mut rng = bbsplat::rng::Rng::new(seed);
+    (0..ts * ts).map(|_| [(); 4].map(|_| rng.uniform())).collect()
+}
+
+/// Compares every lane of `taps_row` (its taps and its sampling taps) with the scalar `taps`,
+/// bit for bit.
 fn check_taps(u: &[f32; LANES], v: &[f32; LANES], ts: usize) -> Result<(), String> {
     let row = taps_row(u, v, ts);
     for lane in 0..LANES {
@@ -64,16 +78,45 @@ fn check_taps(u: &[f32; LANES], v: &[f32; LANES], ts: usize) -> Result<(), Strin
     Ok(())
 }
 
+/// Compares every lane's sample and sample backward read straight from the lanes
+/// (`RowTaps::sample_rgba`, `RowTaps::vjp_rgba`) with the scalar ones, bit for bit.
+fn check_samples(u: &[f32; LANES], v: &[f32; LANES], ts: usize) -> Result<(), String> {
+    let row = taps_row(u, v, ts);
+    for lane in 0..LANES {
+        let scalar = taps(u[lane], v[lane], ts);
+        let texels = texture(ts, lane as u64);
+        let bits = |x: [f32; 4]| x.map(f32::to_bits);
+        let sampled = row.sample_rgba(lane, u[lane], v[lane], &texels).map(bits);
+        if sampled != scalar.map(|t| bits(t.sample_rgba(&texels))) {
+            return Err(format!("lane {lane} ({}, {}): samples differ", u[lane], v[lane]));
+        }
+        let d_rgba = [0.3, -1.7, 0.05, 2.5];
+        let mut lane_emitted = Vec::new();
+        let lane_vjp = row.vjp_rgba(lane, (u[lane], v[lane]), &texels, d_rgba, |i, g| {
+            lane_emitted.push((i, bits(g)))
+        });
+        let mut emitted = Vec::new();
+        let vjp = scalar.map(|t| t.vjp_rgba(&texels, d_rgba, |i, g| emitted.push((i, bits(g)))));
+        let pair_bits = |p: Option<(f32, f32)>| p.map(|(a, b)| (a.to_bits(), b.to_bits()));
+        if pair_bits(lane_vjp) != pair_bits(vjp) || lane_emitted != emitted {
+            return Err(format!("lane {lane} ({}, {}): backward differs", u[lane], v[lane]));
+        }
+    }
+    Ok(())
+}
+
 proptest! {
     #![proptest_config(seeded_config(256))]
 
-    /// Visible billboards, a row of pixels through them and beyond (misses included).
+    /// Visible billboards, pixels through them and beyond (misses included), on one row or on
+    /// three.
     #[test]
-    fn intersect_row_equals_the_scalar_intersection(
+    fn intersect_lanes_equals_the_scalar_intersection(
         (cam, pose) in camera().prop_flat_map(|c| (Just(c), billboard_in_front(c))),
         fy in 0.0f32..1.0,
         fx in 0.0f32..1.0,
         spacing in prop_oneof![Just(1.0f32), 0.1f32..40.0],
+        rows in prop_oneof![Just(0.0f32), 1.0f32..20.0],
     ) {
         let frame = splat_frame(pose.position, pose.log_scales, pose.quaternion, &cam).unwrap();
         let (normal, offset) = view_plane(pose.position, pose.quaternion, &cam, frame.normal_sign);
@@ -81,7 +124,8 @@ proptest! {
         let py = (fy * cam.height as f32).floor() + 0.5;
         let x0 = (fx * cam.width as f32).floor() + 0.5;
         let px: [f32; LANES] = std::array::from_fn(|l| x0 + l as f32 * spacing);
-        check_row(&frame.transform, &plane, &cam, &px, py).map_err(TestCaseError::fail)?;
+        let py: [f32; LANES] = std::array::from_fn(|l| py + (l % 3) as f32 * rows);
+        check_row(&frame.transform, &plane, &cam, &px, &py).map_err(TestCaseError::fail)?;
     }
 
     /// Coordinates around and beyond the texture, with exact texel borders mixed in.
@@ -92,13 +136,14 @@ proptest! {
         ts in prop_oneof![Just(16usize), 2usize..40],
     ) {
         check_taps(&u, &v, ts).map_err(TestCaseError::fail)?;
+        check_samples(&u, &v, ts).map_err(TestCaseError::fail)?;
     }
 }
 
 /// Degenerate transforms: edge-on (p.z = 0 everywhere), all zero, NaN and infinite entries, a
 /// plane behind the camera, and a plane whose hits cross the near plane along the row.
 #[test]
-fn intersect_row_rejects_exactly_what_the_scalar_form_rejects() {
+fn intersect_lanes_rejects_exactly_what_the_scalar_form_rejects() {
     let cam = Camera::look_at(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, Vec3::Y, 60.0, 60.0, 64, 48);
     let face_on = SplatTransform {
         tu: Vec3::new(30.0, 0.0, 32.0),
@@ -137,7 +182,7 @@ fn intersect_row_rejects_exactly_what_the_scalar_form_rejects() {
             for x0 in [0.5f32, 28.5, 60.5, -100.5, 1e30] {
                 for py in [0.5f32, 23.5, 47.5, f32::NAN] {
                     let px: [f32; LANES] = std::array::from_fn(|l| x0 + l as f32);
-                    check_row(&t, &p, &cam, &px, py).unwrap();
+                    check_row(&t, &p, &cam, &px, &[py; LANES]).unwrap();
                     checked += 1;
                 }
             }
@@ -169,6 +214,11 @@ fn taps_row_handles_non_finite_and_boundary_coordinates() {
             let v: [f32; LANES] = std::array::from_fn(|l| specials[(l + 3) % specials.len()]);
             check_taps(&u, &v, ts).unwrap();
             check_taps(&v, &u, ts).unwrap();
+            // Sampling needs the texture (a 65536² one would be 64 GiB).
+            if ts <= 16 {
+                check_samples(&u, &v, ts).unwrap();
+                check_samples(&v, &u, ts).unwrap();
+            }
         }
     }
 }

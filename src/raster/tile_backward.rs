@@ -1,0 +1,301 @@
+//! The backward pass of one tile, billboard by billboard, back to front: each entry of the
+//! tile's list, from the last to the first, is applied to the pixels that blended it before the
+//! next (nearer) entry is read.
+//!
+//! Each pixel keeps its own back-to-front state ([`CompositeBackState`], the stage's own code:
+//! the colour behind, starting at the background) in a small per-tile array; visiting the
+//! entries in reverse list order visits every pixel's blended entries back to front, as the
+//! per-pixel recursion needs. The transmittance in front of each blended pair comes from the
+//! forward pass ([`super::ForwardState::blended_transmittance`]), so no pixel's compositing is
+//! replayed from the front. The alpha of each pair is sampled again and classified with the
+//! stored transmittance, which gives the forward's [`Blend`](crate::stages::composite::Blend)
+//! record bit for bit.
+//!
+//! Every sum keeps its order: an entry's geometric gradients, its texel sums and the texel rows
+//! of single-entry billboards receive their pixels' contributions in pixel order, as in the
+//! pixel-by-pixel walk (`backward_tile`, which still serves the normal and distortion maps), so
+//! the gradients are the same bits (checksums of `raster_stats`; the raster tests).
+
+use super::backward::{EMPTY_RECORD, EntryRecord, SoleEntryRows, TexelSums, TileGrads, add_transform};
+use super::forward::{RenderOutput, prefetch_record, tile_pixels};
+use super::preprocess::Prepared;
+use super::tile_forward::{prefetch_texel_rect, texel_footprint};
+use super::{ActivatedRef, backward::ImageGradients};
+use crate::stages::bilinear::taps_row;
+use crate::stages::composite::{CompositeBackState, Step, classify};
+use crate::stages::ray_plane::{LANES, intersect_lanes, intersect_vjp_with, pixel_ray};
+use glam::Vec3;
+
+/// Channels of the back-to-front recursion: colour (3), opacity (1), depth (1).
+const CHANNELS: usize = 5;
+
+/// The back-to-front state of one pixel and its upstream gradient.
+#[derive(Clone, Copy, Debug)]
+struct PixelBack {
+    back: CompositeBackState<CHANNELS>,
+    d_out: [f32; CHANNELS],
+}
+
+/// One blended (pixel, entry) pair of the tile: the tile-local pixel and the transmittance in
+/// front of the entry there.
+#[derive(Clone, Copy, Debug, Default)]
+struct Pair {
+    pixel: u32,
+    transmittance: f32,
+}
+
+/// Reusable per-task scratch of [`backward_tile_by_entry`] (rebuilt per tile).
+#[derive(Default)]
+pub(super) struct EntryScratch {
+    pixels: Vec<PixelBack>,
+    /// The tile's blended pairs grouped by entry, in pixel order within an entry: the pairs of
+    /// slot `k` are `pairs[starts[k]..starts[k + 1]]`.
+    pairs: Vec<Pair>,
+    starts: Vec<u32>,
+    cursor: Vec<u32>,
+    /// Per slot: the tile adds the entry's texture gradients to its billboard's row itself.
+    sole: Vec<bool>,
+}
+
+/// The backward pass of tile `tile` without the normal and distortion maps: fills `records`
+/// (the tile's entries) and returns the texel sums of the entries whose billboard has other
+/// entries and the tile's background gradient; texel gradients of single-entry billboards go
+/// straight to their rows through `sole_rows`. Bit for bit what the pixel-by-pixel walk gives.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn backward_tile_by_entry(
+    set: &ActivatedRef<'_>,
+    out: &RenderOutput,
+    grads_in: &ImageGradients<'_>,
+    tile: usize,
+    records: &mut [EntryRecord],
+    sole_rows: &SoleEntryRows,
+    scratch: &mut EntryScratch,
+    sums: &mut TexelSums,
+) -> TileGrads {
+    #[cfg(target_arch = "x86_64")]
+    if super::lanes::wide_lanes() {
+        // SAFETY: the CPU has AVX2 and FMA (checked at run time by `wide_lanes`).
+        return unsafe { by_entry_avx2(set, out, grads_in, tile, records, sole_rows, scratch, sums) };
+    }
+    by_entry_body(set, out, grads_in, tile, records, sole_rows, scratch, sums)
+}
+
+/// [`by_entry_body`] compiled for AVX2 and FMA (same operations, same bits).
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn by_entry_avx2(
+    set: &ActivatedRef<'_>,
+    out: &RenderOutput,
+    grads_in: &ImageGradients<'_>,
+    tile: usize,
+    records: &mut [EntryRecord],
+    sole_rows: &SoleEntryRows,
+    scratch: &mut EntryScratch,
+    sums: &mut TexelSums,
+) -> TileGrads {
+    by_entry_body(set, out, grads_in, tile, records, sole_rows, scratch, sums)
+}
+
+/// The body of [`backward_tile_by_entry`], inlined into each instruction-set variant.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn by_entry_body(
+    set: &ActivatedRef<'_>,
+    out: &RenderOutput,
+    grads_in: &ImageGradients<'_>,
+    tile: usize,
+    records: &mut [EntryRecord],
+    sole_rows: &SoleEntryRows,
+    scratch: &mut EntryScratch,
+    sums: &mut TexelSums,
+) -> TileGrads {
+    let state = &out.state;
+    let bins = &state.bins;
+    let range = bins.tile_range(tile);
+    let list = &bins.entries[range.clone()];
+    let prepared: &[Option<Prepared>] = &state.prepared;
+    let settings = &state.settings;
+    let params = &settings.composite;
+    let camera = &state.camera;
+    let ts = set.texture_size;
+    let width = out.width;
+    let (i0, j0, i1, j1) = tile_pixels(bins, tile, width, out.height);
+    let tw = (i1 - i0) as usize;
+    let n_q = tw * (j1 - j0) as usize;
+    debug_assert_eq!(records.len(), list.len());
+    records.fill(EntryRecord {
+        tile: tile as u32,
+        ..EMPTY_RECORD
+    });
+    sums.start(list.len(), ts * ts);
+    let EntryScratch {
+        pixels,
+        pairs,
+        starts,
+        cursor,
+        sole,
+    } = scratch;
+    sole.clear();
+    sole.extend(
+        list.iter()
+            .enumerate()
+            .map(|(k, &b)| sole_rows.owns(bins, b, range.start + k)),
+    );
+    // Per pixel: the upstream gradients, the state behind the last blended entry (the
+    // background), and the background's gradient `Σ g·T_final` in pixel order.
+    let bg = settings.background;
+    let mut background = Vec3::ZERO;
+    pixels.clear();
+    for q in 0..n_q {
+        let (i, j) = (i0 + (q % tw) as u32, j0 + (q / tw) as u32);
+        let p = (j * width + i) as usize;
+        let g_rgb = Vec3::from_slice(&grads_in.rgb[3 * p..3 * p + 3]);
+        background += g_rgb * state.final_transmittance[p];
+        pixels.push(PixelBack {
+            back: CompositeBackState::new(&[bg.x, bg.y, bg.z, 0.0, 0.0]),
+            d_out: [
+                g_rgb.x,
+                g_rgb.y,
+                g_rgb.z,
+                grads_in.alpha.map_or(0.0, |a| a[p]),
+                grads_in.depth.map_or(0.0, |d| d[p]),
+            ],
+        });
+    }
+    // The tile's blended pairs grouped by entry (a counting sort of the per-pixel lists; pixel
+    // order within an entry).
+    let rank = state.tile_pixel_base[tile] as usize;
+    let offsets = &state.blended_offsets[rank..=rank + n_q];
+    let tile_pairs = offsets[0] as usize..offsets[n_q] as usize;
+    let slots = &state.blended_slots[tile_pairs.clone()];
+    let transmittance = &state.blended_transmittance[tile_pairs];
+    starts.clear();
+    starts.resize(list.len() + 1, 0);
+    for &k in slots {
+        starts[k as usize + 1] += 1;
+    }
+    for k in 0..list.len() {
+        starts[k + 1] += starts[k];
+    }
+    cursor.clear();
+    cursor.extend_from_slice(&starts[..list.len()]);
+    pairs.clear();
+    pairs.resize(slots.len(), Pair::default());
+    let base = offsets[0];
+    for q in 0..n_q {
+        for r in (offsets[q] - base) as usize..(offsets[q + 1] - base) as usize {
+            let c = &mut cursor[slots[r] as usize];
+            pairs[*c as usize] = Pair {
+                pixel: q as u32,
+                transmittance: transmittance[r],
+            };
+            *c += 1;
+        }
+    }
+    let starts: &[u32] = starts;
+    let pairs: &[Pair] = pairs;
+    // The tile-local rectangle of the pixels of an entry's pairs.
+    let pair_rect = |k: usize| {
+        let of = &pairs[starts[k] as usize..starts[k + 1] as usize];
+        let (first, last) = (of.first()?.pixel as usize, of.last()?.pixel as usize);
+        let (mut x0, mut x1) = (usize::MAX, 0);
+        for pair in of {
+            let x = pair.pixel as usize % tw;
+            x0 = x0.min(x);
+            x1 = x1.max(x);
+        }
+        Some((x0 as u8, (first / tw) as u8, x1 as u8, (last / tw) as u8))
+    };
+    const AHEAD: usize = 3;
+    for k in (0..list.len()).rev() {
+        // The record and texels of an entry a few ahead (nearer), with where its texel
+        // gradients will go: its billboard's gradient row, or the cells of the sums' index.
+        if let Some(ahead) = k.checked_sub(AHEAD) {
+            let b = list[ahead] as usize;
+            prefetch_record(&prepared[b]);
+            if let Some(pa) = prepared[b].as_ref()
+                && let Some(rect) = pair_rect(ahead).and_then(|r| texel_footprint(pa, r, (i0, j0), ts))
+            {
+                prefetch_texel_rect(set.texture_of(b).as_ptr(), ts, rect);
+                if sole[ahead] {
+                    prefetch_texel_rect(sole_rows.row_start(b), ts, rect);
+                } else {
+                    prefetch_texel_rect(sums.cell_index().wrapping_add(ahead * ts * ts), ts, rect);
+                }
+            }
+        }
+        let of = &pairs[starts[k] as usize..starts[k + 1] as usize];
+        if of.is_empty() {
+            continue;
+        }
+        let b = list[k] as usize;
+        let pr = prepared[b].as_ref().expect("blended entries are prepared");
+        let plane = pr.view_plane();
+        let texture = set.texture_of(b);
+        let record = &mut records[k];
+        for chunk in of.chunks(LANES) {
+            // Hits and taps lane-wise (unused lanes repeat the last pair), then the pairs one by
+            // one in pixel order.
+            let pixel_of = |l: usize| chunk[l.min(chunk.len() - 1)].pixel as usize;
+            let px: [f32; LANES] = std::array::from_fn(|l| (i0 as usize + pixel_of(l) % tw) as f32 + 0.5);
+            let py: [f32; LANES] = std::array::from_fn(|l| (j0 as usize + pixel_of(l) / tw) as f32 + 0.5);
+            let hits = intersect_lanes(&pr.transform, &plane, camera, &px, &py);
+            let lane_taps = taps_row(&hits.u, &hits.v, ts);
+            for (lane, pair) in chunk.iter().enumerate() {
+                debug_assert!(hits.valid[lane], "a blended pair hits its billboard");
+                let (u, v, depth) = (hits.u[lane], hits.v[lane], hits.depth[lane]);
+                let Some([r, g, bl, a]) = lane_taps.sample_rgba(lane, u, v, texture) else {
+                    debug_assert!(false, "a blended pair has taps");
+                    continue;
+                };
+                let Step::Blend(blend) = classify(pair.transmittance, a, params) else {
+                    debug_assert!(false, "a replayed entry must blend again");
+                    continue;
+                };
+                let colour = Vec3::new(r, g, bl) + pr.rgb;
+                let pixel = &mut pixels[pair.pixel as usize];
+                let grad = pixel.back.pop(
+                    &blend,
+                    &[colour.x, colour.y, colour.z, 1.0, depth],
+                    &pixel.d_out,
+                    params,
+                );
+                let [dr, dg, db, _, d_depth] = grad.d_features;
+                let d_rgba = [dr, dg, db, grad.d_alpha];
+                let vjp = if sole[k] {
+                    // SAFETY: `owns` holds for entry `range.start + k`, and this task is the
+                    // only one processing it.
+                    lane_taps.vjp_rgba(lane, (u, v), texture, d_rgba, |texel, g| unsafe {
+                        sole_rows.add(b, texel, g)
+                    })
+                } else {
+                    lane_taps.vjp_rgba(lane, (u, v), texture, d_rgba, |texel, g| sums.add(k as u32, texel, g))
+                };
+                let (du, dv) = vjp.unwrap_or_default();
+                let ray = pixel_ray(camera, px[lane], py[lane]);
+                let d_t = intersect_vjp_with(
+                    &pr.transform,
+                    px[lane],
+                    py[lane],
+                    |_, _| plane.depth(ray),
+                    du,
+                    dv,
+                    d_depth,
+                );
+                add_transform(&mut record.transform, &d_t);
+                record.rgb += Vec3::new(dr, dg, db);
+                record.blended = true;
+            }
+        }
+    }
+    // The texel sums of the other entries go to the reduction.
+    let (tex_offsets, texels) = sums.finish(list.len());
+    for (rec, span) in records.iter_mut().zip(tex_offsets.windows(2)) {
+        rec.texels = (span[0], span[1]);
+    }
+    TileGrads { texels, background }
+}
