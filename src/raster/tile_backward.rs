@@ -23,7 +23,7 @@ use super::tile_forward::{prefetch_texel_rect, texel_footprint};
 use super::{ActivatedRef, backward::ImageGradients};
 use crate::stages::bilinear::taps_row;
 use crate::stages::composite::{CompositeBackState, Step, classify};
-use crate::stages::ray_plane::{LANES, intersect_lanes, intersect_vjp_with, pixel_ray};
+use crate::stages::ray_plane::{LANES, intersect_lanes, intersect_vjp_lanes};
 use glam::Vec3;
 
 /// Channels of the back-to-front recursion: colour (3), opacity (1), depth (1).
@@ -245,6 +245,9 @@ fn by_entry_body(
             let py: [f32; LANES] = std::array::from_fn(|l| (j0 as usize + pixel_of(l) / tw) as f32 + 0.5);
             let hits = intersect_lanes(&pr.transform, &plane, camera, &px, &py);
             let lane_taps = taps_row(&hits.u, &hits.v, ts);
+            // Per pair in pixel order: the compositing backward and the texel gradients; then
+            // the hits' gradients lane-wise, added to the record in pixel order.
+            let (mut d_u, mut d_v, mut d_depth) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
             for (lane, pair) in chunk.iter().enumerate() {
                 debug_assert!(hits.valid[lane], "a blended pair hits its billboard");
                 let (u, v, depth) = (hits.u[lane], hits.v[lane], hits.depth[lane]);
@@ -264,7 +267,7 @@ fn by_entry_body(
                     &pixel.d_out,
                     params,
                 );
-                let [dr, dg, db, _, d_depth] = grad.d_features;
+                let [dr, dg, db, _, dz] = grad.d_features;
                 let d_rgba = [dr, dg, db, grad.d_alpha];
                 let vjp = if sole[k] {
                     // SAFETY: `owns` holds for entry `range.start + k`, and this task is the
@@ -275,20 +278,14 @@ fn by_entry_body(
                 } else {
                     lane_taps.vjp_rgba(lane, (u, v), texture, d_rgba, |texel, g| sums.add(k as u32, texel, g))
                 };
-                let (du, dv) = vjp.unwrap_or_default();
-                let ray = pixel_ray(camera, px[lane], py[lane]);
-                let d_t = intersect_vjp_with(
-                    &pr.transform,
-                    px[lane],
-                    py[lane],
-                    |_, _| plane.depth(ray),
-                    du,
-                    dv,
-                    d_depth,
-                );
-                add_transform(&mut record.transform, &d_t);
+                (d_u[lane], d_v[lane]) = vjp.unwrap_or_default();
+                d_depth[lane] = dz;
                 record.rgb += Vec3::new(dr, dg, db);
                 record.blended = true;
+            }
+            let d_t = intersect_vjp_lanes(&pr.transform, &plane, camera, (&px, &py), (&d_u, &d_v, &d_depth));
+            for lane in 0..chunk.len() {
+                add_transform(&mut record.transform, &d_t.lane(lane));
             }
         }
     }

@@ -279,3 +279,74 @@ pub fn intersect_lanes(
     }
     hits
 }
+
+/// [`LANES`] transform gradients, one per lane ([`intersect_vjp_lanes`]), in
+/// structure-of-arrays form: `tu[c][l]` is component `c` of lane `l`'s `∂L/∂Tu`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LaneTransforms {
+    /// `∂L/∂Tu` per component and lane.
+    pub tu: [[f32; LANES]; 3],
+    /// `∂L/∂Tv` per component and lane.
+    pub tv: [[f32; LANES]; 3],
+    /// `∂L/∂Tw` per component and lane.
+    pub tw: [[f32; LANES]; 3],
+}
+
+impl LaneTransforms {
+    /// Lane `lane`'s gradient.
+    #[inline(always)]
+    pub fn lane(&self, lane: usize) -> SplatTransform {
+        let at = |rows: &[[f32; LANES]; 3]| Vec3::new(rows[0][lane], rows[1][lane], rows[2][lane]);
+        SplatTransform {
+            tu: at(&self.tu),
+            tv: at(&self.tv),
+            tw: at(&self.tw),
+        }
+    }
+}
+
+/// [`intersect_vjp_with`] with the plane-equation depth for the pixel centres `(px[l], py[l])`
+/// and upstream gradients `(d_u[l], d_v[l], d_depth[l])`, lane by lane with no branch (lanes
+/// that [`intersect_lanes`] marks invalid get zero, as the scalar form returns). Each lane equals
+/// the scalar form bit for bit (same operations, same order; tested in
+/// `tests/suite/stage_lanes.rs`); the scalar form carries the finite-difference proofs.
+#[inline(always)]
+pub fn intersect_vjp_lanes(
+    t: &SplatTransform,
+    plane: &ViewPlane,
+    camera: &Camera,
+    (px, py): (&[f32; LANES], &[f32; LANES]),
+    (d_u, d_v, d_depth): (&[f32; LANES], &[f32; LANES], &[f32; LANES]),
+) -> LaneTransforms {
+    let hits = intersect_lanes(t, plane, camera, px, py);
+    let mut out = LaneTransforms {
+        tu: [[0.0; LANES]; 3],
+        tv: [[0.0; LANES]; 3],
+        tw: [[0.0; LANES]; 3],
+    };
+    for lane in 0..LANES {
+        let (x, y) = (px[lane], py[lane]);
+        let k = x * t.tw - t.tu;
+        let l = y * t.tw - t.tv;
+        let inv = 1.0 / (k.x * l.y - k.y * l.x);
+        let (u, v) = (hits.u[lane], hits.v[lane]);
+        let dd = d_depth[lane];
+        let gu = d_u[lane] + dd * t.tw.x;
+        let gv = d_v[lane] + dd * t.tw.y;
+        let dp = Vec3::new(gu, gv, -(gu * u + gv * v)) * inv;
+        let dk = l.cross(dp);
+        let dl = dp.cross(k);
+        let tw = x * dk + y * dl + dd * Vec3::new(u, v, 1.0);
+        let keep = hits.valid[lane];
+        let pick = |g: f32| if keep { g } else { 0.0 };
+        for (c, (a, b, w)) in [(-dk.x, -dl.x, tw.x), (-dk.y, -dl.y, tw.y), (-dk.z, -dl.z, tw.z)]
+            .into_iter()
+            .enumerate()
+        {
+            out.tu[c][lane] = pick(a);
+            out.tv[c][lane] = pick(b);
+            out.tw[c][lane] = pick(w);
+        }
+    }
+    out
+}

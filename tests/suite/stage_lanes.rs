@@ -7,13 +7,16 @@
 
 use bbsplat::camera::Camera;
 use bbsplat::stages::bilinear::{BilinearTaps, taps, taps_row};
-use bbsplat::stages::ray_plane::{LANES, ViewPlane, intersect_lanes, intersect_with, pixel_ray};
+use bbsplat::stages::ray_plane::{
+    LANES, ViewPlane, intersect_lanes, intersect_vjp_lanes, intersect_vjp_with, intersect_with, pixel_ray,
+};
 use bbsplat::stages::splat_transform::{SplatTransform, splat_frame, view_plane};
 use bbsplat::strategies::{billboard_in_front, camera, seeded_config};
 use glam::Vec3;
 use proptest::prelude::*;
 
-/// Compares lane `lane` of `intersect_lanes` with the scalar intersection, bit for bit.
+/// Compares every lane of `intersect_lanes` and `intersect_vjp_lanes` with the scalar
+/// intersection and its backward, bit for bit.
 fn check_row(
     t: &SplatTransform,
     plane: &ViewPlane,
@@ -37,6 +40,22 @@ fn check_row(
                     ));
                 }
             }
+        }
+    }
+    // The backward, lane-wise, against the scalar backward (zero where the scalar misses).
+    let d_u: [f32; LANES] = std::array::from_fn(|l| 0.7 - 0.3 * l as f32);
+    let d_v: [f32; LANES] = std::array::from_fn(|l| -1.1 + 0.2 * l as f32);
+    let d_depth: [f32; LANES] = std::array::from_fn(|l| 0.05 * l as f32 - 0.2);
+    let lanes = intersect_vjp_lanes(t, plane, cam, (px, py), (&d_u, &d_v, &d_depth));
+    for lane in 0..LANES {
+        let (x, y) = (px[lane], py[lane]);
+        let ray = pixel_ray(cam, x, y);
+        let scalar = intersect_vjp_with(t, x, y, |_, _| plane.depth(ray), d_u[lane], d_v[lane], d_depth[lane]);
+        if lanes.lane(lane).to_array().map(f32::to_bits) != scalar.to_array().map(f32::to_bits) {
+            return Err(format!(
+                "lane {lane} ({x}, {y}): backward {:?} against {scalar:?}",
+                lanes.lane(lane)
+            ));
         }
     }
     Ok(())
