@@ -218,7 +218,10 @@ fn by_entry_body(
             let b = list[ahead] as usize;
             prefetch_record(&prepared[b]);
             if let Some(pa) = prepared[b].as_ref()
-                && let Some(rect) = pair_rect(ahead).and_then(|r| texel_footprint(pa, r, (i0, j0), ts))
+                && let Some(rect) = pair_rect(ahead).and_then(|r| {
+                    let pixels = (starts[ahead + 1] - starts[ahead]) as usize;
+                    texel_footprint(pa, r, (i0, j0), ts, pixels)
+                })
             {
                 prefetch_texel_rect(set.texture_of(b).as_ptr(), ts, rect);
                 if sole[ahead] {

@@ -158,13 +158,14 @@ fn composite_tile_body<const DISTORTION: bool>(
         slots.clear();
     }
     for (k, (span, &b)) in spans.iter().zip(list).enumerate() {
-        if let Some(&ahead) = list.get(k + 4) {
+        if let Some(&ahead) = list.get(k + 12) {
             prefetch_record(&prepared[ahead as usize]);
         }
         // The texels of an entry a few ahead (their reads would otherwise miss one by one).
-        if let (Some(&ahead), Some(ahead_span)) = (list.get(k + 3), spans.get(k + 3))
+        if let (Some(&ahead), Some(ahead_span)) = (list.get(k + 6), spans.get(k + 6))
             && let Some(pa) = prepared[ahead as usize].as_ref()
-            && let Some(rect) = span_rect(ahead_span).and_then(|r| texel_footprint(pa, r, (i0, j0), ts))
+            && let Some(rect) =
+                span_rect(ahead_span).and_then(|r| texel_footprint(pa, r, (i0, j0), ts, span_pixels(ahead_span)))
         {
             prefetch_texel_rect(set.texture_of(ahead as usize).as_ptr(), ts, rect);
         }
@@ -258,6 +259,16 @@ fn composite_tile_body<const DISTORTION: bool>(
     }
 }
 
+/// The number of pixels of an entry's span.
+fn span_pixels(span: &EntrySpans) -> usize {
+    (span.rows[0]..=span.rows[1])
+        .map(|y| {
+            let [a, b] = span.cols[y as usize];
+            (usize::from(b) + 1).saturating_sub(usize::from(a))
+        })
+        .sum()
+}
+
 /// The tile-local pixel rectangle `(x0, y0, x1, y1)` (inclusive) holding an entry's span, or
 /// `None` when the span is empty.
 fn span_rect(span: &EntrySpans) -> Option<(u8, u8, u8, u8)> {
@@ -278,16 +289,22 @@ fn span_rect(span: &EntrySpans) -> Option<(u8, u8, u8, u8)> {
 /// rectangle of the plane coordinates of its corners (a projective map sends the rectangle into
 /// the hull of its corners' images while the plane stays in front of the camera), widened by
 /// the second tap. For prefetches only: a wrong rectangle only wastes them. `None` when a
-/// corner has no finite plane coordinates.
+/// corner has no finite plane coordinates, or when the rectangle holds more than
+/// [`FOOTPRINT_TEXELS_PER_PIXEL`] texels per sampling pixel (`pixels` of them): a billboard a
+/// few pixels wide has a footprint of the whole texture of which its pixels read a few texels,
+/// and fetching all of it costs more than the misses it saves.
 pub(crate) fn texel_footprint(
     p: &Prepared,
     (x0, y0, x1, y1): (u8, u8, u8, u8),
     (i0, j0): (u32, u32),
     ts: usize,
+    pixels: usize,
 ) -> Option<(usize, usize, usize, usize)> {
     let t = &p.transform;
     let (mut u_lo, mut u_hi, mut v_lo, mut v_hi) = (f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY);
-    for (x, y) in [(x0, y0), (x1, y0), (x0, y1), (x1, y1)] {
+    // One corner when the rectangle is a single pixel (the common case of small billboards).
+    let corners = if (x0, y0) == (x1, y1) { 1 } else { 4 };
+    for (x, y) in [(x0, y0), (x1, y0), (x0, y1), (x1, y1)].into_iter().take(corners) {
         let px = (i0 + u32::from(x)) as f32 + 0.5;
         let py = (j0 + u32::from(y)) as f32 + 0.5;
         let h = (px * t.tw - t.tu).cross(py * t.tw - t.tv);
@@ -302,13 +319,14 @@ pub(crate) fn texel_footprint(
     }
     let last = (ts - 1) as f32;
     let texel = |c: f32| (((c.clamp(-1.0, 1.0) + 1.0) * 0.5 * last) as usize).min(ts - 1);
-    Some((
-        texel(u_lo),
-        texel(v_lo),
-        (texel(u_hi) + 1).min(ts - 1),
-        (texel(v_hi) + 1).min(ts - 1),
-    ))
+    let (c0, r0) = (texel(u_lo), texel(v_lo));
+    let (c1, r1) = ((texel(u_hi) + 1).min(ts - 1), (texel(v_hi) + 1).min(ts - 1));
+    ((c1 - c0 + 1) * (r1 - r0 + 1) <= FOOTPRINT_TEXELS_PER_PIXEL * pixels).then_some((c0, r0, c1, r1))
 }
+
+/// See [`texel_footprint`]: a bilinear sample reads 4 texels, so 8 per pixel allows for the
+/// rectangle's slack around the pixels' samples.
+pub(crate) const FOOTPRINT_TEXELS_PER_PIXEL: usize = 8;
 
 /// Hints the CPU to fetch the cache lines of the texel rectangle `(c0, r0, c1, r1)` of a
 /// row-major `ts × ts` per-texel array starting at `texels` (a texture, a gradient row, a cell
