@@ -653,7 +653,15 @@ pub fn render_backward(
         .enumerate()
         .map_init(Scratch::default, |scratch, (t, (records, normals))| {
             TEXEL_SUMS.with_borrow_mut(|sums| {
-                if aux {
+                // The pixel walk serves the normal and distortion maps and the tiles of small
+                // billboards (few blended pixels per entry); the same bits either way.
+                let n_q = {
+                    let (i0, j0, i1, j1) = tile_pixels(bins, t, out.width, out.height);
+                    ((i1 - i0) * (j1 - j0)) as usize
+                };
+                let rank = state.tile_pixel_base[t] as usize;
+                let pairs = (state.blended_offsets[rank + n_q] - state.blended_offsets[rank]) as usize;
+                if aux || super::lanes::walk_by_pixel(pairs, records.len()) {
                     backward_tile(set, out, image_grads, t, records, normals, &sole_rows, scratch, sums)
                 } else {
                     backward_tile_by_entry(

@@ -1,5 +1,14 @@
-//! The choice of instruction set for the rasterizer's lane-wise loops.
+//! The choices the rasterizer makes for speed alone, and the switches that force them in tests:
+//! the instruction set of its lane-wise loops, and the order in which a tile is walked.
 //!
+//! **Tile walk.** A tile is composited billboard by billboard (each entry applied to its pixels,
+//! `tile_forward.rs` / `tile_backward.rs`) unless its entries cover fewer than
+//! [`crate::raster::forward::SMALL_ENTRY_PIXELS`] pixels on average, when it is walked pixel by
+//! pixel (`tile_forward_pixels.rs`, and the backward's pixel walk, which also serves the normal
+//! and distortion maps). Both walks give the same bits; [`force_tile_walk`] picks one for
+//! every tile.
+//!
+//! **Instruction set.**
 //! The tile loops are written once, lane by lane over [`crate::stages::ray_plane::LANES`]
 //! pixels, and compiled twice: for the baseline x86-64 instruction set (SSE2, 4 f32 lanes per
 //! register) and for AVX2 with FMA (8 lanes), chosen at run time. Both compile the same
@@ -8,9 +17,40 @@
 //! (`tests/suite/raster_lanes.rs`), and [`force_baseline`] selects it for such tests and for
 //! machines where one wants to rule the wide path out.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
 
 static FORCE_BASELINE: AtomicBool = AtomicBool::new(false);
+static TILE_WALK: AtomicU8 = AtomicU8::new(TileWalk::Auto as u8);
+
+/// How tiles are walked ([`force_tile_walk`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum TileWalk {
+    /// Each tile by its entries' size (the default).
+    Auto = 0,
+    /// Every tile billboard by billboard (except the backward with normal or distortion
+    /// gradients, which always walks pixels).
+    ByEntry = 1,
+    /// Every tile pixel by pixel.
+    ByPixel = 2,
+}
+
+/// Makes every later render of this process walk its tiles as `walk` says. Results are the same
+/// bits whatever the walk; only the speed differs.
+pub fn force_tile_walk(walk: TileWalk) {
+    TILE_WALK.store(walk as u8, Ordering::Relaxed);
+}
+
+/// Whether a tile whose entries cover `pixels` pixels in all over `entries` entries is walked
+/// pixel by pixel.
+#[inline]
+pub(crate) fn walk_by_pixel(pixels: usize, entries: usize) -> bool {
+    match TILE_WALK.load(Ordering::Relaxed) {
+        1 => false,
+        2 => true,
+        _ => pixels < super::forward::SMALL_ENTRY_PIXELS * entries,
+    }
+}
 
 /// Makes every later render of this process use the baseline (SSE2) build of the tile loops
 /// when `on`, or the widest the CPU supports when not (the default). Results are the same bits

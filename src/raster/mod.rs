@@ -27,6 +27,7 @@ pub mod preprocess;
 pub mod reference;
 mod tile_backward;
 mod tile_forward;
+mod tile_forward_pixels;
 pub mod workload;
 
 use crate::stages::composite::CompositeParams;

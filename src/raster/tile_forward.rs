@@ -260,7 +260,7 @@ fn composite_tile_body<const DISTORTION: bool>(
 }
 
 /// The number of pixels of an entry's span.
-fn span_pixels(span: &EntrySpans) -> usize {
+pub(crate) fn span_pixels(span: &EntrySpans) -> usize {
     (span.rows[0]..=span.rows[1])
         .map(|y| {
             let [a, b] = span.cols[y as usize];

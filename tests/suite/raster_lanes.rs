@@ -1,7 +1,9 @@
-//! The rasterizer's two instruction-set builds of its lane-wise tile loops (baseline SSE2, and
-//! AVX2 + FMA chosen at run time; `bbsplat::raster::lanes`) give the same bits: every image, the
-//! per-billboard impact and every gradient, on trained-like scenes (tens of blended billboards
-//! per pixel), the random benchmark scene, and with the normal and distortion maps.
+//! The rasterizer's choices made for speed alone (`bbsplat::raster::lanes`) give the same bits:
+//! the two instruction-set builds of its lane-wise tile loops (baseline SSE2, and AVX2 + FMA
+//! chosen at run time) and the two tile walks (billboard by billboard, pixel by pixel), in every
+//! combination: every image, the per-billboard impact and every gradient, on trained-like
+//! scenes (tens of blended billboards per pixel), the random benchmark scene (a pixel or two per
+//! entry), and with the normal and distortion maps.
 //!
 //! On a CPU without AVX2 both renders take the baseline path and the comparison is trivially
 //! equal; the test says so in its output.
@@ -11,11 +13,12 @@ use bbsplat::billboards::{
 };
 use bbsplat::camera::Camera;
 use bbsplat::raster::backward::ImageGradients;
-use bbsplat::raster::{RenderGradients, RenderSettings, lanes, render, render_backward};
+use bbsplat::raster::lanes::{self, TileWalk};
+use bbsplat::raster::{RenderGradients, RenderSettings, render, render_backward};
 use bbsplat::rng::Rng;
 use std::sync::Mutex;
 
-/// Serialises the tests that switch the process-wide build choice.
+/// Serialises the tests that switch the process-wide choices.
 static SWITCH: Mutex<()> = Mutex::new(());
 
 /// Every output bit of a render and its backward for fixed random image gradients.
@@ -60,53 +63,69 @@ fn everything(scene: &ActivatedBillboards, cam: &Camera, settings: &RenderSettin
     bits
 }
 
-/// Renders with the baseline build forced, then with the widest the CPU has.
-fn both_builds(
+/// Renders under every combination of instruction set (baseline forced, or the widest the CPU
+/// has) and tile walk (by each tile's size, every tile billboard by billboard, every tile pixel
+/// by pixel); returns each combination's name and bits.
+fn all_variants(
     scene: &ActivatedBillboards,
     cam: &Camera,
     settings: &RenderSettings,
     aux: bool,
-) -> (Vec<u32>, Vec<u32>) {
+) -> Vec<(String, Vec<u32>)> {
     let _guard = SWITCH.lock().unwrap_or_else(|e| e.into_inner());
-    lanes::force_baseline(true);
-    assert!(!lanes::wide_lanes());
-    let baseline = everything(scene, cam, settings, aux);
+    let mut out = Vec::new();
+    for baseline in [true, false] {
+        lanes::force_baseline(baseline);
+        if baseline {
+            assert!(!lanes::wide_lanes(), "the baseline build is forced");
+        }
+        for walk in [TileWalk::Auto, TileWalk::ByEntry, TileWalk::ByPixel] {
+            lanes::force_tile_walk(walk);
+            let name = format!("baseline {baseline}, {walk:?}");
+            out.push((name, everything(scene, cam, settings, aux)));
+        }
+    }
     lanes::force_baseline(false);
+    lanes::force_tile_walk(TileWalk::Auto);
     println!("wide lanes (AVX2 + FMA) on this CPU: {}", lanes::wide_lanes());
-    let wide = everything(scene, cam, settings, aux);
-    (baseline, wide)
+    out
+}
+
+/// Every variant gives the bits of the first (baseline instruction set, automatic walk).
+fn assert_all_equal(variants: &[(String, Vec<u32>)]) {
+    let (first_name, first) = &variants[0];
+    assert!(first.len() > 10_000);
+    for (name, bits) in &variants[1..] {
+        assert!(bits == first, "{name} differs from {first_name}");
+    }
 }
 
 #[test]
-fn baseline_and_wide_builds_agree_bit_for_bit_on_trained_like_scenes() {
+fn every_build_and_walk_agree_bit_for_bit_on_trained_like_scenes() {
     let cam = random_scene_camera(160, 128);
     for config in [
         TrainedLikeConfig::object(3000, 160, 128),
         TrainedLikeConfig::capture(3000, 160, 128),
     ] {
         let scene = trained_like_scene(&config);
-        let (baseline, wide) = both_builds(&scene, &cam, &RenderSettings::default(), false);
-        assert!(baseline.len() > 100_000);
-        assert!(baseline == wide, "the two builds differ");
+        assert_all_equal(&all_variants(&scene, &cam, &RenderSettings::default(), false));
     }
 }
 
 #[test]
-fn baseline_and_wide_builds_agree_bit_for_bit_with_the_auxiliary_maps() {
+fn every_build_and_walk_agree_bit_for_bit_with_the_auxiliary_maps() {
     let cam = random_scene_camera(96, 80);
     let scene = trained_like_scene(&TrainedLikeConfig::object(1500, 96, 80));
     let settings = RenderSettings {
         distortion: true,
         ..RenderSettings::default()
     };
-    let (baseline, wide) = both_builds(&scene, &cam, &settings, true);
-    assert!(baseline == wide, "the two builds differ");
+    assert_all_equal(&all_variants(&scene, &cam, &settings, true));
 }
 
 #[test]
-fn baseline_and_wide_builds_agree_bit_for_bit_on_the_benchmark_scene() {
+fn every_build_and_walk_agree_bit_for_bit_on_the_benchmark_scene() {
     let cam = random_scene_camera(128, 128);
     let scene = random_scene(&RandomSceneConfig::benchmark(8000, 128, 128));
-    let (baseline, wide) = both_builds(&scene, &cam, &RenderSettings::default(), false);
-    assert!(baseline == wide, "the two builds differ");
+    assert_all_equal(&all_variants(&scene, &cam, &RenderSettings::default(), false));
 }
