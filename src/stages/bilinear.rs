@@ -85,11 +85,7 @@ impl SampleTaps {
     /// If `texels.len() != ts²`.
     #[inline]
     pub fn sample_rgba(&self, texels: &[[f32; 4]]) -> [f32; 4] {
-        assert_eq!(
-            texels.len(),
-            self.ts as usize * self.ts as usize,
-            "texels must hold ts × ts RGBA values"
-        );
+        check_rgba_texels(texels.len(), self.ts);
         let n = self.len as usize;
         if n == 4 {
             return sample_four(texels, self.index, self.weight);
@@ -100,6 +96,16 @@ impl SampleTaps {
         }
         acc.to_array()
     }
+}
+
+/// Panics unless an RGBA texture of `texels` texels has side `ts` (`texels = ts²`).
+#[inline(always)]
+fn check_rgba_texels(texels: usize, ts: u32) {
+    assert_eq!(
+        texels,
+        ts as usize * ts as usize,
+        "texels must hold ts × ts RGBA values"
+    );
 }
 
 /// The four-tap RGBA sample `Σ wₖ·texel[iₖ]`, summed in tap order from zero (the one copy of
@@ -421,7 +427,7 @@ impl BilinearTaps {
     /// If `texels.len() != ts²`.
     #[inline]
     pub fn vjp_rgba(&self, texels: &[[f32; 4]], d_rgba: [f32; 4], emit: impl FnMut(u32, [f32; 4])) -> (f32, f32) {
-        self.check_texel_count(texels.len());
+        check_rgba_texels(texels.len(), self.ts);
         let n = self.len as usize;
         vjp_taps(
             texels,
@@ -430,15 +436,6 @@ impl BilinearTaps {
             d_rgba,
             emit,
         )
-    }
-
-    #[inline]
-    fn check_texel_count(&self, texels: usize) {
-        assert_eq!(
-            texels,
-            self.ts as usize * self.ts as usize,
-            "texels must hold ts × ts RGBA values"
-        );
     }
 }
 
@@ -585,11 +582,7 @@ impl RowTaps {
         if !self.interior[lane] {
             return taps(u, v, self.ts as usize).map(|t| t.sample_rgba(texels));
         }
-        assert_eq!(
-            texels.len(),
-            self.ts as usize * self.ts as usize,
-            "texels must hold ts × ts RGBA values"
-        );
+        check_rgba_texels(texels.len(), self.ts);
         Some(sample_four(texels, self.indices(lane), self.weight.map(|w| w[lane])))
     }
 
@@ -610,11 +603,7 @@ impl RowTaps {
         if !self.interior[lane] {
             return taps(u, v, self.ts as usize).map(|t| t.vjp_rgba(texels, d_rgba, emit));
         }
-        assert_eq!(
-            texels.len(),
-            self.ts as usize * self.ts as usize,
-            "texels must hold ts × ts RGBA values"
-        );
+        check_rgba_texels(texels.len(), self.ts);
         let at = |w: &[[f32; LANES]; 4]| w.map(|w| w[lane]);
         let parts = [at(&self.weight), at(&self.d_weight_du), at(&self.d_weight_dv)];
         Some(vjp_taps(
