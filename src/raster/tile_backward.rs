@@ -286,7 +286,7 @@ fn by_entry_body(
                 record.rgb += Vec3::new(dr, dg, db);
                 record.blended = true;
             }
-            let d_t = intersect_vjp_lanes(&pr.transform, &plane, camera, (&px, &py), (&d_u, &d_v, &d_depth));
+            let d_t = intersect_vjp_lanes(&pr.transform, &hits, (&px, &py), (&d_u, &d_v, &d_depth));
             for lane in 0..chunk.len() {
                 add_transform(&mut record.transform, &d_t.lane(lane));
             }

@@ -306,19 +306,18 @@ impl LaneTransforms {
 }
 
 /// [`intersect_vjp_with`] with the plane-equation depth for the pixel centres `(px[l], py[l])`
-/// and upstream gradients `(d_u[l], d_v[l], d_depth[l])`, lane by lane with no branch (lanes
-/// that [`intersect_lanes`] marks invalid get zero, as the scalar form returns). Each lane equals
-/// the scalar form bit for bit (same operations, same order; tested in
-/// `tests/suite/stage_lanes.rs`); the scalar form carries the finite-difference proofs.
+/// and upstream gradients `(d_u[l], d_v[l], d_depth[l])`, lane by lane with no branch, given
+/// the forward's `hits` = [`intersect_lanes`]`(t, plane, camera, px, py)` (whose `u`, `v` and
+/// validity the scalar form recomputes; lanes marked invalid get zero, as the scalar form
+/// returns). Each lane equals the scalar form bit for bit (same operations, same order; tested
+/// in `tests/suite/stage_lanes.rs`); the scalar form carries the finite-difference proofs.
 #[inline(always)]
 pub fn intersect_vjp_lanes(
     t: &SplatTransform,
-    plane: &ViewPlane,
-    camera: &Camera,
+    hits: &RowHits,
     (px, py): (&[f32; LANES], &[f32; LANES]),
     (d_u, d_v, d_depth): (&[f32; LANES], &[f32; LANES], &[f32; LANES]),
 ) -> LaneTransforms {
-    let hits = intersect_lanes(t, plane, camera, px, py);
     let mut out = LaneTransforms {
         tu: [[0.0; LANES]; 3],
         tv: [[0.0; LANES]; 3],

@@ -46,7 +46,7 @@ fn check_row(
     let d_u: [f32; LANES] = std::array::from_fn(|l| 0.7 - 0.3 * l as f32);
     let d_v: [f32; LANES] = std::array::from_fn(|l| -1.1 + 0.2 * l as f32);
     let d_depth: [f32; LANES] = std::array::from_fn(|l| 0.05 * l as f32 - 0.2);
-    let lanes = intersect_vjp_lanes(t, plane, cam, (px, py), (&d_u, &d_v, &d_depth));
+    let lanes = intersect_vjp_lanes(t, &row, (px, py), (&d_u, &d_v, &d_depth));
     for lane in 0..LANES {
         let (x, y) = (px[lane], py[lane]);
         let ray = pixel_ray(cam, x, y);
