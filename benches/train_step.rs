@@ -2,7 +2,8 @@
 //! demo scene (`step/96px/3000`, `step/192px/10000`) and on the trained-like scene of
 //! `bbsplat::billboards::trained_like` (`step/trained/400/10000`: the object preset, whose
 //! per-pixel work matches a trained lego state at 400×400; `docs/benchmarks.md`), and the
-//! row-sparse Adam update on its own (the one stage no other bench covers).
+//! row-sparse Adam update on its own, and the texture step on its own (`texture_step/dense/10000`:
+//! both texture groups of 10 000 billboards at TS = 16, dense, as every step of a run does).
 //!
 //! `cargo bench --features bench --bench train_step` (all), or e.g. `cargo bench --features bench --bench train_step -- 'step/96px'`.
 //!
@@ -17,6 +18,7 @@ use bbsplat::model::RawBillboards;
 use bbsplat::raster::{RenderSettings, render};
 use bbsplat::scene::split::camera_extent;
 use bbsplat::train::adam::{AdamGroup, AdamParams};
+use bbsplat::train::texture_step::{RowSelection, step_texture_group};
 use bbsplat::train::{TrainConfig, TrainView, Trainer};
 use criterion::{BenchmarkId, Criterion, Throughput, black_box, criterion_group, criterion_main};
 use glam::Vec3;
@@ -154,5 +156,57 @@ fn adam(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, train_step, adam);
+/// The texture step of one training step on 10 000 billboards at TS = 16: the alpha group, then
+/// the colour group (Adam, the sigmoid chain and re-activation over 10.24 million logits).
+fn texture_step(c: &mut Criterion) {
+    let mut group = c.benchmark_group("texture_step");
+    group.sample_size(20);
+    let (rows, texels) = (10_000usize, 256usize);
+    let mut alpha = AdamGroup::new(rows, texels);
+    let mut colour = AdamGroup::new(rows, 3 * texels);
+    let mut alpha_logits: Vec<f32> = (0..rows * texels).map(|i| ((i % 29) as f32 - 14.0) * 0.3).collect();
+    let mut colour_logits: Vec<f32> = (0..rows * 3 * texels).map(|i| ((i % 31) as f32 - 15.0) * 0.2).collect();
+    let mut activated = vec![[0.5f32; 4]; rows * texels];
+    let grads0: Vec<[f32; 4]> = (0..rows * texels)
+        .map(|i| [0, 1, 2, 3].map(|c| (((i * 4 + c) % 17) as f32 - 8.0) * 1e-3))
+        .collect();
+    let mut grads = grads0.clone();
+    let mask = vec![true; texels];
+    let hp = AdamParams::default();
+    group.throughput(Throughput::Elements((rows * 4 * texels) as u64));
+    group.bench_function(BenchmarkId::new("dense", rows), |b| {
+        b.iter(|| {
+            grads.copy_from_slice(&grads0);
+            alpha.global_step += 1;
+            colour.global_step += 1;
+            step_texture_group(
+                &mut alpha,
+                &mut alpha_logits,
+                &mut activated,
+                &mut grads,
+                3..4,
+                Some(&mask),
+                RowSelection::Dense,
+                1e-3,
+                &hp,
+                true,
+            );
+            step_texture_group(
+                &mut colour,
+                &mut colour_logits,
+                &mut activated,
+                &mut grads,
+                0..3,
+                None,
+                RowSelection::Dense,
+                1e-3,
+                &hp,
+                true,
+            );
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, train_step, adam, texture_step);
 criterion_main!(benches);

@@ -116,6 +116,7 @@ pub mod camera;
 #[cfg(feature = "tools")]
 pub mod demo;
 pub mod eval;
+pub mod exp_f32;
 pub mod export;
 pub mod fault;
 #[cfg(feature = "testing")]

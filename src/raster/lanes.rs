@@ -53,6 +53,7 @@ pub(crate) fn walk_by_pixel(pixels: usize, entries: usize) -> bool {
 }
 
 /// Makes every later render of this process use the baseline (SSE2) build of the tile loops
+/// (and the trainer's texture step, `crate::train::texture_step`, its other lane-wise loop)
 /// when `on`, or the widest the CPU supports when not (the default). Results are the same bits
 /// either way; only the speed differs.
 pub fn force_baseline(on: bool) {

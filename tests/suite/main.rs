@@ -13,6 +13,7 @@ mod cli_export;
 mod cli_reliability;
 mod demo;
 mod eval;
+mod exp_f32;
 mod export;
 mod export_blender;
 mod export_browser;

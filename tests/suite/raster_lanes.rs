@@ -18,8 +18,9 @@ use bbsplat::raster::{RenderGradients, RenderSettings, render, render_backward};
 use bbsplat::rng::Rng;
 use std::sync::Mutex;
 
-/// Serialises the tests that switch the process-wide choices.
-static SWITCH: Mutex<()> = Mutex::new(());
+/// Serialises the tests that switch the process-wide choices (here and in
+/// `train_texture_step.rs`).
+pub(crate) static SWITCH: Mutex<()> = Mutex::new(());
 
 /// Every output bit of a render and its backward for fixed random image gradients.
 fn everything(scene: &ActivatedBillboards, cam: &Camera, settings: &RenderSettings, aux: bool) -> Vec<u32> {
