@@ -54,6 +54,10 @@ pub fn record_of(args: &TrainArgs, scene: &Scene) -> RunRecord {
     // The geometry regularisers are recorded only when on, so that a run without them keeps
     // the record of checkpoints written before they existed.
     let mut arguments = arguments;
+    // Likewise the error-growth share (recorded when not 0).
+    if args.error_growth != 0.0 {
+        arguments.insert("--error-growth".into(), args.error_growth.to_string());
+    }
     if args.lambda_normal != 0.0 {
         arguments.insert("--lambda-normal".into(), args.lambda_normal.to_string());
         arguments.insert("--normal-from".into(), args.normal_from.to_string());

@@ -7,7 +7,7 @@
 //! | field | type | notes |
 //! |---|---|---|
 //! | magic | 8 bytes | `BBSPLCKP` |
-//! | version | u32 | 5 (versions 1 to 4 are still read, see [`OLDEST_VERSION`]) |
+//! | version | u32 | 6 (versions 1 to 5 are still read, see [`OLDEST_VERSION`]) |
 //! | file length | u64 | total bytes including the checksum |
 //! | iterations | u64 | [`TrainConfig::iterations`] |
 //! | sh_degree | u32 | ≤ 3 |
@@ -22,6 +22,7 @@
 //! | learning-rate multipliers | 4 × f32 | [`super::LearningRateScales`] in field order; absent in version 1 (read as all 1) |
 //! | clamp gradient | u8 | [`super::ClampGradient`]: 0 exact, 1 pass-through (straight-through); absent in versions 1-2 (read as exact, what they trained with) |
 //! | geometry regularisers | 4 × f32 | [`super::geometry::GeometryRegularisers`]: `lambda_normal`, `lambda_distortion`, `normal_from`, `distortion_from`; absent in versions 1-4 (read as off, the default) |
+//! | error growth | f32 | [`TrainConfig::error_growth`], in `[0, 1]`; absent in versions 1-5 (read as 0: growth by copies alone, what they grew with) |
 //! | step | u64 | steps done |
 //! | RNG state | 4 × u64 | [`crate::rng::Rng::state`] |
 //! | order length `k`, order | u64, `k` × u64 | view indices still on the shuffled stack (popped from the end) |
@@ -74,14 +75,15 @@ use thiserror::Error;
 /// File magic.
 pub const MAGIC: [u8; 8] = *b"BBSPLCKP";
 /// Format version written (and the newest read).
-pub const VERSION: u32 = 5;
+pub const VERSION: u32 = 6;
 
 /// Oldest format version still read. Version 1 lacks the learning-rate multipliers, read as
 /// [`super::LearningRateScales::REFERENCE`]; versions 1 and 2 lack the clamp gradient, read as
 /// [`ClampGradient::Exact`] (the only one the trainer used before it became a setting); versions
 /// 1 to 3 lack the growth and time-budget section, read as no growth and no budget, and the run
 /// record, read as empty ([`RunRecord::default`]); versions 1 to 4 lack the geometry
-/// regularisers, read as off ([`super::geometry::GeometryRegularisers::default`]).
+/// regularisers, read as off ([`super::geometry::GeometryRegularisers::default`]); versions 1 to 5
+/// lack the error-growth share, read as 0 (growth by copies alone).
 pub const OLDEST_VERSION: u32 = 1;
 
 /// What went wrong reading or writing a checkpoint; every variant names the file.
@@ -367,6 +369,7 @@ fn encode_into<S: Sink>(tr: &Trainer, len: u64, sink: &mut S) {
     });
     let g = &c.geometry;
     w.f32s(&[g.lambda_normal, g.lambda_distortion, g.normal_from, g.distortion_from]);
+    w.f32(c.error_growth);
     w.u64(tr.step as u64);
     for s in tr.rng.state() {
         w.u64(s);
@@ -584,6 +587,15 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
     } else {
         GeometryRegularisers::default()
     };
+    let error_growth = if version >= 6 {
+        let share = r.f32("error growth share")?;
+        if !(0.0..=1.0).contains(&share) {
+            return Err(r.inconsistent(format!("error growth share {share} is not between 0 and 1")));
+        }
+        share
+    } else {
+        0.0
+    };
     let mut config = TrainConfig {
         iterations,
         sh_degree,
@@ -598,6 +610,7 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
         relocate,
         relocate_every,
         growth_cap: 0,
+        error_growth,
         lr_by_run_length: false,
         lr_scales,
         clamp_gradient,

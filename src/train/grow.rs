@@ -68,6 +68,23 @@ pub fn apply_growth(model: &mut RawBillboards, plan: &RelocationPlan) {
     apply_relocation(model, plan);
 }
 
+/// Appends the rows of `rows` (same texture size and alpha mask) to `model`.
+///
+/// # Panics
+/// When the texture sizes differ.
+pub fn append_rows(model: &mut RawBillboards, rows: &RawBillboards) {
+    assert_eq!(
+        model.texture_size, rows.texture_size,
+        "rows of the model's texture size"
+    );
+    model.positions.extend_from_slice(&rows.positions);
+    model.quaternions.extend_from_slice(&rows.quaternions);
+    model.log_scales.extend_from_slice(&rows.log_scales);
+    model.sh.extend_from_slice(&rows.sh);
+    model.alpha_logits.extend_from_slice(&rows.alpha_logits);
+    model.colour_logits.extend_from_slice(&rows.colour_logits);
+}
+
 /// Extends the activated copy to `n` rows (zeroed; the caller refreshes them from the model).
 pub(crate) fn extend_activated(activated: &mut ActivatedBillboards, n: usize) {
     let t = activated.texture_size * activated.texture_size;

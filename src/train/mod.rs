@@ -31,6 +31,7 @@ pub mod finite;
 pub mod footprint;
 pub mod geometry;
 pub mod grow;
+pub mod place;
 pub mod regularise;
 pub mod relocate;
 pub mod resolution;
@@ -45,7 +46,9 @@ use crate::camera::Camera;
 use crate::loss::TrainingLoss;
 use crate::loss::psnr::psnr_u8;
 use crate::model::{RawBillboards, clamped_logit, initial_alpha, logit, sigmoid};
-use crate::raster::{RenderBuffers, RenderGradients, RenderSettings, SH_FLOATS, render_backward, render_with};
+use crate::raster::{
+    RenderBuffers, RenderGradients, RenderOutput, RenderSettings, SH_FLOATS, render_backward, render_with,
+};
 use crate::rng::Rng;
 pub use crate::stages::composite::ClampGradient;
 use adam::{AdamGroup, AdamParams};
@@ -204,6 +207,11 @@ pub struct TrainConfig {
     /// Grow the set toward this many billboards at every relocation step ([`grow`], spec §6:
     /// `min(cap, ⌊1.05·N⌋)`); 0 (the default) or a cap at or below the count: no growth.
     pub growth_cap: usize,
+    /// Share (0 to 1) of each growth step's new billboards placed where the view just rendered
+    /// is worst ([`place`]) instead of copied from existing billboards; 0 (the default, the
+    /// reference's growth) copies them all. Full-texture mode only ([`TextureMode::Gaussian`]
+    /// copies).
+    pub error_growth: f32,
     /// Multipliers of the reference learning rates (all 1 by default).
     pub lr_scales: LearningRateScales,
     /// Also multiply every rate by [`run_length_lr_factor`] of the run's current length (off by
@@ -245,6 +253,12 @@ impl TrainConfig {
         }
         if self.sh_degree > 3 {
             return Some(format!("SH degree {} > 3", self.sh_degree));
+        }
+        if !(0.0..=1.0).contains(&self.error_growth) {
+            return Some(format!(
+                "error_growth {} is not a share between 0 and 1",
+                self.error_growth
+            ));
         }
         self.geometry.problem()
     }
@@ -313,6 +327,7 @@ impl Default for TrainConfig {
             relocate: true,
             relocate_every: 100,
             growth_cap: 0,
+            error_growth: 0.0,
             lr_scales: LearningRateScales::REFERENCE,
             lr_by_run_length: false,
             clamp_gradient: ClampGradient::Exact,
@@ -765,7 +780,6 @@ impl Trainer {
             .evaluate(&out.rgb, target, cam.width as usize, cam.height as usize, 3)
             .expect("sizes validated above");
         let psnr = crate::loss::psnr::psnr(&out.rgb, target).unwrap_or(f64::NAN);
-        self.target = target_buffer;
         // Both geometry terms off: no map gradient (the plain backward pass).
         let geometry_loss = GeometryLoss::evaluate(&out, cam, lambda_normal, lambda_distortion);
         let ig = geometry_loss.image_gradients(&loss.d_render);
@@ -791,6 +805,16 @@ impl Trainer {
         } else {
             0.0
         };
+        // Growth this step: how many rows, and those placed on this view's error (drawn now,
+        // while the render is at hand; appended after relocation, below).
+        let due = relocation_due(self.step, self.config.iterations, self.config.relocate_every);
+        let new_rows = if due {
+            grow::growth_target(self.model.len(), self.config.growth_cap) - self.model.len()
+        } else {
+            0
+        };
+        let placed = self.place_on_error(new_rows, &out, target, cam);
+        self.target = target_buffer;
         self.render_buffers = out.into_buffers();
         let total = if lambda_normal.is_some() || lambda_distortion.is_some() {
             loss.loss + texture_reg + opacity_reg + geometry_loss.normal + geometry_loss.distortion
@@ -844,13 +868,16 @@ impl Trainer {
             self.grads.textures.fill([0.0; 4]);
         }
         self.grads.background = Vec3::ZERO;
-        let due = relocation_due(self.step, self.config.iterations, self.config.relocate_every);
         let relocated = if self.config.relocate && due {
             self.relocate()
         } else {
             0
         };
-        let grown = if due { self.grow() } else { 0 };
+        let grown = if due {
+            self.grow_rows(new_rows - placed.len(), placed)
+        } else {
+            0
+        };
         self.step += 1;
         if let Some(group) = finite::non_finite_parameter(&self.model, &self.opacity_logits) {
             return Err(TrainError::NonFinite {
@@ -1037,12 +1064,38 @@ impl Trainer {
     pub fn grow(&mut self) -> usize {
         let n = self.model.len();
         let target = grow::growth_target(n, self.config.growth_cap);
-        let plan = grow::plan_growth(&self.activated.mean_alphas(), target - n, &mut self.rng);
-        if plan.is_empty() {
+        let none = RawBillboards::from_points(&[], &[], self.model.texture_size, 0);
+        self.grow_rows(target - n, none)
+    }
+
+    /// The billboards of this step's growth placed on the view's error ([`place`]): the share
+    /// [`TrainConfig::error_growth`] of `new_rows` (none in Gaussian mode).
+    fn place_on_error(&mut self, new_rows: usize, out: &RenderOutput, target: &[f32], cam: &Camera) -> RawBillboards {
+        let share = if self.config.texture_mode == TextureMode::Full {
+            self.config.error_growth
+        } else {
+            0.0
+        };
+        let count = (new_rows as f64 * share as f64).round() as usize;
+        let view = place::ViewError {
+            rendered: &out.rgb,
+            target,
+            median_depth: &out.median_depth,
+        };
+        place::place_on_error(&view, cam, count, self.model.texture_size, &mut self.rng)
+    }
+
+    /// Appends `copies` copies of billboards drawn ∝ mean alpha ([`grow`]) and then the rows of
+    /// `placed`; returns how many rows were added.
+    fn grow_rows(&mut self, copies: usize, placed: RawBillboards) -> usize {
+        let n = self.model.len();
+        let plan = grow::plan_growth(&self.activated.mean_alphas(), copies, &mut self.rng);
+        if plan.is_empty() && placed.is_empty() {
             return 0;
         }
-        let total = n + plan.moves.len();
+        let total = n + plan.moves.len() + placed.len();
         grow::apply_growth(&mut self.model, &plan);
+        grow::append_rows(&mut self.model, &placed);
         grow::extend_activated(&mut self.activated, total);
         grow::extend_gradients(&mut self.grads, total, self.model.texture_size);
         for g in &mut self.adam {
@@ -1066,7 +1119,7 @@ impl Trainer {
         for d in n..total {
             self.refresh_row(d);
         }
-        plan.moves.len()
+        total - n
     }
 
     /// Mean PSNR (on 8-bit quantised images, as the reference evaluates) over `views`, rendered

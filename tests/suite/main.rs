@@ -68,6 +68,7 @@ mod train_demo;
 mod train_finite;
 mod train_geometry;
 mod train_grow;
+mod train_place;
 mod train_regularise;
 mod train_relocate;
 mod train_run;

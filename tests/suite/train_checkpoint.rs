@@ -140,9 +140,21 @@ const CLAMP_AT: usize = LR_SCALES_AT + 16;
 /// Byte offset of the geometry regularisers (version ≥ 5: four f32), right after the clamp byte.
 const GEOMETRY_AT: usize = CLAMP_AT + 1;
 
-/// A current checkpoint as format version 4 wrote it (without the geometry regularisers;
-/// version not changed, not resealed).
-fn as_version_4(mut bytes: Vec<u8>) -> Vec<u8> {
+/// Byte offset of the error-growth share (version ≥ 6: one f32), right after the geometry
+/// regularisers.
+const ERROR_GROWTH_AT: usize = GEOMETRY_AT + 16;
+
+/// A current checkpoint as format version 5 wrote it (without the error-growth share; version
+/// not changed, not resealed).
+fn as_version_5(mut bytes: Vec<u8>) -> Vec<u8> {
+    bytes.drain(ERROR_GROWTH_AT..ERROR_GROWTH_AT + 4);
+    bytes
+}
+
+/// A current checkpoint as format version 4 wrote it (without the error-growth share and the
+/// geometry regularisers; version not changed, not resealed).
+fn as_version_4(bytes: Vec<u8>) -> Vec<u8> {
+    let mut bytes = as_version_5(bytes);
     bytes.drain(GEOMETRY_AT..GEOMETRY_AT + 16);
     bytes
 }
@@ -358,7 +370,7 @@ fn corrupted_files_give_typed_errors() {
 
     // A huge billboard count with a valid checksum does not allocate or panic.
     let mut bad = bytes.clone();
-    let order_len_at = GEOMETRY_AT + 16 + 8 + 32;
+    let order_len_at = ERROR_GROWTH_AT + 4 + 8 + 32;
     let k = u64::from_le_bytes(bad[order_len_at..order_len_at + 8].try_into().unwrap()) as usize;
     let n_at = order_len_at + 8 + 8 * k;
     bad[n_at..n_at + 8].copy_from_slice(&u64::MAX.to_le_bytes());
@@ -552,6 +564,37 @@ fn the_geometry_regularisers_are_checkpointed_and_version_4_reads_as_off() {
         .expect("must fail");
     assert!(
         matches!(&err, CheckpointError::Inconsistent { what, .. } if what.contains("lambda_normal")),
+        "{err}"
+    );
+}
+
+/// The error-growth share is checkpointed; version 5 (without it) reads as 0 (growth by copies
+/// alone); a share outside `[0, 1]` is refused by name.
+#[test]
+fn the_error_growth_share_is_checkpointed_and_version_5_reads_as_zero() {
+    let (mut tr, views) = setup(AdamMode::Dense, TextureMode::Full);
+    tr.step(&views).unwrap();
+    let plain = tr.checkpoint_bytes();
+    assert_eq!(tr.config().error_growth, 0.0);
+    let mut bytes = plain.clone();
+    bytes[ERROR_GROWTH_AT..ERROR_GROWTH_AT + 4].copy_from_slice(&0.25f32.to_le_bytes());
+    let bytes = resealed(bytes);
+    let path = PathBuf::from("e.ckpt");
+    let back = Trainer::from_checkpoint_bytes(&bytes, &path).unwrap();
+    assert_eq!(back.config().error_growth, 0.25);
+    assert!(back.checkpoint_bytes() == bytes);
+    let mut v5 = as_version_5(bytes.clone());
+    v5[8..12].copy_from_slice(&5u32.to_le_bytes());
+    let old = Trainer::from_checkpoint_bytes(&resealed(v5), &path).unwrap();
+    assert_eq!(old.config().error_growth, 0.0);
+    assert!(old.checkpoint_bytes() == plain);
+    let mut bad = bytes.clone();
+    bad[ERROR_GROWTH_AT..ERROR_GROWTH_AT + 4].copy_from_slice(&1.5f32.to_le_bytes());
+    let err = Trainer::from_checkpoint_bytes(&resealed(bad), &path)
+        .err()
+        .expect("must fail");
+    assert!(
+        matches!(&err, CheckpointError::Inconsistent { what, .. } if what.contains("error growth")),
         "{err}"
     );
 }

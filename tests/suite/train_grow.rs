@@ -200,9 +200,16 @@ fn demo() -> (RawBillboards, Vec<TrainView>, TrainConfig) {
     (model, train, config)
 }
 
-/// Growth runs inside training (steps 100 and 200 of 300) and is deterministic for any thread count.
+/// Growth runs inside training (steps 100 and 200 of 300) and is deterministic for any thread
+/// count, with copies alone and with half the new rows placed on the error.
 #[test]
 fn growth_in_training_is_deterministic_across_thread_counts() {
+    for error_growth in [0.0, 0.5] {
+        growth_in_training_is_deterministic(error_growth);
+    }
+}
+
+fn growth_in_training_is_deterministic(error_growth: f32) {
     let run = |threads| {
         rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
@@ -210,6 +217,7 @@ fn growth_in_training_is_deterministic_across_thread_counts() {
             .unwrap()
             .install(|| {
                 let (model, train, config) = demo();
+                let config = TrainConfig { error_growth, ..config };
                 let mut tr = Trainer::new(model, config);
                 let mut grown = Vec::new();
                 for _ in 0..220 {
@@ -228,10 +236,17 @@ fn growth_in_training_is_deterministic_across_thread_counts() {
 }
 
 /// 150 steps, a checkpoint, 150 more equal 300 straight, across the growth at step 200 and with
-/// the growth at step 100 inside the first half.
+/// the growth at step 100 inside the first half; copies alone and half placed on the error.
 #[test]
 fn resume_across_a_growth_step_is_bit_exact() {
+    for error_growth in [0.0, 0.5] {
+        resume_across_a_growth_step(error_growth);
+    }
+}
+
+fn resume_across_a_growth_step(error_growth: f32) {
     let (model, train, config) = demo();
+    let config = TrainConfig { error_growth, ..config };
     let mut straight = Trainer::new(model.clone(), config);
     for _ in 0..300 {
         straight.step(&train).unwrap();
@@ -244,6 +259,7 @@ fn resume_across_a_growth_step_is_bit_exact() {
     let bytes = first.checkpoint_bytes();
     let mut resumed = Trainer::from_checkpoint_bytes(&bytes, Path::new("mem")).unwrap();
     assert_eq!(resumed.config().growth_cap, 400);
+    assert_eq!(resumed.config().error_growth, error_growth);
     for _ in 0..150 {
         resumed.step(&train).unwrap();
     }
