@@ -94,9 +94,10 @@ pub struct TrainArgs {
     pub growth_cap: Option<usize>,
     /// Share (0-1) of each growth step's new billboards placed where the view just trained on
     /// is rendered worst (camera-facing, at the rendered depth, in the target colour) instead
-    /// of copied from existing billboards ∝ alpha (0: the reference's growth). Default 1: at 5
-    /// minutes it gave +0.48 dB on lego and +0.27 dB on beer_colmap (docs/quality.md).
-    #[arg(long, default_value_t = 1.0, value_parser = fraction)]
+    /// of copied from existing billboards ∝ alpha (0, the default: the reference's growth). 1
+    /// gave +0.48 dB on lego and +0.27 dB on beer_colmap at 5 minutes, but 0.24 dB less on
+    /// beer_colmap at 30 (docs/quality.md).
+    #[arg(long, default_value_t = 0.0, value_parser = fraction)]
     pub error_growth: f32,
     /// Stop after this many steps (of `--iterations`) with a checkpoint, as Ctrl-C does: lets a
     /// long run be done in slices with `--resume`.
