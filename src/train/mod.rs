@@ -813,7 +813,7 @@ impl Trainer {
         } else {
             0
         };
-        let placed = self.place_on_error(new_rows, &out, target, cam);
+        let placed = (new_rows > 0).then(|| self.place_on_error(new_rows, &out, target, cam));
         self.target = target_buffer;
         self.render_buffers = out.into_buffers();
         let total = if lambda_normal.is_some() || lambda_distortion.is_some() {
@@ -873,10 +873,9 @@ impl Trainer {
         } else {
             0
         };
-        let grown = if due {
-            self.grow_rows(new_rows - placed.len(), placed)
-        } else {
-            0
+        let grown = match placed {
+            Some(placed) => self.grow_rows(new_rows - placed.len(), Some(placed)),
+            None => 0,
         };
         self.step += 1;
         if let Some(group) = finite::non_finite_parameter(&self.model, &self.opacity_logits) {
@@ -1064,8 +1063,7 @@ impl Trainer {
     pub fn grow(&mut self) -> usize {
         let n = self.model.len();
         let target = grow::growth_target(n, self.config.growth_cap);
-        let none = RawBillboards::from_points(&[], &[], self.model.texture_size, 0);
-        self.grow_rows(target - n, none)
+        self.grow_rows(target - n, None)
     }
 
     /// The billboards of this step's growth placed on the view's error ([`place`]): the share
@@ -1086,16 +1084,19 @@ impl Trainer {
     }
 
     /// Appends `copies` copies of billboards drawn ∝ mean alpha ([`grow`]) and then the rows of
-    /// `placed`; returns how many rows were added.
-    fn grow_rows(&mut self, copies: usize, placed: RawBillboards) -> usize {
+    /// `placed` (if any); returns how many rows were added.
+    fn grow_rows(&mut self, copies: usize, placed: Option<RawBillboards>) -> usize {
         let n = self.model.len();
         let plan = grow::plan_growth(&self.activated.mean_alphas(), copies, &mut self.rng);
-        if plan.is_empty() && placed.is_empty() {
+        let placed_rows = placed.as_ref().map_or(0, RawBillboards::len);
+        if plan.is_empty() && placed_rows == 0 {
             return 0;
         }
-        let total = n + plan.moves.len() + placed.len();
+        let total = n + plan.moves.len() + placed_rows;
         grow::apply_growth(&mut self.model, &plan);
-        grow::append_rows(&mut self.model, &placed);
+        if let Some(placed) = &placed {
+            grow::append_rows(&mut self.model, placed);
+        }
         grow::extend_activated(&mut self.activated, total);
         grow::extend_gradients(&mut self.grads, total, self.model.texture_size);
         for g in &mut self.adam {

@@ -57,12 +57,12 @@ pub fn place_on_error(
     assert_eq!(view.rendered.len(), 3 * w * h, "rendered RGB of the camera's size");
     assert_eq!(view.target.len(), 3 * w * h, "target RGB of the camera's size");
     assert_eq!(view.median_depth.len(), w * h, "a median depth per pixel");
-    let empty = RawBillboards::from_points(&[], &[], texture_size, 0);
+    let empty = || RawBillboards::from_points(&[], &[], texture_size, 0);
     if count == 0 {
-        return empty;
+        return empty();
     }
     let Some(fallback_depth) = median_positive(view.median_depth) else {
-        return empty;
+        return empty();
     };
     // Cumulative weights in f64 (a fixed order: the same draws for any thread count).
     let mut cumulative = Vec::with_capacity(w * h);
@@ -77,7 +77,7 @@ pub fn place_on_error(
         cumulative.push(total);
     }
     if total <= 0.0 {
-        return empty;
+        return empty();
     }
     let cam_to_world = cam.rotation.transpose();
     let facing = quaternion_of(cam_to_world);

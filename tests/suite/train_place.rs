@@ -42,17 +42,21 @@ fn view_with_errors(cam: &Camera, blocks: &[(usize, usize, usize, f32)]) -> (Vec
     (rendered, target, depth)
 }
 
+fn view_of<'a>(rendered: &'a [f32], target: &'a [f32], median_depth: &'a [f32]) -> ViewError<'a> {
+    ViewError {
+        rendered,
+        target,
+        median_depth,
+    }
+}
+
 /// Each placed billboard lies inside an erroneous pixel's ray at the rendered depth, faces the
 /// camera, has the half side of `HALF_SIDE_PX` pixels there and the pixel's target colour.
 #[test]
 fn placed_on_the_bad_pixels_at_the_rendered_depth_facing_the_camera() {
     let cam = camera();
     let (rendered, target, depth) = view_with_errors(&cam, &[(5, 7, 3, 0.3)]);
-    let view = ViewError {
-        rendered: &rendered,
-        target: &target,
-        median_depth: &depth,
-    };
+    let view = view_of(&rendered, &target, &depth);
     let placed = place_on_error(&view, &cam, 40, TS, &mut Rng::new(3));
     assert_eq!(placed.len(), 40);
     assert_eq!(placed.texture_size, TS);
@@ -85,11 +89,7 @@ fn placed_on_the_bad_pixels_at_the_rendered_depth_facing_the_camera() {
 fn pixels_without_depth_take_the_views_median_depth() {
     let cam = camera();
     let (rendered, target, depth) = view_with_errors(&cam, &[(30, 10, 2, 0.5)]);
-    let view = ViewError {
-        rendered: &rendered,
-        target: &target,
-        median_depth: &depth,
-    };
+    let view = view_of(&rendered, &target, &depth);
     let placed = place_on_error(&view, &cam, 10, TS, &mut Rng::new(1));
     assert_eq!(placed.len(), 10);
     for p in &placed.positions {
@@ -107,11 +107,7 @@ fn pixels_without_depth_take_the_views_median_depth() {
 fn draws_follow_the_squared_error_and_are_seeded() {
     let cam = camera();
     let (rendered, target, depth) = view_with_errors(&cam, &[(2, 2, 4, 0.1), (10, 15, 4, 0.2)]);
-    let view = ViewError {
-        rendered: &rendered,
-        target: &target,
-        median_depth: &depth,
-    };
+    let view = view_of(&rendered, &target, &depth);
     let placed = place_on_error(&view, &cam, 4000, TS, &mut Rng::new(0));
     let (mut small, mut large) = (0usize, 0usize);
     for p in &placed.positions {
@@ -136,33 +132,17 @@ fn draws_follow_the_squared_error_and_are_seeded() {
 fn nothing_to_place() {
     let cam = camera();
     let (rendered, target, depth) = view_with_errors(&cam, &[]);
-    let view = ViewError {
-        rendered: &rendered,
-        target: &target,
-        median_depth: &depth,
-    };
+    let view = view_of(&rendered, &target, &depth);
     assert_eq!(place_on_error(&view, &cam, 10, TS, &mut Rng::new(0)).len(), 0);
     let (rendered, target, _) = view_with_errors(&cam, &[(1, 1, 2, 0.4)]);
     let no_depth = vec![0.0; depth.len()];
-    let view = ViewError {
-        rendered: &rendered,
-        target: &target,
-        median_depth: &no_depth,
-    };
+    let view = view_of(&rendered, &target, &no_depth);
     assert_eq!(place_on_error(&view, &cam, 10, TS, &mut Rng::new(0)).len(), 0);
-    let view = ViewError {
-        rendered: &rendered,
-        target: &target,
-        median_depth: &depth,
-    };
+    let view = view_of(&rendered, &target, &depth);
     assert_eq!(place_on_error(&view, &cam, 0, TS, &mut Rng::new(0)).len(), 0);
     let mut nan = rendered.clone();
     nan[3 * (20 * 40 + 3)] = f32::NAN;
-    let view = ViewError {
-        rendered: &nan,
-        target: &target,
-        median_depth: &depth,
-    };
+    let view = view_of(&nan, &target, &depth);
     for p in &place_on_error(&view, &cam, 200, TS, &mut Rng::new(2)).positions {
         let (x, y) = cam.project(*p).unwrap();
         assert!(x < 3.0 && y < 3.0, "only the erroneous block is drawn");

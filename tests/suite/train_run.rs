@@ -846,6 +846,22 @@ fn eight_bit_views_train_bit_for_bit_as_their_float_copies() {
     assert!(results[0] == results[1], "8-bit and float views differ");
 }
 
+/// An error-growth share outside `[0, 1]` (or NaN) is a typed error of the step, naming the
+/// setting; the trainer is unchanged.
+#[test]
+fn an_out_of_range_error_growth_share_is_a_typed_error() {
+    for bad in [-0.5f32, 1.5, f32::NAN] {
+        let Setup { mut trainer, train, .. } = setup(4, |c| TrainConfig { error_growth: bad, ..c });
+        let before = trainer.checkpoint_bytes();
+        let err = trainer.step(&train).unwrap_err();
+        assert!(
+            matches!(&err, TrainError::InvalidConfig(what) if what.contains("error_growth")),
+            "{bad}: {err}"
+        );
+        assert!(trainer.checkpoint_bytes() == before);
+    }
+}
+
 /// Failure 3: a texture threshold that is negative, NaN or infinite (which panicked in worker
 /// threads, or wrote NaN into the model) is a typed error of the step, naming the setting; the
 /// trainer is unchanged.
