@@ -54,9 +54,9 @@ pub fn record_of(args: &TrainArgs, scene: &Scene) -> RunRecord {
     // The geometry regularisers are recorded only when on, so that a run without them keeps
     // the record of checkpoints written before they existed.
     let mut arguments = arguments;
-    // Likewise the error-growth share (recorded when not 0).
-    if args.error_growth != 0.0 {
-        arguments.insert("--error-growth".into(), args.error_growth.to_string());
+    // Likewise the error-growth share (recorded when given).
+    if let Some(share) = args.error_growth {
+        arguments.insert("--error-growth".into(), share.to_string());
     }
     if args.lambda_normal != 0.0 {
         arguments.insert("--lambda-normal".into(), args.lambda_normal.to_string());

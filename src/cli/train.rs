@@ -93,12 +93,12 @@ pub struct TrainArgs {
     #[arg(long)]
     pub growth_cap: Option<usize>,
     /// Share (0-1) of each growth step's new billboards placed where the view just trained on
-    /// is rendered worst (camera-facing, at the rendered depth, in the target colour) instead
-    /// of copied from existing billboards ∝ alpha (0, the default: the reference's growth). 1
-    /// gave +0.48 dB on lego and +0.27 dB on beer_colmap at 5 minutes, but 0.24 dB less on
-    /// beer_colmap at 30 (docs/quality.md).
-    #[arg(long, default_value_t = 0.0, value_parser = fraction)]
-    pub error_growth: f32,
+    /// is rendered worst (camera-facing, at the depth where the neighbouring views agree, in
+    /// the target colour) instead of copied from existing billboards ∝ alpha (0: the
+    /// reference's growth). Default: from the scene, 1 without SfM points and 0 with them
+    /// (docs/quality.md).
+    #[arg(long, value_parser = fraction)]
+    pub error_growth: Option<f32>,
     /// Stop after this many steps (of `--iterations`) with a checkpoint, as Ctrl-C does: lets a
     /// long run be done in slices with `--resume`.
     #[arg(long)]
@@ -430,7 +430,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
                 texture_mode: args.texture_mode,
                 relocate: !args.no_relocate,
                 growth_cap: auto.growth_cap,
-                error_growth: args.error_growth,
+                error_growth: auto.error_growth,
                 lr_scales: args.lr_scales(),
                 lr_by_run_length: args.lr_by_run_length(),
                 clamp_gradient: args.clamp_gradient.into(),

@@ -26,6 +26,7 @@
 
 pub mod adam;
 pub mod checkpoint;
+pub mod depth_sweep;
 pub mod error;
 pub mod finite;
 pub mod footprint;
@@ -70,6 +71,16 @@ pub struct TrainView {
     pub camera: Camera,
     /// `width · height · 3` values.
     pub rgb: ViewPixels,
+}
+
+impl depth_sweep::SweepImage for TrainView {
+    fn camera(&self) -> &Camera {
+        &self.camera
+    }
+    fn rgb(&self, x: u32, y: u32) -> [f32; 3] {
+        let i = 3 * (y as usize * self.camera.width as usize + x as usize);
+        [self.rgb.value(i), self.rgb.value(i + 1), self.rgb.value(i + 2)]
+    }
 }
 
 impl TrainView {
@@ -813,7 +824,7 @@ impl Trainer {
         } else {
             0
         };
-        let placed = (new_rows > 0).then(|| self.place_on_error(new_rows, &out, target, cam));
+        let placed = (new_rows > 0).then(|| self.place_on_error(new_rows, &out, target, views, vi));
         self.target = target_buffer;
         self.render_buffers = out.into_buffers();
         let total = if lambda_normal.is_some() || lambda_distortion.is_some() {
@@ -1068,7 +1079,15 @@ impl Trainer {
 
     /// The billboards of this step's growth placed on the view's error ([`place`]): the share
     /// [`TrainConfig::error_growth`] of `new_rows` (none in Gaussian mode).
-    fn place_on_error(&mut self, new_rows: usize, out: &RenderOutput, target: &[f32], cam: &Camera) -> RawBillboards {
+    fn place_on_error(
+        &mut self,
+        new_rows: usize,
+        out: &RenderOutput,
+        target: &[f32],
+        views: &[TrainView],
+        vi: usize,
+    ) -> RawBillboards {
+        let cam = &views[vi].camera;
         let share = if self.config.texture_mode == TextureMode::Full {
             self.config.error_growth
         } else {
@@ -1080,7 +1099,22 @@ impl Trainer {
             target,
             median_depth: &out.median_depth,
         };
-        place::place_on_error(&view, cam, count, self.model.texture_size, &mut self.rng)
+        // The depth where the neighbouring views agree on the pixel, searched around the
+        // rendered depth; the rendered depth where no depth is distinct (an even surface).
+        let sweep = depth_sweep::SweepConfig::default();
+        let neighbours = if count > 0 {
+            depth_sweep::nearest_views(views, vi, sweep.neighbours)
+        } else {
+            Vec::new()
+        };
+        let refine = |x: u32, y: u32, z: f32| -> f32 {
+            let (near, far) = (z / place::SWEEP_RANGE, z * place::SWEEP_RANGE);
+            match depth_sweep::sweep_pixel(views, vi, &neighbours, x, y, near, far, &sweep) {
+                Some(found) if found.distinct() => found.depth,
+                _ => z,
+            }
+        };
+        place::place_on_error(&view, cam, count, self.model.texture_size, &mut self.rng, refine)
     }
 
     /// Appends `copies` copies of billboards drawn ∝ mean alpha ([`grow`]) and then the rows of

@@ -9,16 +9,21 @@
 //! 1. pixel `p` is drawn with probability ∝ `e_p²`, `e_p = Σ_c |rendered − target|` (the L1
 //!    error the loss sees, squared so that the worst regions get most of the draws), with
 //!    replacement, by the trainer's RNG;
-//! 2. a point uniform inside the pixel is lifted to the view depth `z` of the rendered surface
-//!    there (the median depth of the render, [`crate::RenderOutput::median_depth`]; where the
-//!    render has none, the median of the view's median depths);
+//! 2. a point uniform inside the pixel is lifted to a view depth: the caller's `refine_depth`
+//!    of the pixel and the depth `z` of the rendered surface there (the median depth of the
+//!    render, [`crate::RenderOutput::median_depth`]; where the render has none, the median of
+//!    the view's median depths). The trainer refines with a plane sweep
+//!    ([`super::depth_sweep`]) over `[z / `[`SWEEP_RANGE`]`, z · `[`SWEEP_RANGE`]`]` against the
+//!    four training views with the nearest cameras, and keeps `z` where no depth is distinct:
+//!    the model renders a region it missed at the depth of whatever covers it (a wall for a
+//!    railing in front of it), and a billboard placed there fits this view only;
 //! 3. the billboard faces the camera (its axes the camera's right, down and forward axes), has
 //!    the half side [`HALF_SIDE_PX`] pixels at that depth, and the target colour of the pixel
 //!    (set as the SH colour the way initialisation sets a point's, [`RawBillboards::from_points`]:
 //!    alpha `0.5·G`, colour texture 0.1).
 //!
 //! The billboards start as small camera-facing patches of the right colour at the depth the
-//! model puts there; training moves, turns and resizes them like any other.
+//! views agree on (or the model's); training moves, turns and resizes them like any other.
 
 use crate::camera::Camera;
 use crate::model::RawBillboards;
@@ -27,6 +32,10 @@ use glam::{Mat3, Quat, Vec2, Vec3};
 
 /// Half side, in pixels of the view it is placed from, of a placed billboard.
 pub const HALF_SIDE_PX: f32 = 4.0;
+
+/// The plane sweep that refines a placement depth `z` searches `[z / SWEEP_RANGE, z ·
+/// SWEEP_RANGE]`.
+pub const SWEEP_RANGE: f32 = 2.0;
 
 /// One view's render and its target, what placement reads (`width · height` pixels, RGB
 /// interleaved row by row).
@@ -41,7 +50,9 @@ pub struct ViewError<'a> {
 }
 
 /// The billboards to place: `count` draws on the view (empty when the view has no error, no
-/// rendered depth anywhere, or `count` is 0). Positions, camera-facing rotations, half sides and
+/// rendered depth anywhere, or `count` is 0). `refine_depth(x, y, z)` gives the depth used for
+/// pixel `(x, y)` whose rendered depth is `z` (`|_, _, z| z` keeps the render's; called once a
+/// draw, in draw order). Positions, camera-facing rotations, half sides and
 /// colours, in draw order, as rows of a [`RawBillboards`] of texture size `texture_size`.
 ///
 /// # Panics
@@ -52,6 +63,7 @@ pub fn place_on_error(
     count: usize,
     texture_size: usize,
     rng: &mut Rng,
+    refine_depth: impl Fn(u32, u32, f32) -> f32,
 ) -> RawBillboards {
     let (w, h) = (cam.width as usize, cam.height as usize);
     assert_eq!(view.rendered.len(), 3 * w * h, "rendered RGB of the camera's size");
@@ -92,6 +104,10 @@ pub fn place_on_error(
             depth
         } else {
             fallback_depth
+        };
+        let z = match refine_depth((p % w) as u32, (p / w) as u32, z) {
+            refined if refined > 0.0 && refined.is_finite() => refined,
+            _ => z,
         };
         let x = (p % w) as f32 + rng.uniform();
         let y = (p / w) as f32 + rng.uniform();

@@ -63,6 +63,14 @@ impl ViewPixels {
         }
     }
 
+    /// Value `i` as a float.
+    pub fn value(&self, i: usize) -> f32 {
+        match self {
+            ViewPixels::U8(v) => v[i] as f32 / 255.0,
+            ViewPixels::F32(v) => v[i],
+        }
+    }
+
     /// Bytes held.
     pub fn bytes(&self) -> usize {
         match self {

@@ -489,6 +489,11 @@ fn the_background_of_the_data_is_stored_and_reused() {
         assert!(automatic.iter().any(|c| c["setting"] == "background"), "{summary}");
         let lr = automatic.iter().find(|c| c["setting"] == "lr-scale").unwrap();
         assert_eq!(lr["value"], "4.00", "40 steps: the short-run factor");
+        // No SfM points: growth is placed on the error.
+        let placed = automatic.iter().find(|c| c["setting"] == "error-growth").unwrap();
+        assert_eq!(placed["value"], "1");
+        let checkpoint = bbsplat::train::Trainer::load_checkpoint(out.join("checkpoint.bin")).unwrap();
+        assert_eq!(checkpoint.config().error_growth, 1.0);
         let model = out.join("model");
         let eval = |extra: &[&str]| {
             let mut args = vec!["eval", model.to_str().unwrap(), d, "--json"];
@@ -547,7 +552,11 @@ fn minutes_plans_the_run_and_records_it() {
         .find(|c| c["setting"] == "lr-scale")
         .expect("lr-scale chosen");
     assert_eq!(lr["value"], "by run length");
+    // The demo scene has SfM points: growth copies, as the reference.
+    let placed = automatic.iter().find(|c| c["setting"] == "error-growth").unwrap();
+    assert_eq!(placed["value"], "0", "{summary}");
     let checkpoint = bbsplat::train::Trainer::load_checkpoint(out.join("checkpoint.bin")).unwrap();
+    assert_eq!(checkpoint.config().error_growth, 0.0);
     assert!(checkpoint.config().lr_by_run_length);
     assert_eq!(
         checkpoint.config().lr_scales,

@@ -65,6 +65,7 @@ mod sweep;
 mod train_adam;
 mod train_checkpoint;
 mod train_demo;
+mod train_depth_sweep;
 mod train_finite;
 mod train_geometry;
 mod train_grow;

@@ -57,7 +57,7 @@ fn placed_on_the_bad_pixels_at_the_rendered_depth_facing_the_camera() {
     let cam = camera();
     let (rendered, target, depth) = view_with_errors(&cam, &[(5, 7, 3, 0.3)]);
     let view = view_of(&rendered, &target, &depth);
-    let placed = place_on_error(&view, &cam, 40, TS, &mut Rng::new(3));
+    let placed = place_on_error(&view, &cam, 40, TS, &mut Rng::new(3), |_, _, z| z);
     assert_eq!(placed.len(), 40);
     assert_eq!(placed.texture_size, TS);
     let forward = cam.rotation.row(2);
@@ -90,7 +90,7 @@ fn pixels_without_depth_take_the_views_median_depth() {
     let cam = camera();
     let (rendered, target, depth) = view_with_errors(&cam, &[(30, 10, 2, 0.5)]);
     let view = view_of(&rendered, &target, &depth);
-    let placed = place_on_error(&view, &cam, 10, TS, &mut Rng::new(1));
+    let placed = place_on_error(&view, &cam, 10, TS, &mut Rng::new(1), |_, _, z| z);
     assert_eq!(placed.len(), 10);
     for p in &placed.positions {
         let (x, _) = cam.project(*p).unwrap();
@@ -108,7 +108,7 @@ fn draws_follow_the_squared_error_and_are_seeded() {
     let cam = camera();
     let (rendered, target, depth) = view_with_errors(&cam, &[(2, 2, 4, 0.1), (10, 15, 4, 0.2)]);
     let view = view_of(&rendered, &target, &depth);
-    let placed = place_on_error(&view, &cam, 4000, TS, &mut Rng::new(0));
+    let placed = place_on_error(&view, &cam, 4000, TS, &mut Rng::new(0), |_, _, z| z);
     let (mut small, mut large) = (0usize, 0usize);
     for p in &placed.positions {
         let (x, _) = cam.project(*p).unwrap();
@@ -122,7 +122,7 @@ fn draws_follow_the_squared_error_and_are_seeded() {
     let ratio = large as f64 / small as f64;
     println!("draws {small} : {large}, ratio {ratio:.2}");
     assert!((3.4..4.7).contains(&ratio), "ratio {ratio}");
-    let again = place_on_error(&view, &cam, 4000, TS, &mut Rng::new(0));
+    let again = place_on_error(&view, &cam, 4000, TS, &mut Rng::new(0), |_, _, z| z);
     assert_eq!(again, placed);
 }
 
@@ -133,18 +133,64 @@ fn nothing_to_place() {
     let cam = camera();
     let (rendered, target, depth) = view_with_errors(&cam, &[]);
     let view = view_of(&rendered, &target, &depth);
-    assert_eq!(place_on_error(&view, &cam, 10, TS, &mut Rng::new(0)).len(), 0);
+    assert_eq!(
+        place_on_error(&view, &cam, 10, TS, &mut Rng::new(0), |_, _, z| z).len(),
+        0
+    );
     let (rendered, target, _) = view_with_errors(&cam, &[(1, 1, 2, 0.4)]);
     let no_depth = vec![0.0; depth.len()];
     let view = view_of(&rendered, &target, &no_depth);
-    assert_eq!(place_on_error(&view, &cam, 10, TS, &mut Rng::new(0)).len(), 0);
+    assert_eq!(
+        place_on_error(&view, &cam, 10, TS, &mut Rng::new(0), |_, _, z| z).len(),
+        0
+    );
     let view = view_of(&rendered, &target, &depth);
-    assert_eq!(place_on_error(&view, &cam, 0, TS, &mut Rng::new(0)).len(), 0);
+    assert_eq!(
+        place_on_error(&view, &cam, 0, TS, &mut Rng::new(0), |_, _, z| z).len(),
+        0
+    );
     let mut nan = rendered.clone();
     nan[3 * (20 * 40 + 3)] = f32::NAN;
     let view = view_of(&nan, &target, &depth);
-    for p in &place_on_error(&view, &cam, 200, TS, &mut Rng::new(2)).positions {
+    for p in &place_on_error(&view, &cam, 200, TS, &mut Rng::new(2), |_, _, z| z).positions {
         let (x, y) = cam.project(*p).unwrap();
         assert!(x < 3.0 && y < 3.0, "only the erroneous block is drawn");
+    }
+}
+
+/// `refine_depth` moves each placement along its pixel's ray to the depth it returns (the
+/// half side follows), is asked once a draw with the pixel and the rendered depth, and a depth
+/// that is not positive and finite keeps the rendered one.
+#[test]
+fn a_refined_depth_moves_the_placement_along_its_ray() {
+    let cam = camera();
+    let (rendered, target, depth) = view_with_errors(&cam, &[(5, 7, 3, 0.3)]);
+    let view = view_of(&rendered, &target, &depth);
+    let asked = std::cell::RefCell::new(Vec::new());
+    let placed = place_on_error(&view, &cam, 12, TS, &mut Rng::new(3), |x, y, z| {
+        asked.borrow_mut().push((x, y, z));
+        7.5
+    });
+    let plain = place_on_error(&view, &cam, 12, TS, &mut Rng::new(3), |_, _, z| z);
+    assert_eq!(asked.borrow().len(), 12);
+    for (i, &(x, y, z)) in asked.borrow().iter().enumerate() {
+        assert!(
+            (5..8).contains(&x) && (7..10).contains(&y) && z == 5.0,
+            "({x}, {y}, {z})"
+        );
+        let p = placed.positions[i];
+        assert!((cam.world_to_view(p).z - 7.5).abs() < 1e-4);
+        // The same pixel as without refinement, farther along the same ray.
+        let (a, b) = (cam.project(p).unwrap(), cam.project(plain.positions[i]).unwrap());
+        assert!(
+            (a.0 - b.0).abs() < 1e-3 && (a.1 - b.1).abs() < 1e-3,
+            "{a:?} against {b:?}"
+        );
+        let want = HALF_SIDE_PX * 7.5 / cam.fx.max(cam.fy);
+        assert!((placed.log_scales[i].exp().x - want).abs() < 1e-5 * want);
+    }
+    for bad in [0.0, -1.0, f32::NAN, f32::INFINITY] {
+        let kept = place_on_error(&view, &cam, 12, TS, &mut Rng::new(3), |_, _, _| bad);
+        assert_eq!(kept.positions, plain.positions, "refined depth {bad}");
     }
 }
