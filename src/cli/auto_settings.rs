@@ -67,10 +67,8 @@ pub fn resolve(args: &TrainArgs, scene: &Scene, background: &BackgroundChoice) -
             cap.billboards
         }
     };
-    let has_points = scene
-        .points
-        .as_ref()
-        .is_some_and(|p| p.positions.iter().any(|x| x.is_finite()));
+    // A finite SfM point, as the budget rule counts them.
+    let has_points = inputs.sfm_points.is_some();
     let error_growth = match args.error_growth {
         Some(share) => share,
         None if has_points => {
