@@ -253,8 +253,8 @@ fn by_entry_body(
             let (mut d_u, mut d_v, mut d_depth) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
             for (lane, pair) in chunk.iter().enumerate() {
                 debug_assert!(hits.valid[lane], "a blended pair hits its billboard");
-                let (u, v, depth) = (hits.u[lane], hits.v[lane], hits.depth[lane]);
-                let Some([r, g, bl, a]) = lane_taps.sample_rgba(lane, u, v, texture) else {
+                let depth = hits.depth[lane];
+                let Some([r, g, bl, a]) = lane_taps.sample_rgba(lane, texture) else {
                     debug_assert!(false, "a blended pair has taps");
                     continue;
                 };
@@ -275,11 +275,9 @@ fn by_entry_body(
                 let vjp = if sole[k] {
                     // SAFETY: `owns` holds for entry `range.start + k`, and this task is the
                     // only one processing it.
-                    lane_taps.vjp_rgba(lane, (u, v), texture, d_rgba, |texel, g| unsafe {
-                        sole_rows.add(b, texel, g)
-                    })
+                    lane_taps.vjp_rgba(lane, texture, d_rgba, |texel, g| unsafe { sole_rows.add(b, texel, g) })
                 } else {
-                    lane_taps.vjp_rgba(lane, (u, v), texture, d_rgba, |texel, g| sums.add(k as u32, texel, g))
+                    lane_taps.vjp_rgba(lane, texture, d_rgba, |texel, g| sums.add(k as u32, texel, g))
                 };
                 (d_u[lane], d_v[lane]) = vjp.unwrap_or_default();
                 d_depth[lane] = dz;

@@ -201,11 +201,10 @@ fn composite_tile_body<const DISTORTION: bool>(
                     if !hits.valid[lane] {
                         continue;
                     }
-                    let (u, v, depth) = (hits.u[lane], hits.v[lane], hits.depth[lane]);
-                    let Some(taps) = taps.lane_for_sampling(lane, u, v) else {
+                    let Some([r, g, bl, a]) = taps.sample_rgba(lane, texture) else {
                         continue;
                     };
-                    let [r, g, bl, a] = taps.sample_rgba(texture);
+                    let depth = hits.depth[lane];
                     let blend = match state.composite.step(a, params) {
                         Step::Skip => {
                             state.nan_alpha += u32::from(a.is_nan());

@@ -40,7 +40,7 @@
 //! ```
 
 use crate::stages::ray_plane::LANES;
-use glam::Vec4;
+use glam::{BVec4A, Vec4};
 
 /// The (at most four) texels that contribute to a bilinear sample at one `(u, v)`, with their
 /// weights and the derivatives of the weights with respect to `u` and `v`.
@@ -88,7 +88,7 @@ impl SampleTaps {
         check_rgba_texels(texels.len(), self.ts);
         let n = self.len as usize;
         if n == 4 {
-            return sample_four(texels, self.index, self.weight);
+            return sample_four(texels, self.index, self.weight, [true; 4]);
         }
         let mut acc = Vec4::ZERO;
         for k in 0..n {
@@ -108,10 +108,12 @@ fn check_rgba_texels(texels: usize, ts: u32) {
     );
 }
 
-/// The four-tap RGBA sample `Σ wₖ·texel[iₖ]`, summed in tap order from zero (the one copy of
-/// the sampling arithmetic: [`SampleTaps::sample_rgba`] and [`RowTaps::sample_rgba`]).
+/// The four-tap RGBA sample `Σ wₖ·texel[iₖ]` over the taps with `inside[k]`, summed in tap
+/// order from zero, each outside tap's product replaced by zero (the one copy of the sampling
+/// arithmetic: [`SampleTaps::sample_rgba`] and [`RowTaps::sample_rgba`]). Replacing the product,
+/// not the weight, keeps an outside tap from adding `0 · ∞ = NaN`.
 #[inline(always)]
-fn sample_four(texels: &[[f32; 4]], index: [u32; 4], w: [f32; 4]) -> [f32; 4] {
+fn sample_four(texels: &[[f32; 4]], index: [u32; 4], w: [f32; 4], inside: [bool; 4]) -> [f32; 4] {
     let [i0, i1, i2, i3] = index.map(|i| i as usize);
     let (t0, t1, t2, t3) = (
         Vec4::from_array(texels[i0]),
@@ -119,24 +121,29 @@ fn sample_four(texels: &[[f32; 4]], index: [u32; 4], w: [f32; 4]) -> [f32; 4] {
         Vec4::from_array(texels[i2]),
         Vec4::from_array(texels[i3]),
     );
-    (Vec4::ZERO + w[0] * t0 + w[1] * t1 + w[2] * t2 + w[3] * t3).to_array()
+    let keep = |k: usize, x: Vec4| Vec4::select(BVec4A::splat(inside[k]), x, Vec4::ZERO);
+    (Vec4::ZERO + keep(0, w[0] * t0) + keep(1, w[1] * t1) + keep(2, w[2] * t2) + keep(3, w[3] * t3)).to_array()
 }
 
 /// The backward of an RGBA sample over the taps `index` with weights and weight derivatives
-/// `[weight, d_weight_du, d_weight_dv]`: calls `emit(texel, weight · d_rgba)` per tap in tap
-/// order and returns `(∂L/∂u, ∂L/∂v)` (the one copy of this arithmetic:
+/// `[weight, d_weight_du, d_weight_dv]`, skipping the taps without `inside[k]`: calls
+/// `emit(texel, weight · d_rgba)` per tap in tap order and returns `(∂L/∂u, ∂L/∂v)` (the one copy of this arithmetic:
 /// [`BilinearTaps::vjp_rgba`] and [`RowTaps::vjp_rgba`]).
 #[inline(always)]
 fn vjp_taps(
     texels: &[[f32; 4]],
     index: &[u32],
     [weight, d_weight_du, d_weight_dv]: [&[f32]; 3],
+    inside: &[bool],
     d_rgba: [f32; 4],
     mut emit: impl FnMut(u32, [f32; 4]),
 ) -> (f32, f32) {
     let d = Vec4::from_array(d_rgba);
     let (mut du, mut dv) = (0.0f32, 0.0f32);
     for k in 0..index.len() {
+        if !inside[k] {
+            continue;
+        }
         let t = texels[index[k] as usize];
         // The texel's value seen through the upstream gradient: alpha first, then r, g, b.
         let seen = t[3] * d_rgba[3] + t[0] * d_rgba[0] + t[1] * d_rgba[1] + t[2] * d_rgba[2];
@@ -433,6 +440,7 @@ impl BilinearTaps {
             texels,
             &self.index[..n],
             [&self.weight[..n], &self.d_weight_du[..n], &self.d_weight_dv[..n]],
+            &[true; 4][..n],
             d_rgba,
             emit,
         )
@@ -472,23 +480,28 @@ pub fn sample_vjp(
     }
 }
 
-/// The bilinear taps of [`LANES`] `(u, v)` pairs ([`taps_row`]), lane-wise: for the lanes whose
-/// cell lies inside the texture (`interior`, the common case) the four taps `base`, `base + 1`,
-/// `base + ts`, `base + ts + 1` with their weights and weight derivatives; the other lanes go
-/// through the scalar [`taps`] ([`RowTaps::lane`]).
+/// The bilinear taps of [`LANES`] `(u, v)` pairs ([`taps_row`]), lane-wise. Every lane with
+/// taps keeps all four of its cell's taps, in [`BilinearTaps`] order: a tap outside the texture
+/// (zero padding, on the border ring `X` or `Y ∈ [−1, 0) ∪ [ts − 1, ts)`) has its row and column
+/// clamped into the texture, so that it reads a texel the lane's inside taps read too, and a
+/// cleared `inside` flag, so that its product is replaced by zero and it emits no gradient. Over
+/// the inside taps this is [`taps`] exactly; the zeros added in between change no bit (a sum
+/// that starts at +0 is never −0, and adding ±0 to anything else is exact).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RowTaps {
     ts: u32,
-    /// Index of the top-left tap per lane (interior lanes only).
-    base: [u32; LANES],
+    /// Texel index (`row · ts + column`, clamped into the texture) per tap and lane.
+    index: [[u32; LANES]; 4],
     /// Weights per tap (`[tap][lane]`, taps in [`BilinearTaps`] order).
     weight: [[f32; LANES]; 4],
     /// `∂weight/∂u` per tap.
     d_weight_du: [[f32; LANES]; 4],
     /// `∂weight/∂v` per tap.
     d_weight_dv: [[f32; LANES]; 4],
-    /// The lane's four taps are all inside the texture.
-    interior: [bool; LANES],
+    /// Per tap and lane: the tap lies inside the texture.
+    inside: [[bool; LANES]; 4],
+    /// The lane has taps: `X, Y ∈ [−1, ts)` (false for non-finite coordinates).
+    has_taps: [bool; LANES],
 }
 
 /// [`taps`] for [`LANES`] coordinate pairs at once, computed lane by lane with no branch so that
@@ -503,19 +516,21 @@ pub struct RowTaps {
 pub fn taps_row(u: &[f32; LANES], v: &[f32; LANES], ts: usize) -> RowTaps {
     assert!((2..=65536).contains(&ts), "texture size must be in 2..=65536, got {ts}");
     let n = ts as i32;
+    let limit = ts as f64;
     let s = (0.5 * (ts - 1) as f64) as f32;
     let mut out = RowTaps {
         ts: ts as u32,
-        base: [0; LANES],
+        index: [[0; LANES]; 4],
         weight: [[0.0; LANES]; 4],
         d_weight_du: [[0.0; LANES]; 4],
         d_weight_dv: [[0.0; LANES]; 4],
-        interior: [false; LANES],
+        inside: [[false; LANES]; 4],
+        has_taps: [false; LANES],
     };
     for lane in 0..LANES {
         let x = texel_coordinate(u[lane], ts);
         let y = texel_coordinate(v[lane], ts);
-        // `floor_in_range` in i32, exact for the interior range (other lanes are not used):
+        // `floor_in_range` in i32, exact for the range with taps (other lanes are not used):
         // clamped first (`max` maps NaN to the bound), so the truncation needs no saturation.
         #[allow(clippy::manual_clamp)] // `clamp` would keep NaN, which the cast must not see.
         // SAFETY: the clamped values are finite and within i32.
@@ -532,62 +547,72 @@ pub fn taps_row(u: &[f32; LANES], v: &[f32; LANES], ts: usize) -> RowTaps {
         let gx = [1.0 - fx, fx];
         let gy = [1.0 - fy, fy];
         let dg = [-s, s];
-        // Both coordinates in [0, ts − 1): the cell's four taps are inside (false for NaN).
-        out.interior[lane] = x >= 0.0 && y >= 0.0 && x < (ts - 1) as f64 && y < (ts - 1) as f64;
-        out.base[lane] = (iy.wrapping_mul(n).wrapping_add(ix)) as u32;
-        out.weight[0][lane] = gx[0] * gy[0];
-        out.weight[1][lane] = gx[1] * gy[0];
-        out.weight[2][lane] = gx[0] * gy[1];
-        out.weight[3][lane] = gx[1] * gy[1];
-        out.d_weight_du[0][lane] = dg[0] * gy[0];
-        out.d_weight_du[1][lane] = dg[1] * gy[0];
-        out.d_weight_du[2][lane] = dg[0] * gy[1];
-        out.d_weight_du[3][lane] = dg[1] * gy[1];
-        out.d_weight_dv[0][lane] = gx[0] * dg[0];
-        out.d_weight_dv[1][lane] = gx[1] * dg[0];
-        out.d_weight_dv[2][lane] = gx[0] * dg[1];
-        out.d_weight_dv[3][lane] = gx[1] * dg[1];
+        // Written positively so that NaN fails the test, as in `taps`.
+        out.has_taps[lane] = x >= -1.0 && x < limit && y >= -1.0 && y < limit;
+        let col_inside = [ix >= 0, ix + 1 < n];
+        let row_inside = [iy >= 0, iy + 1 < n];
+        let col = [ix.clamp(0, n - 1) as u32, (ix + 1).clamp(0, n - 1) as u32];
+        let row = [iy.clamp(0, n - 1) as u32, (iy + 1).clamp(0, n - 1) as u32];
+        for (k, (dy, dx)) in [(0, 0), (0, 1), (1, 0), (1, 1)].into_iter().enumerate() {
+            out.index[k][lane] = row[dy] * ts as u32 + col[dx];
+            out.inside[k][lane] = row_inside[dy] & col_inside[dx];
+            out.weight[k][lane] = gx[dx] * gy[dy];
+            out.d_weight_du[k][lane] = dg[dx] * gy[dy];
+            out.d_weight_dv[k][lane] = gx[dx] * dg[dy];
+        }
     }
     out
 }
 
 impl RowTaps {
-    /// The taps of lane `lane`, whose coordinates were `(u, v)`: `taps(u, v, ts)`, built from
-    /// the lane's values for an interior cell and by [`taps`] itself otherwise.
-    #[inline(always)]
-    pub fn lane(&self, lane: usize, u: f32, v: f32) -> Option<BilinearTaps> {
-        if !self.interior[lane] {
-            return taps(u, v, self.ts as usize);
+    /// The taps of lane `lane`: `taps(u, v, ts)` for its coordinates `(u, v)`, bit for bit (its
+    /// inside taps, in order), or `None` without taps.
+    pub fn lane(&self, lane: usize) -> Option<BilinearTaps> {
+        if !self.has_taps[lane] {
+            return None;
         }
-        let base = self.base[lane];
-        Some(BilinearTaps {
+        let mut t = BilinearTaps {
             ts: self.ts,
-            len: 4,
-            index: [base, base + 1, base + self.ts, base + self.ts + 1],
-            weight: [0, 1, 2, 3].map(|k| self.weight[k][lane]),
-            d_weight_du: [0, 1, 2, 3].map(|k| self.d_weight_du[k][lane]),
-            d_weight_dv: [0, 1, 2, 3].map(|k| self.d_weight_dv[k][lane]),
-        })
+            len: 0,
+            index: [0; 4],
+            weight: [0.0; 4],
+            d_weight_du: [0.0; 4],
+            d_weight_dv: [0.0; 4],
+        };
+        for k in (0..4).filter(|&k| self.inside[k][lane]) {
+            let at = t.len as usize;
+            t.index[at] = self.index[k][lane];
+            t.weight[at] = self.weight[k][lane];
+            t.d_weight_du[at] = self.d_weight_du[k][lane];
+            t.d_weight_dv[at] = self.d_weight_dv[k][lane];
+            t.len += 1;
+        }
+        Some(t)
     }
 
-    /// Lane `lane`'s RGBA sample of `texels` (`ts²` RGBA texels), whose coordinates were
-    /// `(u, v)`: `taps(u, v, ts)` followed by [`BilinearTaps::sample_rgba`], bit for bit, or
-    /// `None` without taps. The weights are read from the lanes directly (building a
-    /// [`BilinearTaps`] by scalar stores and reading it back whole stalls the CPU).
+    /// Lane `lane`'s RGBA sample of `texels` (`ts²` RGBA texels): [`RowTaps::lane`] followed by
+    /// [`BilinearTaps::sample_rgba`], bit for bit, or `None` without taps. The weights are read
+    /// from the lanes directly (building a [`BilinearTaps`] by scalar stores and reading it back
+    /// whole stalls the CPU).
     ///
     /// # Panics
     /// If `texels.len() != ts²`.
     #[inline(always)]
-    pub fn sample_rgba(&self, lane: usize, u: f32, v: f32, texels: &[[f32; 4]]) -> Option<[f32; 4]> {
-        if !self.interior[lane] {
-            return taps(u, v, self.ts as usize).map(|t| t.sample_rgba(texels));
+    pub fn sample_rgba(&self, lane: usize, texels: &[[f32; 4]]) -> Option<[f32; 4]> {
+        if !self.has_taps[lane] {
+            return None;
         }
         check_rgba_texels(texels.len(), self.ts);
-        Some(sample_four(texels, self.indices(lane), self.weight.map(|w| w[lane])))
+        Some(sample_four(
+            texels,
+            self.index.map(|i| i[lane]),
+            self.weight.map(|w| w[lane]),
+            self.inside.map(|m| m[lane]),
+        ))
     }
 
-    /// Lane `lane`'s [`BilinearTaps::vjp_rgba`] (coordinates `(u, v)`), bit for bit, reading the
-    /// lanes directly; `None` without taps.
+    /// Lane `lane`'s [`BilinearTaps::vjp_rgba`], bit for bit, reading the lanes directly;
+    /// `None` without taps.
     ///
     /// # Panics
     /// If `texels.len() != ts²`.
@@ -595,46 +620,29 @@ impl RowTaps {
     pub fn vjp_rgba(
         &self,
         lane: usize,
-        (u, v): (f32, f32),
         texels: &[[f32; 4]],
         d_rgba: [f32; 4],
         emit: impl FnMut(u32, [f32; 4]),
     ) -> Option<(f32, f32)> {
-        if !self.interior[lane] {
-            return taps(u, v, self.ts as usize).map(|t| t.vjp_rgba(texels, d_rgba, emit));
+        if !self.has_taps[lane] {
+            return None;
         }
         check_rgba_texels(texels.len(), self.ts);
         let at = |w: &[[f32; LANES]; 4]| w.map(|w| w[lane]);
         let parts = [at(&self.weight), at(&self.d_weight_du), at(&self.d_weight_dv)];
         Some(vjp_taps(
             texels,
-            &self.indices(lane),
+            &self.index.map(|i| i[lane]),
             [&parts[0], &parts[1], &parts[2]],
+            &self.inside.map(|m| m[lane]),
             d_rgba,
             emit,
         ))
     }
 
-    /// The four tap indices of an interior lane.
-    #[inline(always)]
-    fn indices(&self, lane: usize) -> [u32; 4] {
-        let base = self.base[lane];
-        [base, base + 1, base + self.ts, base + self.ts + 1]
-    }
-
     /// The taps and weights of lane `lane` (what sampling reads): [`RowTaps::lane`] followed by
     /// [`BilinearTaps::for_sampling`].
-    #[inline(always)]
-    pub fn lane_for_sampling(&self, lane: usize, u: f32, v: f32) -> Option<SampleTaps> {
-        if !self.interior[lane] {
-            return taps(u, v, self.ts as usize).map(|t| t.for_sampling());
-        }
-        let base = self.base[lane];
-        Some(SampleTaps {
-            ts: self.ts,
-            len: 4,
-            index: [base, base + 1, base + self.ts, base + self.ts + 1],
-            weight: [0, 1, 2, 3].map(|k| self.weight[k][lane]),
-        })
+    pub fn lane_for_sampling(&self, lane: usize) -> Option<SampleTaps> {
+        self.lane(lane).map(|t| t.for_sampling())
     }
 }
