@@ -251,10 +251,16 @@ fn by_entry_body(
             // Per pair in pixel order: the compositing backward and the texel gradients; then
             // the hits' gradients lane-wise, added to the record in pixel order.
             let (mut d_u, mut d_v, mut d_depth) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+            // The samples of the chunk's pairs first, so that their texel reads overlap.
+            let samples: [Option<[f32; 4]>; LANES] = std::array::from_fn(|lane| {
+                (lane < chunk.len())
+                    .then(|| lane_taps.sample_rgba(lane, texture))
+                    .flatten()
+            });
             for (lane, pair) in chunk.iter().enumerate() {
                 debug_assert!(hits.valid[lane], "a blended pair hits its billboard");
                 let depth = hits.depth[lane];
-                let Some([r, g, bl, a]) = lane_taps.sample_rgba(lane, texture) else {
+                let Some([r, g, bl, a]) = samples[lane] else {
                     debug_assert!(false, "a blended pair has taps");
                     continue;
                 };

@@ -192,16 +192,21 @@ fn composite_tile_body<const DISTORTION: bool>(
                 let px: [f32; LANES] = std::array::from_fn(|l| (first + l) as f32 + 0.5);
                 let hits = intersect_lanes(&p.transform, &plane, camera, &px, &[py; LANES]);
                 let taps = taps_row(&hits.u, &hits.v, ts);
+                // The samples of the chunk's pixels first, so that their texel reads overlap
+                // instead of each waiting behind the previous pixel's compositing.
+                let mut samples = [None; LANES];
+                for (lane, q) in lanes.clone().enumerate() {
+                    if !states[q].composite.done && hits.valid[lane] {
+                        samples[lane] = taps.sample_rgba(lane, texture);
+                    }
+                }
                 for (lane, q) in lanes.enumerate() {
                     let state = &mut states[q];
                     if state.composite.done {
                         continue;
                     }
                     state.evaluated += 1;
-                    if !hits.valid[lane] {
-                        continue;
-                    }
-                    let Some([r, g, bl, a]) = taps.sample_rgba(lane, texture) else {
+                    let Some([r, g, bl, a]) = samples[lane] else {
                         continue;
                     };
                     let depth = hits.depth[lane];
