@@ -32,11 +32,15 @@ pub struct TrainSummary {
     pub resolution: [u32; 2],
     /// Wall-clock seconds spent in training steps (excluding loading, evaluation and saving).
     pub train_seconds: f64,
-    /// Mean forward-only render time per test frame, milliseconds.
+    /// Mean forward-only render time per test frame, milliseconds (NaN without test views).
+    #[serde(deserialize_with = "nan_when_null")]
     pub render_ms_per_frame: f64,
-    /// Mean test-view PSNR (dB, 8-bit images).
+    /// Mean test-view PSNR (dB, 8-bit images); NaN without test views (JSON has no NaN:
+    /// `summary.json` holds `null`, read back as NaN).
+    #[serde(deserialize_with = "nan_when_null")]
     pub test_psnr: f64,
-    /// Mean test-view SSIM (8-bit images).
+    /// Mean test-view SSIM (8-bit images); NaN (`null` in JSON) without test views.
+    #[serde(deserialize_with = "nan_when_null")]
     pub test_ssim: f64,
     /// Number of test views evaluated.
     pub test_views: usize,
@@ -54,6 +58,11 @@ pub struct TrainSummary {
     /// summaries written before it was recorded.
     #[serde(default)]
     pub command: Vec<String>,
+}
+
+/// Reads a number, or `null` (what `serde_json` writes for a NaN or an infinity) as NaN.
+fn nan_when_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
 }
 
 /// Training settings recorded in `summary.json` next to the [`TrainSummary`] fields (a separate
@@ -173,9 +182,11 @@ pub struct CurvePoint {
     pub step: usize,
     /// Training wall-clock seconds so far (evaluation time excluded).
     pub seconds: f64,
-    /// Mean test PSNR (dB, 8-bit).
+    /// Mean test PSNR (dB, 8-bit); NaN (`null` in JSON) without test views.
+    #[serde(deserialize_with = "nan_when_null")]
     pub psnr: f64,
-    /// Mean test SSIM (8-bit).
+    /// Mean test SSIM (8-bit); NaN (`null` in JSON) without test views.
+    #[serde(deserialize_with = "nan_when_null")]
     pub ssim: f64,
 }
 

@@ -555,14 +555,19 @@ pub fn run(args: TrainArgs) -> Result<()> {
             return Err(e).with_context(|| format!("training on {}{note}", args.scene.display()));
         }
     };
+    let scores = if summary.test_views == 0 {
+        "no test views to score (--test-every 0 or an empty test list)".to_string()
+    } else {
+        format!(
+            "test PSNR {:.2} dB, SSIM {:.4} over {} views",
+            summary.test_psnr, summary.test_ssim, summary.test_views
+        )
+    };
     println!(
-        "trained {} steps in {:.1} s ({:.2} it/s): test PSNR {:.2} dB, SSIM {:.4} over {} views; {} billboards ({} alive); model {:.2} MB; peak memory {:.0} MB",
+        "trained {} steps in {:.1} s ({:.2} it/s): {scores}; {} billboards ({} alive); model {:.2} MB; peak memory {:.0} MB",
         summary.iterations,
         summary.train_seconds,
         summary.iterations as f64 / summary.train_seconds,
-        summary.test_psnr,
-        summary.test_ssim,
-        summary.test_views,
         summary.billboards,
         summary.alive,
         summary.model_bytes as f64 / 1e6,

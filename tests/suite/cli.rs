@@ -136,6 +136,38 @@ fn train_render_and_eval_run_on_a_tiny_scene() {
     std::fs::remove_dir_all(&root).ok();
 }
 
+/// A run without test views (`--test-every 0`) says so instead of printing NaN scores, and its
+/// `summary.json` (which holds `null` for them) reads back with NaN scores.
+#[test]
+fn a_run_without_test_views_says_so_and_its_summary_reads_back() {
+    let root = temp("no-test-views");
+    let data = export_demo(&root, 24, 100);
+    let out = root.join("out");
+    let printed = run_ok(&[
+        "train",
+        data.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--iterations",
+        "10",
+        "--billboards",
+        "100",
+        "--texture-size",
+        "4",
+        "--test-every",
+        "0",
+        "--quiet",
+    ]);
+    assert!(printed.contains("no test views to score"), "{printed}");
+    assert!(!printed.contains("NaN"), "{printed}");
+    let text = std::fs::read_to_string(out.join("summary.json")).unwrap();
+    assert!(text.contains("\"test_psnr\": null"), "{text}");
+    let summary: bbsplat::report::TrainSummary = serde_json::from_str(&text).unwrap();
+    assert_eq!(summary.test_views, 0);
+    assert!(summary.test_psnr.is_nan() && summary.test_ssim.is_nan());
+    std::fs::remove_dir_all(&root).ok();
+}
+
 #[test]
 fn train_names_a_missing_scene_folder() {
     let (ok, err) = run(&["train", "/no/such/scene", "-o", "/tmp/never-written"]);
