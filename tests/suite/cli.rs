@@ -143,21 +143,8 @@ fn a_run_without_test_views_says_so_and_its_summary_reads_back() {
     let root = temp("no-test-views");
     let data = export_demo(&root, 24, 100);
     let out = root.join("out");
-    let printed = run_ok(&[
-        "train",
-        data.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--iterations",
-        "10",
-        "--billboards",
-        "100",
-        "--texture-size",
-        "4",
-        "--test-every",
-        "0",
-        "--quiet",
-    ]);
+    let (d, o) = (data.to_str().unwrap(), out.to_str().unwrap());
+    let printed = run_ok(&tiny_train_args(d, o, &["--test-every", "0"]));
     assert!(printed.contains("no test views to score"), "{printed}");
     assert!(!printed.contains("NaN"), "{printed}");
     let text = std::fs::read_to_string(out.join("summary.json")).unwrap();

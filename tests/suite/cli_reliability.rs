@@ -242,6 +242,15 @@ fn resume_refuses_another_dataset_or_a_changed_flag_naming_it() {
         ),
         (vec!["--seed", "9"], "--seed"),
         (vec!["--texture-threshold", "100"], "--texture-threshold"),
+        // Flags recorded only when given (so that older checkpoints keep their record).
+        (
+            vec!["--error-growth", "0.5"],
+            "--error-growth: the checkpoint's run has (absent), this one 0.5",
+        ),
+        (
+            vec!["--lambda-normal", "0.05"],
+            "--lambda-normal: the checkpoint's run has (absent), this one 0.05",
+        ),
     ] {
         let mut extra = vec!["--resume", c];
         extra.extend(flags);
