@@ -182,10 +182,11 @@ pub struct CurvePoint {
     pub step: usize,
     /// Training wall-clock seconds so far (evaluation time excluded).
     pub seconds: f64,
-    /// Mean test PSNR (dB, 8-bit); NaN (`null` in JSON) without test views.
+    /// Mean test PSNR (dB, 8-bit). A run without test views records no curve point; files of
+    /// earlier builds hold one with `null` scores, read as NaN.
     #[serde(deserialize_with = "nan_when_null")]
     pub psnr: f64,
-    /// Mean test SSIM (8-bit); NaN (`null` in JSON) without test views.
+    /// Mean test SSIM (8-bit); `null` read as NaN, as [`CurvePoint::psnr`].
     #[serde(deserialize_with = "nan_when_null")]
     pub ssim: f64,
 }

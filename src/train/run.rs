@@ -662,12 +662,15 @@ pub fn run(
             None => return stopped(&mut on_event),
         }
     };
-    curve.push(CurvePoint {
-        step: iterations,
-        seconds: train_seconds,
-        psnr: test_psnr,
-        ssim: test_ssim,
-    });
+    // The curve holds evaluations only: none without test views.
+    if !test.is_empty() {
+        curve.push(CurvePoint {
+            step: iterations,
+            seconds: train_seconds,
+            psnr: test_psnr,
+            ssim: test_ssim,
+        });
+    }
     let summary = TrainSummary {
         version: SUMMARY_VERSION,
         scene: config.scene.clone(),

@@ -4,6 +4,7 @@
 
 use bbsplat::demo::{DemoConfig, generate};
 use bbsplat::model::{RawBillboards, logit};
+use bbsplat::report::TrainSummary;
 use bbsplat::scene::split::camera_extent;
 use bbsplat::train::run::{CHECKPOINT_FILE, MODEL_DIR, SUMMARY_FILE};
 use bbsplat::train::{
@@ -782,7 +783,12 @@ fn every_warning_is_recorded_in_the_summary() {
     };
     run(&mut trainer, &train, &[], &config, &StopSignal::new(), |_| {}).unwrap();
     let text = std::fs::read_to_string(dir.join(SUMMARY_FILE)).unwrap();
-    // Without test views the PSNR is NaN (null in JSON): read the warnings alone.
+    // Without test views the scores are NaN (null in JSON) and read back as NaN; the curve
+    // holds no evaluation.
+    let summary: TrainSummary = serde_json::from_str(&text).unwrap();
+    assert_eq!(summary.test_views, 0);
+    assert!(summary.test_psnr.is_nan() && summary.test_ssim.is_nan() && summary.render_ms_per_frame.is_nan());
+    assert!(summary.curve.is_empty(), "{:?}", summary.curve);
     let file: serde_json::Value = serde_json::from_str(&text).unwrap();
     let warnings: Vec<String> = serde_json::from_value(file["warnings"].clone()).unwrap();
     assert_eq!(warnings.len(), 2, "{warnings:?}");
