@@ -52,6 +52,7 @@ fn bench(c: &mut Criterion) {
                 depth: None,
                 normal: None,
                 distortion: None,
+                camera: false,
             };
             group.bench_function(format!("fwd_bwd/{size}/{n}"), |b| {
                 b.iter(|| {
@@ -101,6 +102,7 @@ fn bench_scene(c: &mut Criterion, group_name: &str, name: &str, scene: &Activate
         depth: None,
         normal: None,
         distortion: None,
+        camera: false,
     };
     group.bench_function(format!("{name}/fwd_bwd"), |b| {
         b.iter(|| {

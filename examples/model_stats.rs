@@ -110,6 +110,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 depth: None,
                 normal: None,
                 distortion: None,
+                camera: false,
             };
             let touched = render_backward(&set, &out, &ig, &mut grads);
             both_ms += start.elapsed().as_secs_f64() * 1e3;

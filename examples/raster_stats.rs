@@ -83,6 +83,7 @@ fn main() {
                 depth: None,
                 normal: None,
                 distortion: None,
+                camera: false,
             };
             let touched = render_backward(&set, &out, &ig, &mut grads).len();
             if recycle {
@@ -100,6 +101,7 @@ fn main() {
             depth: None,
             normal: None,
             distortion: None,
+            camera: false,
         };
         render_backward(&set, &out, &ig, &mut g1);
         let mut h = 0xcbf29ce484222325u64;
@@ -159,6 +161,7 @@ fn main() {
                 depth: None,
                 normal: None,
                 distortion: None,
+                camera: false,
             },
             &mut grads,
         );

@@ -121,6 +121,43 @@ impl Camera {
         }
     }
 
+    /// This camera turned by `rotation` (`ω`, radians, camera axes) about its own centre, its
+    /// view frame then shifted by `translation` (`δ`, camera axes, world units), and its focal
+    /// lengths multiplied by `focal_scale`: `R_cw → exp([ω]×)·R_cw`, `t → exp([ω]×)·t + δ`
+    /// (composed in f64, rounded once). The camera centre moves by `−R'ᵀ·δ`; the principal
+    /// point and image size are kept. At `ω = δ = 0` the gradient of a render with respect to
+    /// `ω` and `δ` is [`crate::raster::backward::CameraGradient`].
+    ///
+    /// ```
+    /// use bbsplat::camera::Camera;
+    /// use glam::Vec3;
+    /// let cam = Camera::look_at(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, Vec3::Y, 100.0, 100.0, 64, 48);
+    /// // Turning about the view axis keeps the centre and the image of the target.
+    /// let turned = cam.adjusted(Vec3::new(0.0, 0.0, 0.3), Vec3::ZERO, 1.0);
+    /// assert!((turned.centre() - cam.centre()).length() < 1e-5);
+    /// assert!(turned.world_to_view(Vec3::ZERO).abs_diff_eq(cam.world_to_view(Vec3::ZERO), 1e-5));
+    /// // δ shifts every view point by δ.
+    /// let moved = cam.adjusted(Vec3::ZERO, Vec3::new(0.5, 0.0, 0.0), 2.0);
+    /// assert!((moved.world_to_view(Vec3::ZERO) - Vec3::new(0.5, 0.0, 4.0)).length() < 1e-6);
+    /// assert_eq!(moved.fx, 200.0);
+    /// ```
+    pub fn adjusted(&self, rotation: Vec3, translation: Vec3, focal_scale: f32) -> Camera {
+        let omega = rotation.as_dvec3();
+        let angle = omega.length();
+        let turn = if angle > 0.0 {
+            glam::DMat3::from_axis_angle(omega / angle, angle)
+        } else {
+            glam::DMat3::IDENTITY
+        };
+        Camera {
+            rotation: (turn * self.rotation.as_dmat3()).as_mat3(),
+            translation: (turn * self.translation.as_dvec3() + translation.as_dvec3()).as_vec3(),
+            fx: self.fx * focal_scale,
+            fy: self.fy * focal_scale,
+            ..*self
+        }
+    }
+
     /// World point to view (camera) space.
     #[inline]
     pub fn world_to_view(&self, p: Vec3) -> Vec3 {

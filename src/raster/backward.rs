@@ -28,8 +28,8 @@ use crate::stages::composite::{Blend, CompositeBackState, Step, classify};
 use crate::stages::depth_distortion::{DistortionTotals, depth_gradient, mapped_depth, weight_gradient};
 use crate::stages::ray_plane::{intersect_vjp_with, pixel_ray};
 use crate::stages::sh::sh_colour_vjp_clamped;
-use crate::stages::splat_transform::{SplatTransform, project_splat_vjp_visible};
-use glam::{Vec2, Vec3};
+use crate::stages::splat_transform::{CameraGrads, SplatTransform, camera_vjp, project_splat_vjp_visible};
+use glam::{DVec2, DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 
 /// Gradients of a scalar loss with respect to every billboard parameter and the background.
@@ -51,6 +51,44 @@ pub struct RenderGradients {
     pub textures: Vec<[f32; 4]>,
     /// `∂L/∂background`.
     pub background: Vec3,
+    /// `∂L/∂` the camera of the view (its pose and intrinsics; see [`CameraGradient`]).
+    pub camera: CameraGradient,
+}
+
+/// Gradients of a loss with respect to a small change of the camera a view was rendered with,
+/// summed in f64 over the billboards in index order (so the same for any thread count).
+///
+/// The parametrisation is [`crate::stages::splat_transform::camera_vjp`]'s:
+/// `p_view → (I + [ω]×)·p_view + δ`, i.e. the camera turned by `ω` about its own centre
+/// (radians, camera axes) and its view frame shifted by `δ` (camera axes, world units; the
+/// centre moves by `−R_cwᵀ·δ`). `translation` includes the SH colours' view directions, which
+/// follow the camera centre. [`crate::camera::Camera::adjusted`] applies such a change.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CameraGradient {
+    /// `∂L/∂ω`.
+    pub rotation: DVec3,
+    /// `∂L/∂δ`.
+    pub translation: DVec3,
+    /// `(∂L/∂fx, ∂L/∂fy)`.
+    pub focal: DVec2,
+    /// `(∂L/∂cx, ∂L/∂cy)`.
+    pub principal: DVec2,
+}
+
+impl CameraGradient {
+    fn add(&mut self, g: &CameraGrads) {
+        self.rotation += g.rotation.as_dvec3();
+        self.translation += g.translation.as_dvec3();
+        self.focal += g.focal.as_dvec2();
+        self.principal += g.principal.as_dvec2();
+    }
+
+    fn add_gradient(&mut self, g: &CameraGradient) {
+        self.rotation += g.rotation;
+        self.translation += g.translation;
+        self.focal += g.focal;
+        self.principal += g.principal;
+    }
 }
 
 impl RenderGradients {
@@ -64,6 +102,7 @@ impl RenderGradients {
             sh: vec![0.0; n * SH_FLOATS],
             textures: crate::memory::filled(n * t, [0.0; 4]),
             background: Vec3::ZERO,
+            camera: CameraGradient::default(),
         }
     }
 
@@ -100,6 +139,10 @@ pub struct ImageGradients<'a> {
     /// `∂L/∂distortion` per pixel ([`RenderOutput::distortion`]), if the loss uses it. The
     /// render need not have computed the map: the backward pass rebuilds what it needs.
     pub distortion: Option<&'a [f32]>,
+    /// Also compute [`RenderGradients::camera`] (a few hundred instructions per billboard that
+    /// received a gradient, about 10 % of a backward pass of many small billboards); left at
+    /// zero when false.
+    pub camera: bool,
 }
 
 impl ImageGradients<'_> {
@@ -706,7 +749,8 @@ pub fn render_backward(
     // each step prefetches them a few billboards ahead: the entry records 12 ahead, the texel
     // lists 8 ahead, the gradient rows and SH coefficients 4 ahead. Prefetches change no value.
     const CHUNK: usize = 256;
-    let touched: Vec<Vec<u32>> = (
+    let rotation_cw = camera.rotation;
+    let chunks: Vec<(Vec<u32>, CameraGradient)> = (
         grads.positions.par_chunks_mut(CHUNK),
         grads.quaternions.par_chunks_mut(CHUNK),
         grads.log_scales.par_chunks_mut(CHUNK),
@@ -719,6 +763,7 @@ pub fn render_backward(
             let b0 = c * CHUNK;
             let len = d_pos.len();
             let mut touched = Vec::new();
+            let mut d_camera = CameraGradient::default();
             for lb in 0..len {
                 if lb + 12 < len {
                     for rec in entry_records(b0 + lb + 12) {
@@ -804,10 +849,30 @@ pub fn render_backward(
                 for (q, dq) in d_quat[lb].iter_mut().zip(sg.d_quaternion) {
                     *q += dq;
                 }
+                if !image_grads.camera {
+                    touched.push(b as u32);
+                    continue;
+                }
+                let mut cg = camera_vjp(
+                    set.positions[b],
+                    set.log_scales[b],
+                    set.quaternions[b],
+                    camera,
+                    &d_t,
+                    normal_gradient(b),
+                );
+                // The SH direction `p − centre` follows the centre, which δ moves by `−R_cwᵀ·δ`.
+                cg.translation += rotation_cw * d_pos_sh;
+                d_camera.add(&cg);
                 touched.push(b as u32);
             }
-            touched
+            (touched, d_camera)
         })
         .collect();
-    touched.concat()
+    let mut touched = Vec::new();
+    for (t, d_camera) in &chunks {
+        touched.extend_from_slice(t);
+        grads.camera.add_gradient(d_camera);
+    }
+    touched
 }

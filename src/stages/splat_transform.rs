@@ -583,13 +583,7 @@ fn axes_vjp(
     d_transform: &SplatTransform,
     d_normal_view: Vec3,
 ) -> SplatGrads {
-    let SplatTransform { tu: du, tv: dv, tw: dw } = *d_transform;
-    // T = K·M with M = [a | b | c]: ∂L/∂M = Kᵀ·∂L/∂T. Row 0 of ∂L/∂M is fx·du, row 1 fy·dv,
-    // row 2 cx·du + cy·dv + dw; column j of M is a, b, c.
-    let row2 = camera.cx * du + camera.cy * dv + dw;
-    let da = Vec3::new(camera.fx * du.x, camera.fy * dv.x, row2.x);
-    let db = Vec3::new(camera.fx * du.y, camera.fy * dv.y, row2.y);
-    let dc = Vec3::new(camera.fx * du.z, camera.fy * dv.z, row2.z);
+    let [da, db, dc] = view_columns_vjp(camera, d_transform);
     let wt = camera.rotation.transpose();
     let (da_world, db_world) = (wt * da, wt * db);
     let d_rotation = Mat3::from_cols(
@@ -602,6 +596,86 @@ fn axes_vjp(
         d_position: wt * dc,
         d_log_scales: d_scales * scales,
         d_quaternion: quat_to_rotation_vjp(quaternion, d_rotation),
+    }
+}
+
+/// `∂L/∂[a | b | c]`, the view-space columns of `M` in `T = K·M`, from `∂L/∂T`:
+/// `∂L/∂M = Kᵀ·∂L/∂T`. Row 0 of `∂L/∂M` is `fx·du`, row 1 `fy·dv`, row 2 `cx·du + cy·dv + dw`.
+#[inline]
+fn view_columns_vjp(camera: &Camera, d_transform: &SplatTransform) -> [Vec3; 3] {
+    let SplatTransform { tu: du, tv: dv, tw: dw } = *d_transform;
+    let row2 = camera.cx * du + camera.cy * dv + dw;
+    [
+        Vec3::new(camera.fx * du.x, camera.fy * dv.x, row2.x),
+        Vec3::new(camera.fx * du.y, camera.fy * dv.y, row2.y),
+        Vec3::new(camera.fx * du.z, camera.fy * dv.z, row2.z),
+    ]
+}
+
+/// Gradients of a loss with respect to a small change of the camera, through one billboard's
+/// `T` and facing normal (see [`camera_vjp`] for the parametrisation).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CameraGrads {
+    /// `∂L/∂ω`: the view frame turned by `ω` (radians, camera axes), `p_view → (I + [ω]×)·p_view`.
+    pub rotation: Vec3,
+    /// `∂L/∂δ`: the view frame shifted by `δ` (world units, camera axes), `p_view → p_view + δ`.
+    pub translation: Vec3,
+    /// `(∂L/∂fx, ∂L/∂fy)`.
+    pub focal: Vec2,
+    /// `(∂L/∂cx, ∂L/∂cy)`.
+    pub principal: Vec2,
+}
+
+/// Backward pass of [`project_splat`] to the camera: what `∂L/∂T` and `∂L/∂normal_view` (the
+/// flipped normal, as for [`project_splat_vjp`]) say about the camera's pose and intrinsics.
+///
+/// The pose change is applied on the camera side of the world-to-camera transform:
+/// `p_view = (I + [ω]×)·(R_cw·p + t) + δ`, i.e. `R_cw → (I + [ω]×)·R_cw` and
+/// `t → (I + [ω]×)·t + δ`, so that `ω` turns the camera about its own centre and `δ` moves
+/// it (by `−R_cwᵀ·δ` in world units). Then `a → a + ω×a`, `b → b + ω×b`, `c → c + ω×c + δ` and
+/// `normal_view → normal_view + ω×normal_view`, so with `g_a, g_b, g_c` the columns of
+/// `Kᵀ·∂L/∂T`: `∂L/∂ω = a×g_a + b×g_b + c×g_c + n×∂L/∂n` and `∂L/∂δ = g_c`. The intrinsics enter
+/// only `T`: `∂L/∂fx = du·(a.x, b.x, c.x)`, `∂L/∂cx = du·tw` (same for y).
+///
+/// The SH colour's view direction depends on the camera centre too; that path is not here (it
+/// is `R_cw·∂L/∂position` of the SH VJP, added by the rasterizer's backward pass).
+///
+/// A billboard culled by [`splat_frame`] gets zero gradients.
+///
+/// ```
+/// use bbsplat::camera::Camera;
+/// use bbsplat::stages::splat_transform::{camera_vjp, SplatTransform};
+/// use glam::{Vec2, Vec3};
+/// let cam = Camera::look_at(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, Vec3::Y, 100.0, 100.0, 64, 48);
+/// // L = Tw.z = view depth of the centre: moving the view frame by δ adds δ.z to it.
+/// let d_t = SplatTransform { tw: Vec3::Z, ..Default::default() };
+/// let g = camera_vjp(Vec3::ZERO, Vec2::ZERO, [1.0, 0.0, 0.0, 0.0], &cam, &d_t, Vec3::ZERO);
+/// assert!((g.translation - Vec3::Z).length() < 1e-6);
+/// // Turning the camera about its centre does not change the depth of a point on its axis.
+/// assert!(g.rotation.length() < 1e-6);
+/// ```
+pub fn camera_vjp(
+    position: Vec3,
+    log_scales: Vec2,
+    quaternion: [f32; 4],
+    camera: &Camera,
+    d_transform: &SplatTransform,
+    d_normal_view: Vec3,
+) -> CameraGrads {
+    let Some((frame, g)) = frame_with_geometry(position, log_scales, quaternion, camera) else {
+        return CameraGrads::default();
+    };
+    let [da, db, dc] = view_columns_vjp(camera, d_transform);
+    let SplatTransform { tu: du, tv: dv, .. } = *d_transform;
+    let tw = frame.transform.tw;
+    CameraGrads {
+        rotation: g.a.cross(da) + g.b.cross(db) + g.c.cross(dc) + frame.normal_view.cross(d_normal_view),
+        translation: dc,
+        focal: Vec2::new(
+            du.dot(Vec3::new(g.a.x, g.b.x, g.c.x)),
+            dv.dot(Vec3::new(g.a.y, g.b.y, g.c.y)),
+        ),
+        principal: Vec2::new(du.dot(tw), dv.dot(tw)),
     }
 }
 

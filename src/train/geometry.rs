@@ -150,6 +150,7 @@ impl GeometryLoss {
             depth: self.d_depth.as_deref(),
             normal: self.d_normal.as_deref(),
             distortion: self.d_distortion.as_deref(),
+            camera: false,
         }
     }
 }

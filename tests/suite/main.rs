@@ -38,6 +38,7 @@ mod raster;
 mod raster_aux;
 mod raster_backward;
 mod raster_binning;
+mod raster_camera;
 mod raster_lanes;
 mod raster_preprocess;
 mod raster_workload;

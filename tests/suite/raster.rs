@@ -87,14 +87,14 @@ proptest! {
 }
 
 /// Random per-pixel weights for the rgb, alpha and depth maps.
-struct WeightedLoss {
-    rgb: Vec<f64>,
-    alpha: Vec<f64>,
-    depth: Vec<f64>,
+pub(crate) struct WeightedLoss {
+    pub rgb: Vec<f64>,
+    pub alpha: Vec<f64>,
+    pub depth: Vec<f64>,
 }
 
 impl WeightedLoss {
-    fn new(n_pix: usize, seed: u64) -> Self {
+    pub(crate) fn new(n_pix: usize, seed: u64) -> Self {
         let depth = random_weights(n_pix, seed + 2).into_iter().map(|w| 0.1 * w).collect();
         Self {
             rgb: random_weights(3 * n_pix, seed),
@@ -108,7 +108,7 @@ impl WeightedLoss {
         dot(&out.rgb, &self.rgb) + dot(&out.alpha, &self.alpha) + dot(&out.depth, &self.depth)
     }
 
-    fn f32s(v: &[f64]) -> Vec<f32> {
+    pub(crate) fn f32s(v: &[f64]) -> Vec<f32> {
         v.iter().map(|&x| x as f32).collect()
     }
 }
@@ -176,6 +176,7 @@ fn gradients(scene: &ActivatedBillboards, cam: &Camera, s: &RenderSettings, loss
         depth: Some(&depth),
         normal: None,
         distortion: None,
+        camera: false,
     };
     render_backward(&scene.borrowed(), &out, &ig, &mut g);
     g
@@ -269,7 +270,7 @@ fn group_report(
 }
 
 /// All output values of a render (rgb, alpha, depth), flattened.
-fn outputs(out: &RenderOutput) -> Vec<f32> {
+pub(crate) fn outputs(out: &RenderOutput) -> Vec<f32> {
     out.rgb.iter().chain(&out.alpha).chain(&out.depth).copied().collect()
 }
 
@@ -404,6 +405,7 @@ fn banded_report(
                 depth: Some(&depth),
                 normal: None,
                 distortion: None,
+                camera: false,
             },
             &mut g,
         );
@@ -728,6 +730,7 @@ fn add_weighted_backward(
         depth: None,
         normal: None,
         distortion: None,
+        camera: false,
     };
     render_backward(&scene.borrowed(), out, &ig, g)
 }
@@ -987,6 +990,7 @@ fn clearing_the_reported_rows_restores_zero_gradients() {
         g.clear_row(b as usize);
     }
     g.background = Vec3::ZERO;
+    g.camera = Default::default();
     assert_eq!(g, RenderGradients::zeros(scene.len(), scene.texture_size));
 }
 
@@ -1012,6 +1016,7 @@ fn backward_refuses_overlapping_tile_ranges() {
         depth: None,
         normal: None,
         distortion: None,
+        camera: false,
     };
     render_backward(&scene.borrowed(), &out, &grads_in, &mut g);
 }
@@ -1108,6 +1113,7 @@ fn non_finite_parameters_never_render_as_plausible_values() {
             depth: None,
             normal: None,
             distortion: None,
+            camera: false,
         },
         &mut g,
     );

@@ -36,6 +36,7 @@ fn everything(scene: &ActivatedBillboards, cam: &Camera, settings: &RenderSettin
         depth: Some(&depth),
         normal: aux.then_some(&normal[..]),
         distortion: aux.then_some(&distortion[..]),
+        camera: false,
     };
     let mut grads = RenderGradients::zeros(scene.len(), scene.texture_size);
     let touched = render_backward(&set, &out, &grads_in, &mut grads);

@@ -126,6 +126,7 @@ impl Loss {
             depth: Some(&self.depth),
             normal: None,
             distortion: None,
+            camera: false,
         };
         render_backward(&b.borrowed(), &out, &ig, &mut g);
         g
