@@ -25,6 +25,7 @@
 //! deterministic for any thread count.
 
 pub mod adam;
+pub mod camera_fit;
 pub mod checkpoint;
 pub mod depth_sweep;
 pub mod error;

@@ -64,6 +64,7 @@ mod stage_splat_transform;
 mod strategies;
 mod sweep;
 mod train_adam;
+mod train_camera_fit;
 mod train_checkpoint;
 mod train_demo;
 mod train_depth_sweep;
