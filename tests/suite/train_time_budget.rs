@@ -123,7 +123,10 @@ fn the_plan_round_trips_through_the_checkpoint_and_resume_continues_it() {
     .unwrap();
     assert!(matches!(outcome, RunOutcome::Stopped { step: 40, .. }), "{outcome:?}");
     let saved = *trainer.time_plan().unwrap();
-    assert!(saved.spent_seconds > 0.0 && saved.coarse_steps + saved.calibration_steps == 40);
+    // Every step is counted once, in whichever phase it ran (on a loaded host the planned run is
+    // short and full resolution can start before step 40: seen once with two training runs
+    // beside the test suite).
+    assert!(saved.spent_seconds > 0.0 && saved.coarse_steps + saved.calibration_steps + saved.fine_steps == 40);
     assert_eq!(saved.calibration_steps, 2);
     let mut resumed = Trainer::load_checkpoint(dir.join("checkpoint.bin")).unwrap();
     assert_eq!(resumed.time_plan(), Some(&saved), "the plan round-trips bit for bit");
