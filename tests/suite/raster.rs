@@ -358,6 +358,35 @@ pub(crate) fn banded_difference(
     }
 }
 
+/// The backward pass of a [`banded_difference`]'s masked weights (rgb, then alpha, then depth,
+/// as [`outputs`] lays them out) from `base`, the render they weigh; with the camera gradient
+/// when `camera` is set.
+pub(crate) fn masked_backward(
+    scene: &ActivatedBillboards,
+    base: &RenderOutput,
+    masked: &[f64],
+    camera: bool,
+) -> RenderGradients {
+    let n_pix = (base.width * base.height) as usize;
+    let to_f32 = |r: std::ops::Range<usize>| masked[r].iter().map(|&w| w as f32).collect::<Vec<f32>>();
+    let (rgb, alpha, depth) = (
+        to_f32(0..3 * n_pix),
+        to_f32(3 * n_pix..4 * n_pix),
+        to_f32(4 * n_pix..5 * n_pix),
+    );
+    let mut g = RenderGradients::zeros(scene.len(), scene.texture_size);
+    let ig = ImageGradients {
+        rgb: &rgb,
+        alpha: Some(&alpha),
+        depth: Some(&depth),
+        normal: None,
+        distortion: None,
+        camera,
+    };
+    render_backward(&scene.borrowed(), base, &ig, &mut g);
+    g
+}
+
 /// The comparison of [`check_group_banded`] and the band's fraction of the moved outputs, with
 /// the analytic gradient multiplied by `scale` (1 for the real check; the catch tests pass 1.01).
 fn banded_report(
@@ -378,7 +407,6 @@ fn banded_report(
         outputs(&render(&b.borrowed(), cam, s))
     };
     let base = render(&scene.borrowed(), cam, s);
-    let n_pix = cam.pixel_count();
     let h = 1e-3f64;
     let (mut analytic_v, mut numeric_v) = (Vec::new(), Vec::new());
     let (mut banded, mut moved) = (0usize, 0usize);
@@ -388,27 +416,7 @@ fn banded_report(
         banded += step.banded;
         moved += step.moved;
         numeric_v.push(step.numeric);
-        let masked = step.masked_weights;
-        let to_f32 = |r: std::ops::Range<usize>| masked[r].iter().map(|&w| w as f32).collect::<Vec<f32>>();
-        let (rgb, alpha, depth) = (
-            to_f32(0..3 * n_pix),
-            to_f32(3 * n_pix..4 * n_pix),
-            to_f32(4 * n_pix..5 * n_pix),
-        );
-        let mut g = RenderGradients::zeros(scene.len(), scene.texture_size);
-        render_backward(
-            &scene.borrowed(),
-            &base,
-            &ImageGradients {
-                rgb: &rgb,
-                alpha: Some(&alpha),
-                depth: Some(&depth),
-                normal: None,
-                distortion: None,
-                camera: false,
-            },
-            &mut g,
-        );
+        let g = masked_backward(scene, &base, &step.masked_weights, false);
         analytic_v.push(analytic(&g, group)[i] * scale);
     }
     let report = compare(&analytic_v, &numeric_v, tol);

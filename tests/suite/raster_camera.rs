@@ -3,12 +3,12 @@
 //! `raster::check_group_banded` (moving the camera moves every pixel's `(u, v)` across texel
 //! borders).
 
-use super::raster::{WeightedLoss, banded_difference, fd_scene, outputs, smooth_settings};
+use super::raster::{WeightedLoss, banded_difference, fd_scene, masked_backward, outputs, smooth_settings};
 use bbsplat::billboards::ActivatedBillboards;
 use bbsplat::camera::Camera;
 use bbsplat::gradcheck::{GradReport, GradTolerance, compare};
-use bbsplat::raster::backward::{CameraGradient, ImageGradients};
-use bbsplat::raster::{RenderGradients, RenderSettings, render, render_backward};
+use bbsplat::raster::backward::CameraGradient;
+use bbsplat::raster::{RenderSettings, render};
 use glam::Vec3;
 
 /// The ten camera parameters the check moves: `ω` (3), `δ` (3), `fx`, `fy`, `cx`, `cy`.
@@ -53,7 +53,6 @@ fn camera_report(
     let render_at = |p: &[f32]| outputs(&render(&scene.borrowed(), &camera_at(cam, p), s));
     let base = render(&scene.borrowed(), cam, s);
     let base_values = outputs(&base);
-    let n_pix = cam.pixel_count();
     let (mut analytic_v, mut numeric_v) = (Vec::new(), Vec::new());
     let (mut banded, mut moved) = (0usize, 0usize);
     for (i, &h) in STEPS.iter().enumerate() {
@@ -61,23 +60,7 @@ fn camera_report(
         banded += step.banded;
         moved += step.moved;
         numeric_v.push(step.numeric);
-        let masked = step.masked_weights;
-        let to_f32 = |r: std::ops::Range<usize>| masked[r].iter().map(|&w| w as f32).collect::<Vec<f32>>();
-        let (rgb, alpha, depth) = (
-            to_f32(0..3 * n_pix),
-            to_f32(3 * n_pix..4 * n_pix),
-            to_f32(4 * n_pix..5 * n_pix),
-        );
-        let mut g = RenderGradients::zeros(scene.len(), scene.texture_size);
-        let ig = ImageGradients {
-            rgb: &rgb,
-            alpha: Some(&alpha),
-            depth: Some(&depth),
-            normal: None,
-            distortion: None,
-            camera: true,
-        };
-        render_backward(&scene.borrowed(), &base, &ig, &mut g);
+        let g = masked_backward(scene, &base, &step.masked_weights, true);
         analytic_v.push(flatten(&g.camera)[i] * scale);
     }
     let report = compare(&analytic_v, &numeric_v, tol);
