@@ -75,15 +75,19 @@ pub struct CameraGradient {
     pub principal: DVec2,
 }
 
-impl CameraGradient {
-    fn add(&mut self, g: &CameraGrads) {
-        self.rotation += g.rotation.as_dvec3();
-        self.translation += g.translation.as_dvec3();
-        self.focal += g.focal.as_dvec2();
-        self.principal += g.principal.as_dvec2();
+impl From<CameraGrads> for CameraGradient {
+    fn from(g: CameraGrads) -> Self {
+        Self {
+            rotation: g.rotation.as_dvec3(),
+            translation: g.translation.as_dvec3(),
+            focal: g.focal.as_dvec2(),
+            principal: g.principal.as_dvec2(),
+        }
     }
+}
 
-    fn add_gradient(&mut self, g: &CameraGradient) {
+impl std::ops::AddAssign for CameraGradient {
+    fn add_assign(&mut self, g: Self) {
         self.rotation += g.rotation;
         self.translation += g.translation;
         self.focal += g.focal;
@@ -863,7 +867,7 @@ pub fn render_backward(
                 );
                 // The SH direction `p − centre` follows the centre, which δ moves by `−R_cwᵀ·δ`.
                 cg.translation += rotation_cw * d_pos_sh;
-                d_camera.add(&cg);
+                d_camera += CameraGradient::from(cg);
                 touched.push(b as u32);
             }
             (touched, d_camera)
@@ -872,7 +876,7 @@ pub fn render_backward(
     let mut touched = Vec::new();
     for (t, d_camera) in &chunks {
         touched.extend_from_slice(t);
-        grads.camera.add_gradient(d_camera);
+        grads.camera += *d_camera;
     }
     touched
 }

@@ -5,21 +5,18 @@
 //! centre, shifts its view frame by `Δδ` and scales its focal lengths by `exp(Δφ)`
 //! ([`Camera::adjusted`]), so the gradient the backward pass gives (at `ω = δ = 0` of the
 //! current camera) is exactly the gradient of the step's parameters. The moments are seven
-//! values per camera (`ω`, `δ`, `φ`), a row of an [`AdamGroup`] with the row's own update count.
+//! values (`ω`, `δ`, `φ`), in three one-row [`AdamGroup`]s with their own step sizes.
 //!
 //! [`fit_camera`] aligns one camera to its image under a frozen model: it tells how much of a
 //! view's error a pose or focal error explains (`examples/fit_cameras.rs` runs it on a trained
 //! model's test views; `docs/quality.md` has what it found on beer_colmap).
 
-use super::adam::{AdamGroup, AdamParams, update_row};
+use super::adam::{AdamGroup, AdamParams};
 use crate::camera::Camera;
 use crate::loss::{LossError, TrainingLoss};
 use crate::raster::backward::{CameraGradient, ImageGradients};
 use crate::raster::{ActivatedRef, RenderBuffers, RenderGradients, RenderSettings, render_backward, render_with};
 use glam::Vec3;
-
-/// Values per camera row of the optimiser: `ω` (3), `δ` (3), `φ` (1).
-pub const CAMERA_ROW: usize = 7;
 
 /// Adam step sizes of a camera correction.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -43,52 +40,36 @@ impl CameraStepSizes {
     }
 }
 
-/// The gradient of a camera row, `[ω, δ, φ]`: `∂L/∂φ = fx·∂L/∂fx + fy·∂L/∂fy` (both focal
-/// lengths scale by `exp(φ)`).
-pub fn row_gradient(camera: &Camera, g: &CameraGradient) -> [f32; CAMERA_ROW] {
-    let d_phi = f64::from(camera.fx) * g.focal.x + f64::from(camera.fy) * g.focal.y;
-    [
-        g.rotation.x as f32,
-        g.rotation.y as f32,
-        g.rotation.z as f32,
-        g.translation.x as f32,
-        g.translation.y as f32,
-        g.translation.z as f32,
-        d_phi as f32,
-    ]
+/// Adam state of one camera: the turn `ω` (3), the shift `δ` (3) and the log focal scale `φ`
+/// (1), each a one-row [`AdamGroup`] with its own step size.
+struct CameraAdam {
+    turn: AdamGroup,
+    shift: AdamGroup,
+    focal: AdamGroup,
 }
 
-/// One Adam step of camera `row` of `adam` (row length [`CAMERA_ROW`]) from its gradient at
-/// `camera`: the step `[ω, δ, φ]` to apply ([`Camera::adjusted`] with `exp(φ)`). The row's own
-/// update count drives the bias correction.
-pub fn adam_delta(
-    camera: &Camera,
-    gradient: &CameraGradient,
-    adam: &mut AdamGroup,
-    row: usize,
-    sizes: &CameraStepSizes,
-) -> [f32; CAMERA_ROW] {
-    assert_eq!(adam.row_len, CAMERA_ROW, "a camera row holds ω, δ and φ");
-    let grads = row_gradient(camera, gradient);
-    adam.steps[row] = adam.steps[row].saturating_add(1);
-    let t = u64::from(adam.steps[row]);
-    let hp = AdamParams::default();
-    let base = row * CAMERA_ROW;
-    // Each part has its own step size; the update starts from zero, so it is the step itself.
-    let mut delta = [0.0f32; CAMERA_ROW];
-    for (range, lr) in [(0..3, sizes.rotation), (3..6, sizes.translation), (6..7, sizes.focal)] {
-        let span = base + range.start..base + range.end;
-        update_row(
-            &mut adam.m[span.clone()],
-            &mut adam.v[span],
-            &mut delta[range.clone()],
-            &grads[range],
-            lr,
-            &hp,
-            t,
-        );
+impl CameraAdam {
+    fn new() -> Self {
+        Self {
+            turn: AdamGroup::new(1, 3),
+            shift: AdamGroup::new(1, 3),
+            focal: AdamGroup::new(1, 1),
+        }
     }
-    delta
+
+    /// `camera` after one Adam step on its gradient `g` (taken at `camera`): the step starts
+    /// from zero, so the updated parameters are the step itself, applied by [`Camera::adjusted`]
+    /// (`∂L/∂φ = fx·∂L/∂fx + fy·∂L/∂fy`, both focal lengths scaling by `exp(φ)`).
+    fn step(&mut self, camera: &Camera, g: &CameraGradient, sizes: &CameraStepSizes) -> Camera {
+        let hp = AdamParams::default();
+        let d_phi = f64::from(camera.fx) * g.focal.x + f64::from(camera.fy) * g.focal.y;
+        let (mut turn, mut shift, mut phi) = ([0.0f32; 3], [0.0f32; 3], [0.0f32]);
+        let (g_turn, g_shift) = (g.rotation.as_vec3().to_array(), g.translation.as_vec3().to_array());
+        self.turn.step_row(0, &mut turn, &g_turn, sizes.rotation, &hp);
+        self.shift.step_row(0, &mut shift, &g_shift, sizes.translation, &hp);
+        self.focal.step_row(0, &mut phi, &[d_phi as f32], sizes.focal, &hp);
+        camera.adjusted(Vec3::from_array(turn), Vec3::from_array(shift), phi[0].exp())
+    }
 }
 
 /// What [`fit_camera`] did.
@@ -139,7 +120,7 @@ pub fn fit_camera(
 ) -> Result<CameraFit, LossError> {
     let (w, h) = (camera.width as usize, camera.height as usize);
     let loss_fn = TrainingLoss::default();
-    let mut adam = AdamGroup::new(1, CAMERA_ROW);
+    let mut adam = CameraAdam::new();
     let mut grads = RenderGradients::zeros(set.len(), set.texture_size);
     let mut buffers = RenderBuffers::default();
     let mut current = *camera;
@@ -170,8 +151,7 @@ pub fn fit_camera(
         grads.background = Vec3::ZERO;
         buffers = out.into_buffers();
         let decay = 0.01f32.powf(k as f32 / iterations.max(1) as f32);
-        let [wx, wy, wz, dx, dy, dz, phi] = adam_delta(&current, &gradient, &mut adam, 0, &sizes.scaled(decay));
-        current = current.adjusted(Vec3::new(wx, wy, wz), Vec3::new(dx, dy, dz), phi.exp());
+        current = adam.step(&current, &gradient, &sizes.scaled(decay));
     }
     Ok(CameraFit {
         camera: best.1,

@@ -108,6 +108,11 @@ impl WeightedLoss {
         dot(&out.rgb, &self.rgb) + dot(&out.alpha, &self.alpha) + dot(&out.depth, &self.depth)
     }
 
+    /// The weights of every output in [`outputs`]' order: rgb, then alpha, then depth.
+    pub(crate) fn all(&self) -> Vec<f64> {
+        self.rgb.iter().chain(&self.alpha).chain(&self.depth).copied().collect()
+    }
+
     pub(crate) fn f32s(v: &[f64]) -> Vec<f32> {
         v.iter().map(|&x| x as f32).collect()
     }
@@ -163,23 +168,7 @@ pub(crate) fn analytic(g: &RenderGradients, group: Group) -> Vec<f64> {
 }
 
 fn gradients(scene: &ActivatedBillboards, cam: &Camera, s: &RenderSettings, loss: &WeightedLoss) -> RenderGradients {
-    let out = render(&scene.borrowed(), cam, s);
-    let mut g = RenderGradients::zeros(scene.len(), scene.texture_size);
-    let (rgb, alpha, depth) = (
-        WeightedLoss::f32s(&loss.rgb),
-        WeightedLoss::f32s(&loss.alpha),
-        WeightedLoss::f32s(&loss.depth),
-    );
-    let ig = ImageGradients {
-        rgb: &rgb,
-        alpha: Some(&alpha),
-        depth: Some(&depth),
-        normal: None,
-        distortion: None,
-        camera: false,
-    };
-    render_backward(&scene.borrowed(), &out, &ig, &mut g);
-    g
+    masked_backward(scene, &render(&scene.borrowed(), cam, s), &loss.all(), false)
 }
 
 /// Checks one parameter group: every element by central differences when the group is small,
@@ -398,8 +387,7 @@ fn banded_report(
     tol: &GradTolerance,
     scale: f64,
 ) -> (bbsplat::gradcheck::GradReport, f64) {
-    let loss = WeightedLoss::new(cam.pixel_count(), seed);
-    let weights: Vec<f64> = loss.rgb.iter().chain(&loss.alpha).chain(&loss.depth).copied().collect();
+    let weights = WeightedLoss::new(cam.pixel_count(), seed).all();
     let x = flatten(scene, group);
     let render_at = |p: &[f32]| {
         let mut b = scene.clone();
@@ -722,7 +710,7 @@ fn backward_of(scene: &ActivatedBillboards, cam: &Camera, out: &RenderOutput) ->
 }
 
 /// Adds into `g` the backward pass of `out` under the random per-pixel weighted loss of `seed`
-/// on rgb and alpha; returns the touched billboards.
+/// on rgb and alpha, the camera gradient included; returns the touched billboards.
 fn add_weighted_backward(
     scene: &ActivatedBillboards,
     cam: &Camera,
@@ -738,7 +726,7 @@ fn add_weighted_backward(
         depth: None,
         normal: None,
         distortion: None,
-        camera: false,
+        camera: true,
     };
     render_backward(&scene.borrowed(), out, &ig, g)
 }
@@ -759,6 +747,8 @@ fn bit_identical_across_runs_and_thread_counts() {
     let s = settings(Vec3::splat(0.5));
     let run = |threads: usize| with_threads(threads, || render_and_backward(&scene, &cam, &s));
     let (o1, g1, t1) = run(1);
+    // The camera gradient is summed over two chunks of billboards (400 > 256): covered too.
+    assert!(g1.camera.rotation.length() > 0.0 && g1.camera.translation.length() > 0.0);
     for threads in [1, 2, 8] {
         let (o, g, t) = run(threads);
         assert_eq!(o.rgb, o1.rgb, "{threads} threads");

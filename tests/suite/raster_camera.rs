@@ -47,8 +47,7 @@ fn camera_report(
     tol: &GradTolerance,
     scale: f64,
 ) -> (GradReport, f64) {
-    let loss = WeightedLoss::new(cam.pixel_count(), seed);
-    let weights: Vec<f64> = loss.rgb.iter().chain(&loss.alpha).chain(&loss.depth).copied().collect();
+    let weights = WeightedLoss::new(cam.pixel_count(), seed).all();
     let x = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, cam.fx, cam.fy, cam.cx, cam.cy];
     let render_at = |p: &[f32]| outputs(&render(&scene.borrowed(), &camera_at(cam, p), s));
     let base = render(&scene.borrowed(), cam, s);
