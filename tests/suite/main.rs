@@ -63,6 +63,7 @@ mod stage_sh;
 mod stage_splat_transform;
 mod strategies;
 mod sweep;
+mod tool_colmap_unfold;
 mod train_adam;
 mod train_camera_fit;
 mod train_checkpoint;
