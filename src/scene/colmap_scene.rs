@@ -3,7 +3,7 @@
 use super::colmap::{self, model_kind};
 use super::error::{Location, SceneError};
 use super::views::{self, CameraSpec, ViewSource};
-use super::{LoadOptions, PointCloud, Scene, SceneFormat, split};
+use super::{LoadOptions, PointCloud, Scene, SceneFormat, registration, split};
 use glam::{Mat3, Vec3};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -146,6 +146,11 @@ pub(crate) fn load(model_dir: &Path, options: &LoadOptions, warnings: &mut Vec<S
     }
     sources.sort_by(|a, b| a.name.cmp(&b.name));
     let views = views::load_all(sources, options, warnings)?;
+    let names: Vec<&str> = views.iter().map(|v| v.name.as_str()).collect();
+    let cameras: Vec<_> = views.iter().map(|v| v.camera).collect();
+    if let Some(w) = registration::folded_registration_warning(&names, &cameras) {
+        warnings.push(format!("{}: {w}", images_file.display()));
+    }
     let (train, test) = split::split_every(views, options.test_every);
     let points = PointCloud {
         positions: model

@@ -37,6 +37,7 @@ pub(crate) mod image_io;
 mod json_scene;
 pub mod nerf_json;
 pub mod ply;
+pub mod registration;
 pub mod split;
 pub mod undistort;
 mod views;

@@ -51,6 +51,7 @@ mod scene_fuzz;
 mod scene_image_io;
 mod scene_load;
 mod scene_real_data;
+mod scene_registration;
 #[allow(dead_code)]
 mod scene_support;
 mod shared_data;

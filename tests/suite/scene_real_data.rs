@@ -170,6 +170,12 @@ fn beer_colmap_reprojects_under_half_a_pixel() {
     assert_eq!(scene.format, SceneFormat::Colmap);
     assert_eq!(scene.train.len() + scene.test.len(), 71);
     assert_eq!(scene.test.len(), 9);
+    // COLMAP registered the capture folded (docs/quality.md): the loader says where.
+    assert_eq!(scene.warnings.len(), 1, "{:?}", scene.warnings);
+    for pair in ["0013.jpg -> 0014.jpg", "0034.jpg -> 0035.jpg", "0052.jpg -> 0053.jpg"] {
+        assert!(scene.warnings[0].contains(pair), "{pair}: {}", scene.warnings[0]);
+    }
+    assert!(scene.warnings[0].starts_with(&format!("{}", dir.join("sparse/0/images.bin").display())));
     let model = colmap::read_model(&dir.join("sparse/0")).unwrap();
     let points: HashMap<u64, glam::Vec3> = model
         .points
