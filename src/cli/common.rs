@@ -52,6 +52,10 @@ pub struct SceneArgs {
     /// warning, instead of refusing them.
     #[arg(long)]
     pub allow_damaged_images: bool,
+    /// Keep a COLMAP registration that looks folded (passes of an orbit video turned by about
+    /// 180 degrees onto the rest) as given, instead of turning its passes back (docs/scene.md).
+    #[arg(long)]
+    pub keep_folded: bool,
 }
 
 impl SceneArgs {
@@ -63,6 +67,7 @@ impl SceneArgs {
             test_every: self.test_every,
             print_warnings: !quiet,
             allow_damaged_images: self.allow_damaged_images,
+            unfold: !self.keep_folded,
             ..LoadOptions::default()
         }
     }

@@ -3,7 +3,7 @@
 use super::colmap::{self, model_kind};
 use super::error::{Location, SceneError};
 use super::views::{self, CameraSpec, ViewSource};
-use super::{LoadOptions, PointCloud, Scene, SceneFormat, registration, split};
+use super::{LoadOptions, PointCloud, Scene, SceneFormat, registration, split, unfold};
 use glam::{Mat3, Vec3};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -145,28 +145,60 @@ pub(crate) fn load(model_dir: &Path, options: &LoadOptions, warnings: &mut Vec<S
         });
     }
     sources.sort_by(|a, b| a.name.cmp(&b.name));
-    let views = views::load_all(sources, options, warnings)?;
-    let names: Vec<&str> = views.iter().map(|v| v.name.as_str()).collect();
-    let cameras: Vec<_> = views.iter().map(|v| v.camera).collect();
-    if let Some(w) = registration::folded_registration_warning(&names, &cameras) {
-        warnings.push(format!("{}: {w}", images_file.display()));
-    }
-    let (train, test) = split::split_every(views, options.test_every);
-    let points = PointCloud {
-        positions: model
-            .points
-            .iter()
-            .map(|p| Vec3::new(p.xyz[0] as f32, p.xyz[1] as f32, p.xyz[2] as f32))
-            .collect(),
-        colours: model.points.iter().map(|p| p.rgb.map(|c| c as f32 / 255.0)).collect(),
+    let mut views = views::load_all(sources, options, warnings)?;
+    let (unfolding, unfolded) = match unfold_views(&mut views, options.unfold, &images_file, warnings) {
+        Some((u, report)) => (Some(u), report),
+        None => (None, String::new()),
     };
-    if let Some(i) = points.positions.iter().position(|p| !p.is_finite()) {
-        return Err(SceneError::parse(
-            &model_dir.join(if binary { "points3D.bin" } else { "points3D.txt" }),
-            Location::Record(format!("point {i} (point3D_id {})", model.points[i].id)),
-            "position overflows single precision",
+    // The frame (capture-order index) of each image id, for the points' tracks.
+    let frame_of: HashMap<u32, usize> = {
+        let index: HashMap<&str, usize> = views.iter().enumerate().map(|(i, v)| (v.name.as_str(), i)).collect();
+        model
+            .images
+            .iter()
+            .filter_map(|im| index.get(im.name.as_str()).map(|&i| (im.id, i)))
+            .collect()
+    };
+    let (train, test) = split::split_every(views, options.test_every);
+    // SfM points: with an unfolded registration, those seen by one pass turn with it and those
+    // seen by several (joining folded halves) are dropped.
+    let mut positions = Vec::with_capacity(model.points.len());
+    let mut colours = Vec::with_capacity(model.points.len());
+    for (i, p) in model.points.iter().enumerate() {
+        let mut xyz = glam::DVec3::from_array(p.xyz);
+        if let Some(u) = &unfolding {
+            let mut passes = p
+                .track
+                .iter()
+                .filter_map(|t| frame_of.get(&t.image_id))
+                .map(|&f| u.pass_of(f));
+            let Some(pass) = passes.next() else { continue };
+            if passes.any(|q| q != pass) {
+                continue;
+            }
+            xyz = u.point(pass, xyz);
+        }
+        let position = xyz.as_vec3();
+        if !position.is_finite() {
+            return Err(SceneError::parse(
+                &model_dir.join(if binary { "points3D.bin" } else { "points3D.txt" }),
+                Location::Record(format!("point {i} (point3D_id {})", p.id)),
+                "position overflows single precision",
+            ));
+        }
+        positions.push(position);
+        colours.push(p.rgb.map(|c| c as f32 / 255.0));
+    }
+    if unfolding.is_some() {
+        warnings.push(format!(
+            "{}: {unfolded}; {} of {} SfM points kept (those seen by one pass). --keep-folded keeps \
+             the registration as given (docs/scene.md, \"Folded registrations\")",
+            images_file.display(),
+            positions.len(),
+            model.points.len()
         ));
     }
+    let points = PointCloud { positions, colours };
     let root = root_of(model_dir);
     Ok(Scene {
         name: root.file_name().and_then(|n| n.to_str()).unwrap_or("scene").to_string(),
@@ -179,4 +211,67 @@ pub(crate) fn load(model_dir: &Path, options: &LoadOptions, warnings: &mut Vec<S
         extent: 0.0,
         warnings: Vec::new(),
     })
+}
+
+/// Turns back the passes of a folded registration of `views` (capture order) when `unfold` is
+/// on and [`unfold::plan`] explains the sharp turns as folds, and returns the plan with what it
+/// did in words; otherwise warns about the sharp turns, if any
+/// ([`registration::folded_registration_warning`]).
+fn unfold_views(
+    views: &mut [super::View],
+    unfold: bool,
+    images_file: &Path,
+    warnings: &mut Vec<String>,
+) -> Option<(unfold::Unfolding, String)> {
+    let poses: Vec<unfold::Pose> = views
+        .iter()
+        .map(|v| unfold::Pose {
+            rotation: v.camera.rotation.as_dmat3(),
+            centre: v.camera.centre_f64(),
+        })
+        .collect();
+    let plan = unfold.then(|| unfold::plan(&poses));
+    let Some(unfold::Plan::Unfold(u)) = plan else {
+        let names: Vec<&str> = views.iter().map(|v| v.name.as_str()).collect();
+        let cameras: Vec<_> = views.iter().map(|v| v.camera).collect();
+        if let Some(w) = registration::folded_registration_warning(&names, &cameras) {
+            let why = match plan {
+                Some(unfold::Plan::NotFolds(reason)) => format!("not turned back: {reason}"),
+                _ => "not turned back: kept as given (--keep-folded)".to_string(),
+            };
+            warnings.push(format!("{}: {w}; {why}", images_file.display()));
+        }
+        return None;
+    };
+    for (i, v) in views.iter_mut().enumerate() {
+        let p = u.pose(i, &poses[i]);
+        v.camera.rotation = p.rotation.as_mat3();
+        v.camera.translation = (-(p.rotation * p.centre)).as_vec3();
+    }
+    let name = |i: usize| views[i].name.as_str();
+    let passes: Vec<String> = u.passes[1..]
+        .iter()
+        .zip(&u.turns[1..])
+        .map(|(p, t)| format!("{}-{} by {:.1} deg", name(p.start), name(p.end - 1), t.to_degrees()))
+        .collect();
+    let worst_turn = u.boundaries.iter().map(|b| b.residual_turn_deg).fold(0.0, f64::max);
+    let worst_steps = u.boundaries.iter().map(|b| b.residual_steps).fold(0.0, f64::max);
+    let folds: Vec<String> = u.boundaries.iter().map(|b| format!("{:.0}", b.fold_deg)).collect();
+    let report = format!(
+        "the registration folds an orbit video onto itself ({} passes; where they meet, \
+         consecutive frames are registered turned by {} deg about one axis), so it is turned \
+         back: frames {} about the axis ({:.3}, {:.3}, {:.3}) through ({:.3}, {:.3}, {:.3}); each \
+         pass then starts within {worst_turn:.1} deg and {worst_steps:.1} frame steps of where the \
+         previous one leads",
+        u.passes.len(),
+        folds.join(", "),
+        passes.join(", "),
+        u.axis.x,
+        u.axis.y,
+        u.axis.z,
+        u.pivot.x,
+        u.pivot.y,
+        u.pivot.z,
+    );
+    Some((u, report))
 }

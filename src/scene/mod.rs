@@ -40,6 +40,7 @@ pub mod ply;
 pub mod registration;
 pub mod split;
 pub mod undistort;
+pub mod unfold;
 mod views;
 
 pub use error::{Location, SceneError};
@@ -235,6 +236,9 @@ pub struct LoadOptions {
     /// Accept damaged images (a JPEG cut short, whose missing part decodes grey) with a warning
     /// instead of refusing them with [`SceneError::ImageDecode`]. Default false.
     pub allow_damaged_images: bool,
+    /// Turn back the passes of a COLMAP registration that folded an orbit video onto itself
+    /// ([`unfold`]; reported in [`Scene::warnings`]). Default true.
+    pub unfold: bool,
 }
 
 impl Default for LoadOptions {
@@ -249,6 +253,7 @@ impl Default for LoadOptions {
             images_dir: None,
             print_warnings: true,
             allow_damaged_images: false,
+            unfold: true,
         }
     }
 }

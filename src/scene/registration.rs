@@ -5,9 +5,11 @@
 //! a square-tiled floor) on top of the rest, turned by about 180° about the object's axis. Every
 //! image then fits its own points well, and nothing in the reconstruction's errors shows it, but
 //! views placed side by side see opposite sides of the room, and no static model fits both: on
-//! beer_colmap this costs 3.5 dB (`docs/quality.md`, "beer_colmap: the registration is folded").
+//! beer_colmap this cost 3.5 dB (`docs/quality.md`, "beer_colmap: the registration is folded").
 //! Where such a registration meets the rest, two frames taken a moment apart are registered facing
-//! nearly opposite ways, which [`sharp_turns`] finds in the frames' order.
+//! nearly opposite ways, which [`sharp_turns`] finds in the frames' order. The COLMAP loader then
+//! tries to turn the folded passes back ([`super::unfold`]) and warns with these words when it
+//! cannot (or is told not to).
 //!
 //! Images named in capture order are what a video gives; a collection of photographs in no order
 //! turns sharply between many of its neighbours, so [`folded_registration_warning`] speaks only when
@@ -85,8 +87,7 @@ pub fn folded_registration_warning(names: &[&str], cameras: &[Camera]) -> Option
         "{} of {pairs} consecutive image pairs (in name order) are registered facing more than \
          {SHARP_TURN_DEG:.0} deg apart: {}. If the images are frames of one video, the \
          registration may have folded part of the capture onto the rest (a nearly symmetric \
-         object), and no model fits both halves; tools/colmap_unfold.py turns such passes back \
-         (docs/scene.md, \"Folded registrations\")",
+         object), and no model fits both halves (docs/scene.md, \"Folded registrations\")",
         turns.len(),
         listed.join(", ")
     ))

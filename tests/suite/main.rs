@@ -54,6 +54,7 @@ mod scene_real_data;
 mod scene_registration;
 #[allow(dead_code)]
 mod scene_support;
+mod scene_unfold;
 mod shared_data;
 mod stage_bilinear;
 mod stage_composite;
@@ -64,7 +65,6 @@ mod stage_sh;
 mod stage_splat_transform;
 mod strategies;
 mod sweep;
-mod tool_colmap_unfold;
 mod train_adam;
 mod train_camera_fit;
 mod train_checkpoint;

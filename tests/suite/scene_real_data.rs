@@ -160,7 +160,12 @@ fn silhouette_iou(carve: &[bbsplat::scene::View], eval: &[bbsplat::scene::View],
 fn beer_colmap_reprojects_under_half_a_pixel() {
     let Some(dir) = data("beer_colmap") else { return };
     let t = Instant::now();
-    let scene = load(&dir, &LoadOptions::default()).unwrap();
+    // The registration as COLMAP wrote it (the default turns its folded passes back, below).
+    let options = LoadOptions {
+        unfold: false,
+        ..LoadOptions::default()
+    };
+    let scene = load(&dir, &options).unwrap();
     println!(
         "beer: loaded {} + {} views in {:?}",
         scene.train.len(),
@@ -176,6 +181,7 @@ fn beer_colmap_reprojects_under_half_a_pixel() {
         assert!(scene.warnings[0].contains(pair), "{pair}: {}", scene.warnings[0]);
     }
     assert!(scene.warnings[0].starts_with(&format!("{}", dir.join("sparse/0/images.bin").display())));
+    assert!(scene.warnings[0].contains("kept as given (--keep-folded)"));
     let model = colmap::read_model(&dir.join("sparse/0")).unwrap();
     let points: HashMap<u64, glam::Vec3> = model
         .points
@@ -218,6 +224,44 @@ fn beer_colmap_reprojects_under_half_a_pixel() {
         scene.train[0].camera.height
     );
     assert!(mean < 0.5, "{mean}");
+}
+
+#[test]
+fn beer_colmap_is_unfolded_by_default() {
+    let Some(dir) = data("beer_colmap") else { return };
+    let scene = load(&dir, &LoadOptions::default()).unwrap();
+    assert_eq!(scene.warnings.len(), 1, "{:?}", scene.warnings);
+    let w = &scene.warnings[0];
+    println!("beer: {w}");
+    // Three folds of 177-180 deg; the passes after the first turned by 177.0, 356.6 and 173.4 deg
+    // (a search every 0.25 deg against the same predictions found 177.00, 356.50 and 173.25);
+    // 1765 points are seen by one pass only.
+    for part in [
+        "(4 passes; where they meet, consecutive frames are registered turned by 177, 180, 177 deg",
+        "frames 0014.jpg-0034.jpg by 177.0 deg, 0035.jpg-0052.jpg by 356.6 deg, 0053.jpg-0070.jpg by 173.4 deg",
+        "1765 of 4414 SfM points kept",
+    ] {
+        assert!(w.contains(part), "{part}: {w}");
+    }
+    assert_eq!(scene.points.as_ref().unwrap().positions.len(), 1765);
+    // Test view 32 and training view 10: registered 0.5 units and 6 deg apart, seeing opposite
+    // sides of the room (docs/figures/beer/pose_neighbours.jpg); unfolded, far apart.
+    let view = |name: &str| {
+        scene
+            .train
+            .iter()
+            .chain(&scene.test)
+            .find(|v| v.name == name)
+            .unwrap()
+            .camera
+    };
+    let (a, b) = (view("0032.jpg"), view("0010.jpg"));
+    assert!(
+        (a.centre() - b.centre()).length() > 3.0,
+        "{} {}",
+        a.centre(),
+        b.centre()
+    );
 }
 
 #[test]
