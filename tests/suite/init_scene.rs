@@ -293,9 +293,11 @@ fn budgets_and_initialisation_of_the_real_scenes() {
         println!("{name}: {}", init.report);
         assert_eq!(init.report.total(), b.billboards, "{name}");
         if name == "beer_colmap" {
-            assert_eq!((init.report.sfm, init.report.sky, init.report.shell), (4_414, 0, 1_029));
+            // The loader turns its folded passes back and keeps the 1765 of 4414 points seen
+            // by one pass (docs/scene.md, "Folded registrations").
+            assert_eq!((init.report.sfm, init.report.sky, init.report.shell), (1_765, 0, 3_678));
             // The reference's rule places the points alone.
-            assert_eq!(init_points(&s, b.billboards, 0).unwrap().report.total(), 4_414);
+            assert_eq!(init_points(&s, b.billboards, 0).unwrap().report.total(), 1_765);
         }
         if name == "lego" {
             // The camera rule, were it used on lego, lands near the spec's box (half side 1.3).
