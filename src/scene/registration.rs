@@ -35,10 +35,7 @@ pub struct SharpTurn {
 
 /// The angle in degrees (0 to 180) of the rotation between two world-to-camera rotations, in f64.
 pub fn turn_degrees(a: &Camera, b: &Camera) -> f64 {
-    let (ra, rb) = (a.rotation.as_dmat3(), b.rotation.as_dmat3());
-    let m = ra * rb.transpose();
-    let cos = ((m.x_axis.x + m.y_axis.y + m.z_axis.z - 1.0) / 2.0).clamp(-1.0, 1.0);
-    cos.acos().to_degrees()
+    super::unfold::angle_of(a.rotation.as_dmat3() * b.rotation.as_dmat3().transpose()).to_degrees()
 }
 
 /// The consecutive pairs of `cameras` (in capture order) that turn by more than

@@ -92,8 +92,8 @@ pub enum Plan {
     Unfold(Unfolding),
 }
 
-/// The angle (radians, 0 to π) of the rotation `m`.
-fn angle_of(m: DMat3) -> f64 {
+/// The angle (radians, 0 to π) of the rotation `m`, from its trace.
+pub fn angle_of(m: DMat3) -> f64 {
     ((m.x_axis.x + m.y_axis.y + m.z_axis.z - 1.0) / 2.0)
         .clamp(-1.0, 1.0)
         .acos()
