@@ -244,3 +244,26 @@ impl Camera {
 pub fn offset_from(centre: glam::DVec3, position: Vec3) -> Vec3 {
     (position.as_dvec3() - centre).as_vec3()
 }
+
+/// The least-squares point nearest to the lines `o + t·d` given as `(o, d)` with unit `d`: the
+/// solution of `Σ(I − ddᵀ)·x = Σ(I − ddᵀ)·o`, in f64. `None` when the lines are (nearly)
+/// parallel (the system's determinant at most `1e-6·n³` for `n` lines) or there are none. With
+/// optical axes (camera centre, viewing direction) it is what the cameras look at.
+///
+/// ```
+/// use glam::DVec3;
+/// let lines = [(DVec3::new(-1.0, 0.0, 0.0), DVec3::X), (DVec3::new(0.0, 5.0, 1.0), DVec3::NEG_Y)];
+/// let p = bbsplat::camera::nearest_to_lines(lines).unwrap();
+/// assert!((p - DVec3::new(0.0, 0.0, 0.5)).length() < 1e-12);
+/// ```
+pub fn nearest_to_lines(lines: impl IntoIterator<Item = (glam::DVec3, glam::DVec3)>) -> Option<glam::DVec3> {
+    use glam::{DMat3, DVec3};
+    let (mut a, mut b, mut n) = (DMat3::ZERO, DVec3::ZERO, 0usize);
+    for (o, d) in lines {
+        let proj = DMat3::IDENTITY - DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+        a += proj;
+        b += proj * o;
+        n += 1;
+    }
+    (n > 0 && a.determinant().abs() > 1e-6 * n.pow(3) as f64).then(|| a.inverse() * b)
+}

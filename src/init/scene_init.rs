@@ -50,7 +50,7 @@ use crate::model::RawBillboards;
 use crate::rng::Rng;
 use crate::scene::Scene;
 use crate::stages::sh::SH_C0;
-use glam::{DMat3, DVec3, Vec3};
+use glam::{DVec3, Vec3};
 use thiserror::Error;
 
 /// Half side of the reference's NeRF-synthetic random box (spec §8), for comparison: the box
@@ -403,24 +403,14 @@ pub fn camera_box(cameras: &[crate::camera::Camera]) -> (Vec3, f32) {
     if cameras.is_empty() {
         return (Vec3::ZERO, 1.0);
     }
-    let mut a = DMat3::ZERO;
-    let mut b = DVec3::ZERO;
-    let mut mean = DVec3::ZERO;
-    for cam in cameras {
-        let o = cam.centre().as_dvec3();
-        let d = cam.rotation.row(2).as_dvec3().normalize_or_zero();
-        let proj = DMat3::IDENTITY - DMat3::from_cols(d * d.x, d * d.y, d * d.z);
-        a += proj;
-        b += proj * o;
-        mean += o;
-    }
-    mean /= cameras.len() as f64;
+    let mean = cameras.iter().map(|c| c.centre().as_dvec3()).sum::<DVec3>() / cameras.len() as f64;
     // Well conditioned when the axes span at least two directions.
-    let centre = if a.determinant().abs() > 1e-6 * cameras.len().pow(3) as f64 {
-        a.inverse() * b
-    } else {
-        mean
-    };
+    let centre = crate::camera::nearest_to_lines(
+        cameras
+            .iter()
+            .map(|c| (c.centre().as_dvec3(), c.rotation.row(2).as_dvec3().normalize_or_zero())),
+    )
+    .unwrap_or(mean);
     let mut radii: Vec<f64> = cameras
         .iter()
         .map(|cam| {

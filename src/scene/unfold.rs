@@ -135,14 +135,7 @@ fn predicted(a: &Pose, b: &Pose) -> Pose {
 /// The least-squares point nearest to every frame's optical axis; `None` when the axes are
 /// (nearly) parallel.
 fn pivot(poses: &[Pose]) -> Option<DVec3> {
-    let (mut a, mut b) = (DMat3::ZERO, DVec3::ZERO);
-    for p in poses {
-        let f = p.rotation.row(2);
-        let proj = DMat3::IDENTITY - DMat3::from_cols(f * f.x, f * f.y, f * f.z);
-        a += proj;
-        b += proj * p.centre;
-    }
-    (a.determinant().abs() > 1e-9 * poses.len().pow(3) as f64).then(|| a.inverse() * b)
+    crate::camera::nearest_to_lines(poses.iter().map(|p| (p.centre, p.rotation.row(2))))
 }
 
 /// The angle `θ` maximising `tr(Rot(axis, θ)ᵀ m)`, in `[0, 2π)`.
