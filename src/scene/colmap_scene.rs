@@ -146,10 +146,7 @@ pub(crate) fn load(model_dir: &Path, options: &LoadOptions, warnings: &mut Vec<S
     }
     sources.sort_by(|a, b| a.name.cmp(&b.name));
     let mut views = views::load_all(sources, options, warnings)?;
-    let (unfolding, unfolded) = match unfold_views(&mut views, options.unfold, &images_file, warnings) {
-        Some((u, report)) => (Some(u), report),
-        None => (None, String::new()),
-    };
+    let unfolding = unfold_views(&mut views, options.unfold, &images_file, warnings);
     // The frame (capture-order index) of each image id, for the points' tracks.
     let frame_of: HashMap<u32, usize> = {
         let index: HashMap<&str, usize> = views.iter().enumerate().map(|(i, v)| (v.name.as_str(), i)).collect();
@@ -166,7 +163,7 @@ pub(crate) fn load(model_dir: &Path, options: &LoadOptions, warnings: &mut Vec<S
     let mut colours = Vec::with_capacity(model.points.len());
     for (i, p) in model.points.iter().enumerate() {
         let mut xyz = glam::DVec3::from_array(p.xyz);
-        if let Some(u) = &unfolding {
+        if let Some((u, _)) = &unfolding {
             let mut passes = p
                 .track
                 .iter()
@@ -189,7 +186,7 @@ pub(crate) fn load(model_dir: &Path, options: &LoadOptions, warnings: &mut Vec<S
         positions.push(position);
         colours.push(p.rgb.map(|c| c as f32 / 255.0));
     }
-    if unfolding.is_some() {
+    if let Some((_, unfolded)) = &unfolding {
         warnings.push(format!(
             "{}: {unfolded}; {} of {} SfM points kept (those seen by one pass). --keep-folded keeps \
              the registration as given (docs/scene.md, \"Folded registrations\")",

@@ -53,11 +53,18 @@ pub fn turn_degrees(a: &Camera, b: &Camera) -> f64 {
 /// assert!((turns[0].degrees - 3.1f64.to_degrees()).abs() < 1e-3);
 /// ```
 pub fn sharp_turns(cameras: &[Camera]) -> Vec<SharpTurn> {
-    cameras
+    let rotations: Vec<glam::DMat3> = cameras.iter().map(|c| c.rotation.as_dmat3()).collect();
+    sharp_turns_of(&rotations)
+}
+
+/// [`sharp_turns`] of world-to-camera rotations in f64 (what [`super::unfold::plan`] splits
+/// passes at).
+pub fn sharp_turns_of(rotations: &[glam::DMat3]) -> Vec<SharpTurn> {
+    rotations
         .windows(2)
         .enumerate()
         .filter_map(|(index, pair)| {
-            let degrees = turn_degrees(&pair[0], &pair[1]);
+            let degrees = super::unfold::angle_of(pair[0] * pair[1].transpose()).to_degrees();
             (degrees > SHARP_TURN_DEG).then_some(SharpTurn { index, degrees })
         })
         .collect()

@@ -119,11 +119,6 @@ fn axis_of(m: DMat3) -> DVec3 {
         .map_or(DVec3::X, |c| c.normalize())
 }
 
-/// The rotation by `angle` (radians) about the unit `axis`.
-pub fn rotation_about(axis: DVec3, angle: f64) -> DMat3 {
-    DMat3::from_axis_angle(axis, angle)
-}
-
 /// The pose predicted after `b` if the frames go on turning and moving as from `a` to `b`.
 fn predicted(a: &Pose, b: &Pose) -> Pose {
     Pose {
@@ -151,15 +146,12 @@ fn best_turn(axis: DVec3, m: DMat3) -> f64 {
 /// Explains the sharp turns between consecutive `poses` (capture order) as folds of one orbit,
 /// or says why not. See the module documentation.
 pub fn plan(poses: &[Pose]) -> Plan {
-    let sharp = super::registration::SHARP_TURN_DEG.to_radians();
-    let mut passes: Vec<Range<usize>> = Vec::new();
-    passes.push(0..0);
-    for i in 0..poses.len() {
-        if i > 0 && angle_of(poses[i].rotation * poses[i - 1].rotation.transpose()) > sharp {
-            passes.push(i..i);
-        }
-        passes.last_mut().expect("one pass at least").end = i + 1;
-    }
+    let rotations: Vec<DMat3> = poses.iter().map(|p| p.rotation).collect();
+    let starts = super::registration::sharp_turns_of(&rotations)
+        .into_iter()
+        .map(|t| t.index + 1);
+    let bounds: Vec<usize> = std::iter::once(0).chain(starts).chain([poses.len()]).collect();
+    let passes: Vec<Range<usize>> = bounds.windows(2).map(|w| w[0]..w[1]).collect();
     if passes.len() == 1 {
         return Plan::OnePass;
     }
@@ -194,7 +186,7 @@ pub fn plan(poses: &[Pose]) -> Plan {
         let step = (turned[prev.end - 1].centre - turned[prev.end - 2].centre).length();
         let first = passes[k].start;
         let turn = best_turn(axis, guess.rotation.transpose() * turned[first].rotation);
-        let rot = rotation_about(axis, turn);
+        let rot = DMat3::from_axis_angle(axis, turn);
         for pose in &mut turned[passes[k].clone()] {
             pose.rotation *= rot.transpose();
             pose.centre = pivot + rot * (pose.centre - pivot);
@@ -248,7 +240,7 @@ impl Unfolding {
 
     /// The rotation turning pass `pass` back.
     fn rotation(&self, pass: usize) -> DMat3 {
-        rotation_about(self.axis, self.turns[pass])
+        DMat3::from_axis_angle(self.axis, self.turns[pass])
     }
 
     /// Frame `frame`'s pose turned back with its pass.

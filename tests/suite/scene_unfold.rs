@@ -111,6 +111,21 @@ fn a_smooth_orbit_is_one_pass_and_a_jump_elsewhere_is_not_a_fold() {
         p.centre += 3.0 * axis();
     }
     assert!(matches!(plan(&shifted), Plan::NotFolds(_)), "{:?}", plan(&shifted));
+    // Photographs in no order: every other frame from the far side, so passes of one frame,
+    // from which nothing can be predicted.
+    let shuffled: Vec<Pose> = (0..FRAMES)
+        .map(|i| {
+            if i % 2 == 1 {
+                registered_pose(PASS + i % PASS)
+            } else {
+                true_pose(i)
+            }
+        })
+        .collect();
+    match plan(&shuffled) {
+        Plan::NotFolds(reason) => assert!(reason.contains("too short"), "{reason}"),
+        other => panic!("{other:?}"),
+    }
 }
 
 /// Points near the pivot seen by two frames of one pass, and (every fourth) by two passes,
