@@ -9,7 +9,7 @@ use crate::camera::Camera;
 use crate::memory::{refill, resize_for_overwrite};
 use crate::stages::bilinear::{self, BilinearTaps};
 use crate::stages::ray_plane::{intersect_with, pixel_ray};
-use crate::stages::splat_transform::{pixel_range, support_quad};
+use crate::stages::splat_transform::{ROW_LANES, pixel_range, support_quad};
 use rayon::prelude::*;
 
 /// Everything the backward pass needs from the forward pass.
@@ -276,7 +276,8 @@ pub const QUAD_MIN_COLUMNS: u32 = 4;
 /// The [`EntrySpans`] of a tile's entries, written to `spans` (its old contents replaced, its
 /// storage reused): the billboard's pixel box clamped to the tile and, when
 /// the box is at least [`QUAD_MIN_COLUMNS`] wide and [`support_quad`] gives the projected support
-/// square, each row narrowed to [`SupportQuad::row_span`] (pixels outside it cannot hit the
+/// square, each row narrowed to [`SupportQuad::row_span`] (computed for eight rows at a time by
+/// [`SupportQuad::row_spans`], the same bits; pixels outside it cannot hit the
 /// texture support, so culling them changes no value). The quad is recomputed per tile entry
 /// rather than stored with the billboard's record: the records of the narrow billboards of a
 /// dense view stay small, and the quad costs a few tens of nanoseconds against the candidate
@@ -286,6 +287,7 @@ pub const QUAD_MIN_COLUMNS: u32 = 4;
 ///
 /// [`support_half_side`]: crate::stages::splat_transform::support_half_side
 /// [`SupportQuad::row_span`]: crate::stages::splat_transform::SupportQuad::row_span
+/// [`SupportQuad::row_spans`]: crate::stages::splat_transform::SupportQuad::row_spans
 pub(crate) fn local_spans(
     prepared: &[Option<Prepared>],
     list: &[u32],
@@ -312,21 +314,28 @@ pub(crate) fn local_spans(
         };
         let wide = p.pixel_max[0] - p.pixel_min[0] + 1 >= QUAD_MIN_COLUMNS;
         if let Some(quad) = wide.then(|| support_quad(&p.transform, half_side)).flatten() {
-            for y in y0..=y1 {
-                let py = (j0 + u32::from(y)) as f32 + 0.5;
-                spans.cols[y as usize] = match quad.row_span(py) {
-                    // Columns whose centres lie in [lo, hi], within the box.
-                    Some((lo, hi)) => {
-                        let (first, end) = pixel_range(lo, hi, i0 + u32::from(x1) + 1);
-                        let first = first.max(i0 + u32::from(x0));
-                        if first < end {
-                            [(first - i0) as u8, (end - 1 - i0) as u8]
-                        } else {
-                            [1, 0]
+            // The rows' spans `ROW_LANES` at a time (rows past `y1` repeat it and are unused).
+            for first_row in (y0..=y1).step_by(ROW_LANES) {
+                let py: [f32; ROW_LANES] = std::array::from_fn(|l| {
+                    let y = (usize::from(first_row) + l).min(usize::from(y1));
+                    (j0 + y as u32) as f32 + 0.5
+                });
+                let row_spans = quad.row_spans(&py);
+                for (y, span) in (first_row..=y1).zip(row_spans) {
+                    spans.cols[y as usize] = match span {
+                        // Columns whose centres lie in [lo, hi], within the box.
+                        Some((lo, hi)) => {
+                            let (first, end) = pixel_range(lo, hi, i0 + u32::from(x1) + 1);
+                            let first = first.max(i0 + u32::from(x0));
+                            if first < end {
+                                [(first - i0) as u8, (end - 1 - i0) as u8]
+                            } else {
+                                [1, 0]
+                            }
                         }
-                    }
-                    None => [1, 0],
-                };
+                        None => [1, 0],
+                    };
+                }
             }
         }
         spans

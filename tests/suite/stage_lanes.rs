@@ -1,4 +1,5 @@
-//! The lane-wise forms of the ray-plane and bilinear stages (`intersect_lanes`, `taps_row`), which
+//! The lane-wise forms of the ray-plane and bilinear stages (`intersect_lanes`, `taps_row`) and of
+//! the support quad's row spans (`SupportQuad::row_spans`), which
 //! the rasterizer's tile loops run, against the scalar forms that carry the gradient proofs:
 //! equal bit for bit, lane by lane, on random visible billboards, on pixels far outside them,
 //! on degenerate transforms (edge-on, zero, NaN, infinite), at texel borders and outside the
@@ -10,9 +11,9 @@ use bbsplat::stages::bilinear::{BilinearTaps, taps, taps_row};
 use bbsplat::stages::ray_plane::{
     LANES, ViewPlane, intersect_lanes, intersect_vjp_lanes, intersect_vjp_with, intersect_with, pixel_ray,
 };
-use bbsplat::stages::splat_transform::{SplatTransform, splat_frame, view_plane};
+use bbsplat::stages::splat_transform::{ROW_LANES, SplatTransform, SupportQuad, splat_frame, view_plane};
 use bbsplat::strategies::{billboard_in_front, camera, seeded_config};
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use proptest::prelude::*;
 
 /// Compares every lane of `intersect_lanes` and `intersect_vjp_lanes` with the scalar
@@ -304,4 +305,83 @@ fn the_bitwise_comparison_catches_a_one_ulp_difference() {
     let shifted = taps(f32::from_bits(u[0].to_bits() + 1), v[0], 16).unwrap();
     assert_ne!(tap_bits(&good), tap_bits(&shifted));
     assert_eq!(tap_bits(&good), tap_bits(&taps(u[0], v[0], 16).unwrap()));
+}
+
+/// Compares every lane of `SupportQuad::row_spans` with `row_span` of its row, bit for bit
+/// (`None` in the same lanes, the same bits of both ends elsewhere).
+fn check_row_spans(quad: &SupportQuad, py: &[f32; ROW_LANES]) -> Result<(), String> {
+    let lanes = quad.row_spans(py);
+    for (l, got) in lanes.iter().enumerate() {
+        let bits = |s: Option<(f32, f32)>| s.map(|(lo, hi)| (lo.to_bits(), hi.to_bits()));
+        let want = quad.row_span(py[l]);
+        if bits(*got) != bits(want) {
+            return Err(format!("row {} of {quad:?}: lanes {got:?}, scalar {want:?}", py[l]));
+        }
+    }
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(seeded_config(512))]
+
+    /// Random quadrilaterals (convex or not, some with horizontal edges) and rows above, across
+    /// and below them.
+    #[test]
+    fn row_spans_equal_the_scalar_row_span(
+        corners in prop::array::uniform4((-60.0f32..60.0, -60.0f32..60.0)),
+        flat in 0usize..6,
+        margin in 0.01f32..0.5,
+        first in -70.0f32..70.0,
+        step in 0.1f32..3.0,
+    ) {
+        let mut corners = corners.map(|(x, y)| Vec2::new(x, y));
+        // Cases 0-3: edge `flat` → `flat + 1` horizontal; 4, 5: none.
+        if flat < 4 {
+            corners[(flat + 1) % 4].y = corners[flat].y;
+        }
+        let quad = SupportQuad { corners, margin };
+        let py: [f32; ROW_LANES] = std::array::from_fn(|l| first + step * l as f32);
+        check_row_spans(&quad, &py).map_err(TestCaseError::fail)?;
+        // Rows through the corners and at the band's edges, where the edge tests flip.
+        for c in corners {
+            let py: [f32; ROW_LANES] = std::array::from_fn(|l| c.y + (l as f32 - 3.5) * margin * 0.5);
+            check_row_spans(&quad, &py).map_err(TestCaseError::fail)?;
+        }
+    }
+}
+
+/// Horizontal edges on the band's edges, non-finite rows and a degenerate (point) quad.
+#[test]
+fn row_spans_handle_flat_edges_and_non_finite_rows() {
+    let square = SupportQuad {
+        corners: [
+            Vec2::new(0.0, 0.0),
+            Vec2::new(10.0, 0.0),
+            Vec2::new(10.0, 10.0),
+            Vec2::new(0.0, 10.0),
+        ],
+        margin: 0.25,
+    };
+    let py = [
+        -0.25,
+        0.25,
+        -0.3,
+        10.25,
+        10.2500001,
+        f32::NAN,
+        f32::INFINITY,
+        -0.2500001,
+    ];
+    check_row_spans(&square, &py).unwrap();
+    // Both branches are exercised: the band touching the flat edge from below gives a span,
+    // the row just beyond it none.
+    let spans = square.row_spans(&py);
+    assert_eq!(spans[0], Some((-0.25, 10.25)));
+    assert_eq!(spans[2], None);
+    // Non-finite rows (never a pixel centre) need only agree with the scalar form, checked above.
+    let point = SupportQuad {
+        corners: [Vec2::splat(3.0); 4],
+        margin: 0.01,
+    };
+    check_row_spans(&point, &[2.99, 3.0, 3.01, 3.02, -1.0, 3.005, 2.995, f32::NEG_INFINITY]).unwrap();
 }
