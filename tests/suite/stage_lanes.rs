@@ -367,10 +367,10 @@ fn row_spans_handle_flat_edges_and_non_finite_rows() {
         0.25,
         -0.3,
         10.25,
-        10.2500001,
+        f32::from_bits(10.25f32.to_bits() + 1),
         f32::NAN,
         f32::INFINITY,
-        -0.2500001,
+        f32::from_bits((-0.25f32).to_bits() + 1),
     ];
     check_row_spans(&square, &py).unwrap();
     // Both branches are exercised: the band touching the flat edge from below gives a span,
