@@ -59,7 +59,7 @@ pub use error::TrainError;
 pub use finite::{NonFinite, ParamGroup};
 use geometry::GeometryLoss;
 use glam::Vec3;
-use regularise::{gaussian_opacity_grad, opacity_regulariser, texture_regulariser};
+use regularise::{RegulariserValues, TextureTerm, gaussian_opacity_grad, regularise};
 use relocate::{apply_relocation, plan_relocation, split_alpha_logit};
 pub use run::{RunConfig, RunError, RunOutcome, RunWarning, StopReason, StopSignal, TrainEvent, run};
 use serde::{Deserialize, Serialize};
@@ -796,27 +796,24 @@ impl Trainer {
         let geometry_loss = GeometryLoss::evaluate(&out, cam, lambda_normal, lambda_distortion);
         let ig = geometry_loss.image_gradients(&loss.d_render);
         let touched = render_backward(&self.activated.borrowed(), &out, &ig, &mut self.grads);
-        let texture_reg = if self.config.texture_reg_weight != 0.0 {
-            texture_regulariser(
-                &self.activated.textures,
-                &self.alpha0,
-                &out.impact,
-                self.config.impact_threshold,
-                self.config.texture_reg_weight,
-                &mut self.grads.textures,
-            )
-        } else {
-            0.0
-        };
-        let opacity_reg = if self.config.opacity_reg_weight != 0.0 {
-            opacity_regulariser(
-                &self.activated.textures,
-                self.config.opacity_reg_weight,
-                &mut self.grads.textures,
-            )
-        } else {
-            0.0
-        };
+        // Both regularisers in one pass over the texture rows (the bits of one after the other).
+        let texture_term = (self.config.texture_reg_weight != 0.0).then_some(TextureTerm {
+            alpha0: &self.alpha0,
+            impact: &out.impact,
+            threshold: self.config.impact_threshold,
+            weight: self.config.texture_reg_weight,
+        });
+        let opacity_weight = (self.config.opacity_reg_weight != 0.0).then_some(self.config.opacity_reg_weight);
+        let RegulariserValues {
+            texture: texture_reg,
+            opacity: opacity_reg,
+        } = regularise(
+            &self.activated.textures,
+            self.model.texture_size * self.model.texture_size,
+            texture_term,
+            opacity_weight,
+            &mut self.grads.textures,
+        );
         // Growth this step: how many rows, and those placed on this view's error (drawn now,
         // while the render is at hand; appended after relocation, below).
         let due = relocation_due(self.step, self.config.iterations, self.config.relocate_every);

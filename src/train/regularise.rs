@@ -20,6 +20,135 @@ pub const OPACITY_REG_WEIGHT: f32 = 0.01;
 /// Impact threshold σ of the texture regulariser (paper-era value; current reference code: 100).
 pub const IMPACT_THRESHOLD: f32 = 500.0;
 
+/// What the texture regulariser of [`regularise`] reads besides the textures: the reference alpha
+/// `alpha0` (`T` values), the view's per-billboard `impact`, the threshold σ and the weight λ.
+#[derive(Clone, Copy, Debug)]
+pub struct TextureTerm<'a> {
+    /// The reference alpha texture `A0` (`T = TS²` values, shared by all billboards).
+    pub alpha0: &'a [f32],
+    /// Per billboard: the view's `Σ α·T`.
+    pub impact: &'a [f32],
+    /// σ.
+    pub threshold: f32,
+    /// λ.
+    pub weight: f32,
+}
+
+/// The values of the two regularisers (0 for one that is off).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RegulariserValues {
+    /// [`texture_regulariser`]'s value.
+    pub texture: f64,
+    /// [`opacity_regulariser`]'s value.
+    pub opacity: f64,
+}
+
+/// The texture regulariser (`texture`, when given) and the opacity regulariser (`opacity_weight`,
+/// when given) in one pass over the billboards: each row of `textures` is read once and each row
+/// of `d_textures` updated once, in parallel over billboards. Per texel the gradient additions
+/// are those of [`texture_regulariser`] followed by those of [`opacity_regulariser`], in that
+/// order, so the gradients are the bits of the two calls one after the other; each value is
+/// summed row by row and the rows' sums added in billboard order (the same for any thread
+/// count). See the two functions for the formulas.
+///
+/// # Panics
+/// When `d_textures` and `textures` differ in length, `textures` is not whole rows of
+/// `texels_per_row` (`TS²`, positive) texels, or `texture` is given with `alpha0` not of
+/// `texels_per_row` values or `impact` not one per row.
+pub fn regularise(
+    textures: &[[f32; 4]],
+    texels_per_row: usize,
+    texture: Option<TextureTerm<'_>>,
+    opacity_weight: Option<f32>,
+    d_textures: &mut [[f32; 4]],
+) -> RegulariserValues {
+    let t = texels_per_row;
+    assert_eq!(d_textures.len(), textures.len(), "texture gradient buffer");
+    assert!(t > 0 && textures.len().is_multiple_of(t), "whole rows of TS² texels");
+    // The texture term with |vis|; off when no billboard is visible (the reference divides by
+    // zero there).
+    let texture = texture.and_then(|term| {
+        assert_eq!(term.alpha0.len(), t, "one reference alpha per texel");
+        assert_eq!(textures.len(), term.impact.len() * t, "TS² RGBA texels per billboard");
+        let vis = term.impact.iter().filter(|&&x| x > 0.0).count();
+        (vis > 0).then_some((term, vis as f64))
+    });
+    let opacity = opacity_weight.filter(|_| !textures.is_empty());
+    if texture.is_none() && opacity.is_none() {
+        return RegulariserValues::default();
+    }
+    let g_opacity = opacity.map(|w| (w as f64 / textures.len() as f64) as f32);
+    // Per row: the texture term's contribution and the row's alpha sum, each in f64.
+    let rows: Vec<(f64, f64)> = d_textures
+        .par_chunks_mut(t)
+        .zip(textures.par_chunks(t))
+        .enumerate()
+        .map(|(i, (d_tex, tex))| {
+            let term = texture.and_then(|(term, vis)| row_texture_term(term, vis, i, tex));
+            if let Some((_, gc, ga)) = term {
+                for g in d_tex.iter_mut() {
+                    for c in 0..3 {
+                        g[c] += gc;
+                    }
+                    if ga != 0.0 {
+                        g[3] += ga;
+                    }
+                }
+            }
+            let alpha_sum = match g_opacity {
+                Some(g) => {
+                    for d in d_tex.iter_mut() {
+                        d[3] += g;
+                    }
+                    tex.iter().map(|x| x[3] as f64).sum::<f64>()
+                }
+                None => 0.0,
+            };
+            (term.map_or(0.0, |(value, _, _)| value), alpha_sum)
+        })
+        .collect();
+    // Skipped billboards contribute an exact 0.0, which leaves the running sums unchanged.
+    let (terms, alpha) = rows.iter().fold((0.0, 0.0), |(a, b), &(x, y)| (a + x, b + y));
+    RegulariserValues {
+        texture: texture.map_or(0.0, |(term, vis)| term.weight as f64 * terms / vis),
+        opacity: opacity.map_or(0.0, |w| w as f64 * alpha / textures.len() as f64),
+    }
+}
+
+/// The texture regulariser on billboard `i` (texels `tex`) given `|vis|`: `(w_i · (mean colour +
+/// |m_i|), ∂/∂colour, ∂/∂alpha)`, or `None` when the billboard is not visible or at or above the
+/// threshold (weight 0).
+fn row_texture_term(term: TextureTerm<'_>, vis: f64, i: usize, tex: &[[f32; 4]]) -> Option<(f64, f32, f32)> {
+    let t = tex.len();
+    let (threshold, lambda) = (term.threshold as f64, term.weight as f64);
+    let imp = term.impact[i] as f64;
+    if imp <= 0.0 {
+        return None;
+    }
+    let w = threshold - imp.clamp(0.0, threshold);
+    if w == 0.0 {
+        return None;
+    }
+    // Channel by channel (r, g, b), each over the texels in order.
+    let mean_c = (0..3).flat_map(|c| tex.iter().map(move |x| x[c] as f64)).sum::<f64>() / (3 * t) as f64;
+    let m = tex
+        .iter()
+        .zip(term.alpha0)
+        .map(|(x, &x0)| x[3] as f64 - x0 as f64)
+        .sum::<f64>()
+        / t as f64;
+    let gc = (lambda * w / (vis * (3 * t) as f64)) as f32;
+    let sign = if m > 0.0 {
+        1.0
+    } else if m < 0.0 {
+        -1.0
+    } else {
+        0.0
+    };
+    let ga = (lambda * w * sign / (vis * t as f64)) as f32;
+    Some(((mean_c + m.abs()) * w, gc, ga))
+}
+
 /// Texture regulariser of paper Eq. 9.
 ///
 /// With `vis = {i : impact_i > 0}` and the constant weights `w_i = σ − clamp(impact_i, 0, σ)`:
@@ -31,7 +160,7 @@ pub const IMPACT_THRESHOLD: f32 = 500.0;
 /// `m_i` the signed mean alpha difference (`sign(0) = 0`, the subgradient at the kink). When no
 /// billboard is visible the value is 0 and nothing is added (the reference divides by zero).
 /// `alpha0` is the reference alpha texture `A0` (`T` values, shared by all billboards).
-#[allow(clippy::too_many_arguments)]
+/// [`regularise`] with only this term.
 pub fn texture_regulariser(
     textures: &[[f32; 4]],
     alpha0: &[f32],
@@ -40,79 +169,31 @@ pub fn texture_regulariser(
     weight: f32,
     d_textures: &mut [[f32; 4]],
 ) -> f64 {
-    let t = alpha0.len();
-    let n = impact.len();
-    assert_eq!(textures.len(), n * t, "TS² RGBA texels per billboard");
-    assert_eq!(d_textures.len(), textures.len(), "texture gradient buffer");
-    let vis = impact.iter().filter(|&&x| x > 0.0).count();
-    if vis == 0 || t == 0 {
+    if alpha0.is_empty() {
+        assert_eq!(d_textures.len(), textures.len(), "texture gradient buffer");
+        assert!(textures.is_empty(), "TS² RGBA texels per billboard");
         return 0.0;
     }
-    let threshold = threshold as f64;
-    let lambda = weight as f64;
-    // Billboards in parallel, each writing only its own gradient rows; the per-billboard terms
-    // are summed afterwards in index order, so the value does not depend on the thread count.
-    let terms: Vec<f64> = d_textures
-        .par_chunks_mut(t)
-        .zip(textures.par_chunks(t))
-        .zip(impact)
-        .map(|((d_tex, tex), &imp)| {
-            let imp = imp as f64;
-            if imp <= 0.0 {
-                return 0.0;
-            }
-            let w = threshold - imp.clamp(0.0, threshold);
-            if w == 0.0 {
-                return 0.0;
-            }
-            // Channel by channel (r, g, b), each over the texels in order.
-            let mean_c = (0..3).flat_map(|c| tex.iter().map(move |x| x[c] as f64)).sum::<f64>() / (3 * t) as f64;
-            let m = tex
-                .iter()
-                .zip(alpha0)
-                .map(|(x, &x0)| x[3] as f64 - x0 as f64)
-                .sum::<f64>()
-                / t as f64;
-            let gc = (lambda * w / (vis as f64 * (3 * t) as f64)) as f32;
-            for g in d_tex.iter_mut() {
-                for c in 0..3 {
-                    g[c] += gc;
-                }
-            }
-            let sign = if m > 0.0 {
-                1.0
-            } else if m < 0.0 {
-                -1.0
-            } else {
-                0.0
-            };
-            let ga = (lambda * w * sign / (vis as f64 * t as f64)) as f32;
-            if ga != 0.0 {
-                for g in d_tex.iter_mut() {
-                    g[3] += ga;
-                }
-            }
-            (mean_c + m.abs()) * w
-        })
-        .collect();
-    // Skipped billboards contribute an exact 0.0, which leaves the running sum unchanged.
-    let total: f64 = terms.iter().fold(0.0, |acc, &x| acc + x);
-    lambda * total / vis as f64
+    let term = TextureTerm {
+        alpha0,
+        impact,
+        threshold,
+        weight,
+    };
+    regularise(textures, alpha0.len(), Some(term), None, d_textures).texture
 }
 
 /// Global opacity regulariser: `L = λ · mean over all billboards and texels of alpha`, including
 /// texels held at zero by the alpha mask (the reference's mean runs over all `TS²`). Adds
 /// `λ / (N·T)` to the alpha channel of every texel of `d_textures`. An empty model gives 0.
-pub fn opacity_regulariser(textures: &[[f32; 4]], weight: f32, d_textures: &mut [[f32; 4]]) -> f64 {
-    assert_eq!(d_textures.len(), textures.len(), "texture gradient buffer");
-    if textures.is_empty() {
-        return 0.0;
-    }
-    let g = (weight as f64 / textures.len() as f64) as f32;
-    for d in d_textures.iter_mut() {
-        d[3] += g;
-    }
-    opacity_value(textures, weight)
+/// [`regularise`] with only this term (`texels_per_row = T`: the value is summed row by row).
+pub fn opacity_regulariser(
+    textures: &[[f32; 4]],
+    texels_per_row: usize,
+    weight: f32,
+    d_textures: &mut [[f32; 4]],
+) -> f64 {
+    regularise(textures, texels_per_row, None, Some(weight), d_textures).opacity
 }
 
 /// The opacity regulariser's value alone (no gradient).

@@ -14,7 +14,8 @@ use bbsplat::gradcheck::{GradReport, GradTolerance, StepRule, WorstObserved, che
 use bbsplat::model::{initial_alpha, sigmoid};
 use bbsplat::rng::Rng;
 use bbsplat::train::regularise::{
-    chain_sigmoid, gaussian_alpha, gaussian_opacity_grad, opacity_regulariser, texture_regulariser,
+    TextureTerm, chain_sigmoid, gaussian_alpha, gaussian_opacity_grad, opacity_regulariser, regularise,
+    texture_regulariser,
 };
 
 const TS: usize = 4;
@@ -59,7 +60,7 @@ fn loss(case: &Case, x: &[f32]) -> f64 {
     let tex = rgba(&alpha, &colour);
     let mut d = vec![[0.0; 4]; N * T];
     texture_regulariser(&tex, &case.alpha0, &case.impact, SIGMA, LAMBDA_TEX, &mut d)
-        + opacity_regulariser(&tex, LAMBDA_OP, &mut d)
+        + opacity_regulariser(&tex, T, LAMBDA_OP, &mut d)
 }
 
 /// Analytic gradient wrt the logits. `broken` selects a deliberate mistake.
@@ -68,7 +69,7 @@ fn analytic(case: &Case, broken: Option<&str>) -> Vec<f64> {
     let tex = rgba(&alpha, &colour);
     let mut d = vec![[0.0; 4]; N * T];
     texture_regulariser(&tex, &case.alpha0, &case.impact, SIGMA, LAMBDA_TEX, &mut d);
-    opacity_regulariser(&tex, LAMBDA_OP, &mut d);
+    opacity_regulariser(&tex, T, LAMBDA_OP, &mut d);
     let (da, dc) = planar_textures(&d, T);
     let mut out = vec![0.0f32; 4 * N * T];
     let (oa, oc) = out.split_at_mut(N * T);
@@ -210,7 +211,7 @@ fn empty_visibility_is_zero_not_nan() {
     let v = texture_regulariser(&tex, &[0.1; 4], &[0.0, 0.0], 500.0, 1e-4, &mut d);
     assert_eq!(v, 0.0);
     assert!(d.iter().flatten().all(|&g| g == 0.0));
-    assert_eq!(opacity_regulariser(&[], 0.01, &mut []), 0.0);
+    assert_eq!(opacity_regulariser(&[], 16, 0.01, &mut []), 0.0);
 }
 
 #[test]
@@ -224,4 +225,65 @@ fn strongly_visible_billboards_are_not_regularised() {
     assert!((v - expected).abs() < 1e-9, "{v} vs {expected}");
     assert!(d[..t].iter().flatten().all(|&g| g == 0.0));
     assert!(d[t..].iter().flatten().all(|&g| g > 0.0));
+}
+
+/// The fused pass gives the bits of the two regularisers one after the other: every gradient
+/// (added onto random starting values, signed zeros among them) and both values, on billboards
+/// below, at and above the threshold and not visible; also with either term off. The starting
+/// values are of the size of the additions, so that their order shows in the bits (adding the
+/// opacity term first was tried and fails this test).
+#[test]
+fn the_fused_pass_equals_the_two_regularisers_in_turn() {
+    let (t, n) = (16, 9);
+    let mut rng = Rng::new(41);
+    let tex: Vec<[f32; 4]> = (0..n * t).map(|_| std::array::from_fn(|_| rng.uniform())).collect();
+    let start: Vec<[f32; 4]> = (0..n * t)
+        .map(|k| {
+            std::array::from_fn(|c| {
+                if (k + c) % 5 == 0 {
+                    -0.0
+                } else {
+                    (rng.uniform() - 0.5) * 1e-3
+                }
+            })
+        })
+        .collect();
+    let alpha0: Vec<f32> = (0..t).map(|k| 0.05 * k as f32).collect();
+    let impact = [0.0, 12.0, 499.0, 500.0, 800.0, 0.5, 250.0, -1.0, 60.0];
+    let term = TextureTerm {
+        alpha0: &alpha0,
+        impact: &impact,
+        threshold: 500.0,
+        weight: 1e-4,
+    };
+    let bits = |d: &[[f32; 4]]| d.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
+    for (with_texture, with_opacity) in [(true, true), (true, false), (false, true)] {
+        let mut apart = start.clone();
+        let texture_value = if with_texture {
+            texture_regulariser(&tex, &alpha0, &impact, 500.0, 1e-4, &mut apart)
+        } else {
+            0.0
+        };
+        let opacity_value = if with_opacity {
+            opacity_regulariser(&tex, t, 0.01, &mut apart)
+        } else {
+            0.0
+        };
+        let mut fused = start.clone();
+        let values = regularise(
+            &tex,
+            t,
+            with_texture.then_some(term),
+            with_opacity.then_some(0.01),
+            &mut fused,
+        );
+        assert_eq!(
+            bits(&fused),
+            bits(&apart),
+            "texture {with_texture}, opacity {with_opacity}"
+        );
+        assert_eq!(values.texture.to_bits(), texture_value.to_bits());
+        assert_eq!(values.opacity.to_bits(), opacity_value.to_bits());
+        assert_ne!(bits(&fused), bits(&start), "the regularisers add something");
+    }
 }
