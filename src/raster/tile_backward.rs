@@ -36,11 +36,14 @@ struct PixelBack {
     d_out: [f32; CHANNELS],
 }
 
-/// One blended (pixel, entry) pair of the tile: the tile-local pixel and the transmittance in
-/// front of the entry there.
+/// One blended (pixel, entry) pair of the tile: the tile-local pixel (its index and its column
+/// and row, so that the pair loop divides nothing) and the transmittance in front of the entry
+/// there.
 #[derive(Clone, Copy, Debug, Default)]
 struct Pair {
-    pixel: u32,
+    pixel: u16,
+    x: u8,
+    y: u8,
     transmittance: f32,
 }
 
@@ -190,7 +193,9 @@ fn by_entry_body(
         for r in (offsets[q] - base) as usize..(offsets[q + 1] - base) as usize {
             let c = &mut cursor[slots[r] as usize];
             pairs[*c as usize] = Pair {
-                pixel: q as u32,
+                pixel: q as u16,
+                x: (q % tw) as u8,
+                y: (q / tw) as u8,
                 transmittance: transmittance[r],
             };
             *c += 1;
@@ -201,14 +206,13 @@ fn by_entry_body(
     // The tile-local rectangle of the pixels of an entry's pairs.
     let pair_rect = |k: usize| {
         let of = &pairs[starts[k] as usize..starts[k + 1] as usize];
-        let (first, last) = (of.first()?.pixel as usize, of.last()?.pixel as usize);
-        let (mut x0, mut x1) = (usize::MAX, 0);
+        let (first, last) = (of.first()?.y, of.last()?.y);
+        let (mut x0, mut x1) = (u8::MAX, 0);
         for pair in of {
-            let x = pair.pixel as usize % tw;
-            x0 = x0.min(x);
-            x1 = x1.max(x);
+            x0 = x0.min(pair.x);
+            x1 = x1.max(pair.x);
         }
-        Some((x0 as u8, (first / tw) as u8, x1 as u8, (last / tw) as u8))
+        Some((x0, first, x1, last))
     };
     const AHEAD: usize = 3;
     for k in (0..list.len()).rev() {
@@ -243,9 +247,9 @@ fn by_entry_body(
         for chunk in of.chunks(LANES) {
             // Hits and taps lane-wise (unused lanes repeat the last pair), then the pairs one by
             // one in pixel order.
-            let pixel_of = |l: usize| chunk[l.min(chunk.len() - 1)].pixel as usize;
-            let px: [f32; LANES] = std::array::from_fn(|l| (i0 as usize + pixel_of(l) % tw) as f32 + 0.5);
-            let py: [f32; LANES] = std::array::from_fn(|l| (j0 as usize + pixel_of(l) / tw) as f32 + 0.5);
+            let pair_of = |l: usize| &chunk[l.min(chunk.len() - 1)];
+            let px: [f32; LANES] = std::array::from_fn(|l| (i0 + u32::from(pair_of(l).x)) as f32 + 0.5);
+            let py: [f32; LANES] = std::array::from_fn(|l| (j0 + u32::from(pair_of(l).y)) as f32 + 0.5);
             let hits = intersect_lanes(&pr.transform, &plane, camera, &px, &py);
             let lane_taps = taps_row(&hits.u, &hits.v, ts);
             // Per pair in pixel order: the compositing backward and the texel gradients; then
