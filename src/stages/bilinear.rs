@@ -605,9 +605,9 @@ impl RowTaps {
         check_rgba_texels(texels.len(), self.ts);
         Some(sample_four(
             texels,
-            self.index.map(|i| i[lane]),
-            self.weight.map(|w| w[lane]),
-            self.inside.map(|m| m[lane]),
+            std::array::from_fn(|k| self.index[k][lane]),
+            std::array::from_fn(|k| self.weight[k][lane]),
+            std::array::from_fn(|k| self.inside[k][lane]),
         ))
     }
 
@@ -628,13 +628,16 @@ impl RowTaps {
             return None;
         }
         check_rgba_texels(texels.len(), self.ts);
-        let at = |w: &[[f32; LANES]; 4]| w.map(|w| w[lane]);
+        // Each value read in place: `w.map(|w| w[lane])` would copy every tap's whole lane array first.
+        let at = |w: &[[f32; LANES]; 4]| -> [f32; 4] { std::array::from_fn(|k| w[k][lane]) };
         let parts = [at(&self.weight), at(&self.d_weight_du), at(&self.d_weight_dv)];
+        let index: [u32; 4] = std::array::from_fn(|k| self.index[k][lane]);
+        let inside: [bool; 4] = std::array::from_fn(|k| self.inside[k][lane]);
         Some(vjp_taps(
             texels,
-            &self.index.map(|i| i[lane]),
+            &index,
             [&parts[0], &parts[1], &parts[2]],
-            &self.inside.map(|m| m[lane]),
+            &inside,
             d_rgba,
             emit,
         ))
