@@ -125,31 +125,31 @@ fn sample_four(texels: &[[f32; 4]], index: [u32; 4], w: [f32; 4], inside: [bool;
     (Vec4::ZERO + keep(0, w[0] * t0) + keep(1, w[1] * t1) + keep(2, w[2] * t2) + keep(3, w[3] * t3)).to_array()
 }
 
-/// The backward of an RGBA sample over the taps `index` with weights and weight derivatives
-/// `[weight, d_weight_du, d_weight_dv]`, skipping the taps without `inside[k]`: calls
-/// `emit(texel, weight · d_rgba)` per tap in tap order and returns `(∂L/∂u, ∂L/∂v)` (the one copy of this arithmetic:
-/// [`BilinearTaps::vjp_rgba`] and [`RowTaps::vjp_rgba`]).
+/// The backward of an RGBA sample over `taps` taps, tap `k` given by `tap(k)` as `(texel index,
+/// weight, ∂weight/∂u, ∂weight/∂v)`, or `None` for a tap to skip (outside the texture): calls
+/// `emit(texel, weight · d_rgba)` per tap in tap order and returns `(∂L/∂u, ∂L/∂v)` (the one
+/// copy of this arithmetic: [`BilinearTaps::vjp_rgba`] and [`RowTaps::vjp_rgba`]). The taps are
+/// read through `tap` so that each caller reads its own layout in place, with no copies.
 #[inline(always)]
 fn vjp_taps(
     texels: &[[f32; 4]],
-    index: &[u32],
-    [weight, d_weight_du, d_weight_dv]: [&[f32]; 3],
-    inside: &[bool],
+    taps: usize,
+    tap: impl Fn(usize) -> Option<(u32, f32, f32, f32)>,
     d_rgba: [f32; 4],
     mut emit: impl FnMut(u32, [f32; 4]),
 ) -> (f32, f32) {
     let d = Vec4::from_array(d_rgba);
     let (mut du, mut dv) = (0.0f32, 0.0f32);
-    for k in 0..index.len() {
-        if !inside[k] {
+    for k in 0..taps {
+        let Some((index, weight, d_weight_du, d_weight_dv)) = tap(k) else {
             continue;
-        }
-        let t = texels[index[k] as usize];
+        };
+        let t = texels[index as usize];
         // The texel's value seen through the upstream gradient: alpha first, then r, g, b.
         let seen = t[3] * d_rgba[3] + t[0] * d_rgba[0] + t[1] * d_rgba[1] + t[2] * d_rgba[2];
-        du += d_weight_du[k] * seen;
-        dv += d_weight_dv[k] * seen;
-        emit(index[k], (weight[k] * d).to_array());
+        du += d_weight_du * seen;
+        dv += d_weight_dv * seen;
+        emit(index, (weight * d).to_array());
     }
     (du, dv)
 }
@@ -435,15 +435,8 @@ impl BilinearTaps {
     #[inline]
     pub fn vjp_rgba(&self, texels: &[[f32; 4]], d_rgba: [f32; 4], emit: impl FnMut(u32, [f32; 4])) -> (f32, f32) {
         check_rgba_texels(texels.len(), self.ts);
-        let n = self.len as usize;
-        vjp_taps(
-            texels,
-            &self.index[..n],
-            [&self.weight[..n], &self.d_weight_du[..n], &self.d_weight_dv[..n]],
-            &[true; 4][..n],
-            d_rgba,
-            emit,
-        )
+        let tap = |k: usize| Some((self.index[k], self.weight[k], self.d_weight_du[k], self.d_weight_dv[k]));
+        vjp_taps(texels, self.len as usize, tap, d_rgba, emit)
     }
 }
 
@@ -628,19 +621,19 @@ impl RowTaps {
             return None;
         }
         check_rgba_texels(texels.len(), self.ts);
-        // Each value read in place: `w.map(|w| w[lane])` would copy every tap's whole lane array first.
-        let at = |w: &[[f32; LANES]; 4]| -> [f32; 4] { std::array::from_fn(|k| w[k][lane]) };
-        let parts = [at(&self.weight), at(&self.d_weight_du), at(&self.d_weight_dv)];
-        let index: [u32; 4] = std::array::from_fn(|k| self.index[k][lane]);
-        let inside: [bool; 4] = std::array::from_fn(|k| self.inside[k][lane]);
-        Some(vjp_taps(
-            texels,
-            &index,
-            [&parts[0], &parts[1], &parts[2]],
-            &inside,
-            d_rgba,
-            emit,
-        ))
+        // Each value read in place (`w.map(|w| w[lane])` would copy every tap's whole lane
+        // array to the stack first).
+        let tap = |k: usize| {
+            self.inside[k][lane].then(|| {
+                (
+                    self.index[k][lane],
+                    self.weight[k][lane],
+                    self.d_weight_du[k][lane],
+                    self.d_weight_dv[k][lane],
+                )
+            })
+        };
+        Some(vjp_taps(texels, 4, tap, d_rgba, emit))
     }
 
     /// The taps and weights of lane `lane` (what sampling reads): [`RowTaps::lane`] followed by
