@@ -188,8 +188,9 @@ fn composite_tile_body<const DISTORTION: bool>(
                 if states[lanes.clone()].iter().all(|s| s.composite.done) {
                     continue;
                 }
-                let first = i0 as usize + lanes.start - row;
-                let px: [f32; LANES] = std::array::from_fn(|l| (first + l) as f32 + 0.5);
+                // In u32: a 64-bit integer's conversion to f32 is a long instruction sequence.
+                let first = i0 + (lanes.start - row) as u32;
+                let px: [f32; LANES] = std::array::from_fn(|l| (first + l as u32) as f32 + 0.5);
                 let hits = intersect_lanes(&p.transform, &plane, camera, &px, &[py; LANES]);
                 let taps = taps_row(&hits.u, &hits.v, ts);
                 // The samples of the chunk's pixels first, so that their texel reads overlap
