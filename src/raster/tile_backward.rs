@@ -214,13 +214,18 @@ fn by_entry_body(
         }
         Some((x0, first, x1, last))
     };
+    // The record of an entry `RECORD_AHEAD` ahead (nearer); the texels of one `AHEAD` ahead, whose
+    // record, read to find them, was fetched some entries before.
     const AHEAD: usize = 3;
+    const RECORD_AHEAD: usize = 8;
     for k in (0..list.len()).rev() {
-        // The record and texels of an entry a few ahead (nearer), with where its texel
-        // gradients will go: its billboard's gradient row, or the cells of the sums' index.
+        if let Some(ahead) = k.checked_sub(RECORD_AHEAD) {
+            prefetch_record(&prepared[list[ahead] as usize]);
+        }
+        // The texels of an entry a few ahead, with where its texel gradients will go: its
+        // billboard's gradient row, or the cells of the sums' index.
         if let Some(ahead) = k.checked_sub(AHEAD) {
             let b = list[ahead] as usize;
-            prefetch_record(&prepared[b]);
             if let Some(pa) = prepared[b].as_ref()
                 && let Some(rect) = pair_rect(ahead).and_then(|r| {
                     let pixels = (starts[ahead + 1] - starts[ahead]) as usize;
