@@ -52,6 +52,7 @@ struct PixelState {
     spread: DistortionState,
     median: f32,
     evaluated: u32,
+    blended: u32,
     nan_alpha: u32,
 }
 
@@ -69,6 +70,7 @@ impl PixelState {
         },
         median: 0.0,
         evaluated: 0,
+        blended: 0,
         nan_alpha: 0,
     };
 }
@@ -85,12 +87,25 @@ pub(crate) type TileInputs<'a, 's> = (
     &'a [EntrySpans],
 );
 
+/// One blended (entry, pixel) pair of the tile, as the entry-by-entry walk finds it.
+#[derive(Clone, Copy, Debug)]
+struct BlendedPair {
+    slot: u32,
+    /// The transmittance in front of the entry at the pixel.
+    transmittance: f32,
+    /// The tile-local pixel.
+    pixel: u16,
+}
+
 /// Reusable per-task scratch of [`composite_tile`] (rebuilt per tile).
 #[derive(Default)]
 pub(crate) struct TileComposite {
     pixels: Vec<PixelState>,
-    /// Per pixel: the slots it blended, front to back, with the transmittance in front of each.
-    blended: Vec<Vec<(u32, f32)>>,
+    /// The tile's blended pairs in the order found: entry by entry, pixel order within an entry
+    /// (one sequential list; regrouped by pixel at the end of the tile).
+    blended: Vec<BlendedPair>,
+    /// Per pixel: where its next pair goes in the per-pixel output.
+    cursor: Vec<u32>,
 }
 
 /// Composites the tile `(i0, j0, i1, j1)` whose list is `list` (with the entries' `spans`):
@@ -148,15 +163,11 @@ fn composite_tile_body<const DISTORTION: bool>(
     let TileComposite {
         pixels: states,
         blended,
+        cursor,
     } = scratch;
     states.clear();
     states.resize(n, PixelState::START);
-    if blended.len() < n {
-        blended.resize_with(n, Vec::new);
-    }
-    for slots in &mut blended[..n] {
-        slots.clear();
-    }
+    blended.clear();
     for (k, (span, &b)) in spans.iter().zip(list).enumerate() {
         if let Some(&ahead) = list.get(k + 12) {
             prefetch_record(&prepared[ahead as usize]);
@@ -234,7 +245,12 @@ fn composite_tile_body<const DISTORTION: bool>(
                         state.spread.add(mapped_depth(depth), blend.weight, blend.transmittance);
                     }
                     entry_impact += blend.weight;
-                    blended[q].push((k as u32, blend.transmittance));
+                    state.blended += 1;
+                    blended.push(BlendedPair {
+                        slot: k as u32,
+                        transmittance: blend.transmittance,
+                        pixel: q as u16,
+                    });
                 }
             }
         }
@@ -242,10 +258,7 @@ fn composite_tile_body<const DISTORTION: bool>(
     }
     let bg = settings.background;
     pixels.clear();
-    let (blended_slots, blended_transmittance) = out_blended;
-    blended_slots.clear();
-    blended_transmittance.clear();
-    for (state, slots) in states.iter().zip(&blended[..n]) {
+    for state in states.iter() {
         let [r, g, b, alpha, depth, nx, ny, nz] = state.composite.finish(&[bg.x, bg.y, bg.z, 0.0, 0.0, 0.0, 0.0, 0.0]);
         pixels.push(PixelOut {
             rgb: Vec3::new(r, g, b),
@@ -255,12 +268,30 @@ fn composite_tile_body<const DISTORTION: bool>(
             normal: Vec3::new(nx, ny, nz),
             final_t: state.composite.transmittance,
             evaluated: state.evaluated,
-            blended: slots.len() as u32,
+            blended: state.blended,
             nan_alpha: state.nan_alpha,
             distortion: if DISTORTION { state.spread.distortion } else { 0.0 },
         });
-        blended_slots.extend(slots.iter().map(|&(k, _)| k));
-        blended_transmittance.extend(slots.iter().map(|&(_, t)| t));
+    }
+    // The pairs regrouped pixel by pixel (a counting sort; entries stay front to back within a
+    // pixel, the order they were found in).
+    let (blended_slots, blended_transmittance) = out_blended;
+    blended_slots.clear();
+    blended_slots.resize(blended.len(), 0);
+    blended_transmittance.clear();
+    blended_transmittance.resize(blended.len(), 0.0);
+    cursor.clear();
+    let mut start = 0u32;
+    cursor.extend(states.iter().map(|state| {
+        let at = start;
+        start += state.blended;
+        at
+    }));
+    for pair in blended.iter() {
+        let at = &mut cursor[usize::from(pair.pixel)];
+        blended_slots[*at as usize] = pair.slot;
+        blended_transmittance[*at as usize] = pair.transmittance;
+        *at += 1;
     }
 }
 
