@@ -276,10 +276,9 @@ fn composite_tile_body<const DISTORTION: bool>(
     // The pairs regrouped pixel by pixel (a counting sort; entries stay front to back within a
     // pixel, the order they were found in).
     let (blended_slots, blended_transmittance) = out_blended;
-    blended_slots.clear();
-    blended_slots.resize(blended.len(), 0);
-    blended_transmittance.clear();
-    blended_transmittance.resize(blended.len(), 0.0);
+    // Every value is overwritten below: only new slots are filled.
+    crate::memory::resize_for_overwrite(blended_slots, blended.len(), 0);
+    crate::memory::resize_for_overwrite(blended_transmittance, blended.len(), 0.0);
     cursor.clear();
     let mut start = 0u32;
     cursor.extend(states.iter().map(|state| {
