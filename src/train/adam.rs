@@ -92,9 +92,46 @@ impl AdamGroup {
         self.update(row, params, grads, lr, hp, t);
     }
 
+    /// [`AdamGroup::step_row_global`] with its bias-corrected factors computed beforehand (once
+    /// per step for all rows, as dense mode's rows share the step count): the same bits.
+    pub fn step_row_with(
+        &mut self,
+        row: usize,
+        params: &mut [f32],
+        grads: &[f32],
+        factors: StepFactors,
+        hp: &AdamParams,
+    ) {
+        self.steps[row] = self.steps[row].saturating_add(1);
+        let span = row * self.row_len..(row + 1) * self.row_len;
+        update_row_with(&mut self.m[span.clone()], &mut self.v[span], params, grads, factors, hp);
+    }
+
     fn update(&mut self, row: usize, params: &mut [f32], grads: &[f32], lr: f32, hp: &AdamParams, t: u64) {
         let span = row * self.row_len..(row + 1) * self.row_len;
         update_row(&mut self.m[span.clone()], &mut self.v[span], params, grads, lr, hp, t);
+    }
+}
+
+/// The scalars of one Adam update at bias-correction step `t ≥ 1` with learning rate `lr`: the
+/// step size `lr / (1 − β₁ᵗ)` and `√(1 − β₂ᵗ)`. Computing them costs two integer powers and a
+/// square root, more than the update of a row of three values, so rows that share `t` share
+/// them ([`update_row_with`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepFactors {
+    step_size: f32,
+    bc2_sqrt: f32,
+}
+
+impl StepFactors {
+    /// The factors at step `t` (values of `t` above `i32::MAX` count as `i32::MAX`).
+    pub fn new(lr: f32, hp: &AdamParams, t: u64) -> Self {
+        let t = t.min(i32::MAX as u64) as i32;
+        let bc1 = 1.0 - hp.beta1.powi(t);
+        Self {
+            step_size: lr / bc1,
+            bc2_sqrt: (1.0 - hp.beta2.powi(t)).sqrt(),
+        }
     }
 }
 
@@ -104,13 +141,23 @@ impl AdamGroup {
 /// parallel texture step ([`super::texture_step`]) all call it.
 #[inline]
 pub fn update_row(m: &mut [f32], v: &mut [f32], params: &mut [f32], grads: &[f32], lr: f32, hp: &AdamParams, t: u64) {
+    update_row_with(m, v, params, grads, StepFactors::new(lr, hp, t), hp);
+}
+
+/// [`update_row`] with its step's [`StepFactors`] given (the one copy of the update's loop).
+#[inline]
+pub fn update_row_with(
+    m: &mut [f32],
+    v: &mut [f32],
+    params: &mut [f32],
+    grads: &[f32],
+    factors: StepFactors,
+    hp: &AdamParams,
+) {
     assert_eq!(m.len(), params.len());
     assert_eq!(v.len(), params.len());
     assert_eq!(grads.len(), params.len());
-    let t = t.min(i32::MAX as u64) as i32;
-    let bc1 = 1.0 - hp.beta1.powi(t);
-    let bc2_sqrt = (1.0 - hp.beta2.powi(t)).sqrt();
-    let step_size = lr / bc1;
+    let StepFactors { step_size, bc2_sqrt } = factors;
     // Zipped slices (no index bounds to check), so that the loop vectorises.
     for (((m, v), p), &g) in m.iter_mut().zip(v.iter_mut()).zip(params.iter_mut()).zip(grads) {
         *m = hp.beta1 * *m + (1.0 - hp.beta1) * g;

@@ -53,7 +53,7 @@ use crate::raster::{
 };
 use crate::rng::Rng;
 pub use crate::stages::composite::ClampGradient;
-use adam::{AdamGroup, AdamParams};
+use adam::{AdamGroup, AdamParams, StepFactors};
 pub use checkpoint::CheckpointError;
 pub use error::TrainError;
 pub use finite::{NonFinite, ParamGroup};
@@ -941,35 +941,60 @@ impl Trainer {
         // the late freeze the textures never move again, so their groups are skipped.
         let textures_live = !past_milestone(self.step, self.config.iterations, 30_000);
         // Geometry, SH and (Gaussian mode) opacity: 57 floats a row, stepped row by row.
+        let group_lr = [
+            lr.position,
+            lr.rotation,
+            lr.scale,
+            lr.sh_dc,
+            lr.sh_rest,
+            lr.alpha,
+            lr.colour,
+            lr.opacity,
+        ];
+        let factors: [StepFactors; 8] =
+            std::array::from_fn(|i| StepFactors::new(group_lr[i], &hp, self.adam[i].global_step));
         for &b in rows {
             let b = b as usize;
             let m = &mut self.model;
             let g = &self.grads;
             let [a_pos, a_rot, a_scale, a_sh_dc, a_sh_rest, _, _, a_opacity] = &mut self.adam;
-            let step = |group: &mut AdamGroup, params: &mut [f32], grads: &[f32], lr: f32| {
+            // Dense rows share each group's step count: its factors are computed once, above.
+            let step = |group: &mut AdamGroup, params: &mut [f32], grads: &[f32], lr: f32, factors: StepFactors| {
                 if dense {
-                    let t = group.global_step;
-                    group.step_row_global(b, params, grads, lr, &hp, t);
+                    group.step_row_with(b, params, grads, factors, &hp);
                 } else {
                     group.step_row(b, params, grads, lr, &hp);
                 }
             };
-            step(a_pos, m.positions[b].as_mut(), &g.positions[b].to_array(), lr.position);
-            step(a_rot, &mut m.quaternions[b], &g.quaternions[b], lr.rotation);
-            step(a_scale, m.log_scales[b].as_mut(), &g.log_scales[b].to_array(), lr.scale);
+            let [f_pos, f_rot, f_scale, f_sh_dc, f_sh_rest, _, _, f_opacity] = factors;
+            step(
+                a_pos,
+                m.positions[b].as_mut(),
+                &g.positions[b].to_array(),
+                lr.position,
+                f_pos,
+            );
+            step(a_rot, &mut m.quaternions[b], &g.quaternions[b], lr.rotation, f_rot);
+            step(
+                a_scale,
+                m.log_scales[b].as_mut(),
+                &g.log_scales[b].to_array(),
+                lr.scale,
+                f_scale,
+            );
             // SH: degree 0 (3 values) and degrees 1-3 (45 values) have their own rates.
             let (sh, d_sh) = (
                 &mut m.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS],
                 &g.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS],
             );
             let (dc, rest) = sh.split_at_mut(3);
-            step(a_sh_dc, dc, &d_sh[..3], lr.sh_dc);
-            step(a_sh_rest, rest, &d_sh[3..], lr.sh_rest);
+            step(a_sh_dc, dc, &d_sh[..3], lr.sh_dc, f_sh_dc);
+            step(a_sh_rest, rest, &d_sh[3..], lr.sh_rest, f_sh_rest);
             if gaussian {
                 if textures_live {
                     let w = &mut self.opacity_logits[b..b + 1];
                     let d = gaussian_opacity_grad(w[0], &g.textures[b * t..(b + 1) * t], &self.shape);
-                    step(a_opacity, w, &[d], lr.opacity);
+                    step(a_opacity, w, &[d], lr.opacity, f_opacity);
                 }
                 self.refresh_row(b);
                 self.grads.clear_row(b);

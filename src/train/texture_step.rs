@@ -12,7 +12,7 @@
 //! of a row while its texels are in cache instead of one group after the other was measured and
 //! gained nothing (criterion `texture_step/dense/10000`: 23.7-26.5 ms against 23.5-24.9).
 
-use super::adam::{AdamGroup, AdamParams, update_row};
+use super::adam::{AdamGroup, AdamParams, StepFactors, update_row_with};
 use crate::model::sigmoid;
 use rayon::prelude::*;
 use std::ops::Range;
@@ -169,13 +169,15 @@ fn step_rows(rows: ChunkRows<'_>, how: &RowStep<'_, '_>) {
     let owned: [bool; 4] = std::array::from_fn(|c| how.channels.contains(&c));
     // `d_logit` holds the logit gradient, then the row's sigmoids before they are scattered.
     let mut d_logit = vec![0.0f32; n];
+    // Dense rows share the group's step count, so its Adam factors are computed once.
+    let dense_factors = StepFactors::new(how.lr, how.hp, how.global_step);
     for r in 0..steps.len() {
         let span = r * n..(r + 1) * n;
         let texel_span = r * texels..(r + 1) * texels;
-        let t = match how.selection {
+        let factors = match how.selection {
             RowSelection::Dense => {
                 steps[r] = steps[r].saturating_add(1);
-                how.global_step
+                dense_factors
             }
             RowSelection::Sparse(selected) => {
                 if !selected[first_row + r] {
@@ -183,7 +185,7 @@ fn step_rows(rows: ChunkRows<'_>, how: &RowStep<'_, '_>) {
                     continue;
                 }
                 steps[r] = steps[r].saturating_add(1);
-                u64::from(steps[r])
+                StepFactors::new(how.lr, how.hp, u64::from(steps[r]))
             }
         };
         let (y, g) = (&mut activated[texel_span.clone()], &mut grads[texel_span]);
@@ -196,7 +198,7 @@ fn step_rows(rows: ChunkRows<'_>, how: &RowStep<'_, '_>) {
             }
         }
         let x = &mut logits[span.clone()];
-        update_row(&mut m[span.clone()], &mut v[span], x, &d_logit, how.lr, how.hp, t);
+        update_row_with(&mut m[span.clone()], &mut v[span], x, &d_logit, factors, how.hp);
         // Sigmoids over the contiguous logits (vectorised), then scattered into the texels.
         for (s, &x) in d_logit.iter_mut().zip(x.iter()) {
             *s = sigmoid(x);
