@@ -145,7 +145,9 @@ pub fn update_row(m: &mut [f32], v: &mut [f32], params: &mut [f32], grads: &[f32
 }
 
 /// [`update_row`] with its step's [`StepFactors`] given (the one copy of the update's loop).
-#[inline]
+/// Always inlined, so that it is compiled into the caller's instruction-set variant (the
+/// texture step's AVX2 build).
+#[inline(always)]
 pub fn update_row_with(
     m: &mut [f32],
     v: &mut [f32],
