@@ -40,7 +40,8 @@ const ROUND: f32 = 12_582_912.0;
 #[inline]
 pub fn exp_f32(x: f32) -> f32 {
     let xc = x.clamp(MIN_ARG, MAX_ARG);
-    let n = (xc * std::f32::consts::LOG2_E + ROUND) - ROUND;
+    let shifted = xc * std::f32::consts::LOG2_E + ROUND;
+    let n = shifted - ROUND;
     let r = (xc - n * LN2_HI) - n * LN2_LO;
     let p = 1.0
         + r * (1.0
@@ -48,7 +49,11 @@ pub fn exp_f32(x: f32) -> f32 {
                 + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0 + r * (1.0 / 5040.0)))))));
     // `2ⁿ⁻¹ · 2` rather than `2ⁿ`: `n` reaches 128 just below MAX_ARG, whose `2ⁿ` has no `f32`
     // exponent; `n ≥ −125` above MIN_ARG keeps `2ⁿ⁻¹` normal. (`n` is integral and in range.)
-    let half_scale = f32::from_bits(((n as i32 + 126) as u32) << 23);
+    // `n` as an integer without a float-to-integer conversion (whose saturating form is a long
+    // sequence): `shifted` lies in ROUND's binade, where one unit is one ulp, so its bits differ
+    // from ROUND's by `n` exactly (for NaN the bits are arbitrary, and `p`, hence `y`, is NaN).
+    let n_int = (shifted.to_bits() as i32).wrapping_sub(ROUND.to_bits() as i32);
+    let half_scale = f32::from_bits((n_int.wrapping_add(126) as u32) << 23);
     let y = (p * half_scale) * 2.0;
     if x < MIN_ARG {
         0.0
