@@ -328,7 +328,8 @@ impl Geometry {
 /// `out[i] = Σ_k g[k]·input[i + k − 5 + off]` over pixels (each `stride` values), zero outside
 /// `0..n_in`; `out` holds `n_out` pixels. Taps are added to 0 in increasing `k`, skipping those
 /// outside, so an output whose window is inside the image gets the same bits whatever the
-/// padding.
+/// padding. Always inlined, so that it runs in its caller's instruction-set variant.
+#[inline(always)]
 fn correlate_row(input: &[f64], out: &mut [f64], n_in: usize, stride: usize, off: isize, g: &[f64; WINDOW_SIZE]) {
     let n_out = out.len() / stride;
     let r = RADIUS as isize;
@@ -379,6 +380,7 @@ impl Scratch {
 
     /// The five moments of map row `oy`: the vertical pass over the products (formed on the
     /// fly, in f64, where the products of f32 values are exact), then the horizontal pass.
+    #[inline(always)]
     fn row_moments(&mut self, a: &[f32], b: &[f32], geo: &Geometry, oy: usize) -> [&[f64]; MOMENTS] {
         let lin = geo.in_row();
         self.vertical.fill(0.0);
@@ -412,6 +414,7 @@ impl Scratch {
 /// `out[m] = Σ_k g[k]·rows[oy + k − 5 + off][m]` for each of the `maps` interleaved maps of a
 /// buffer laid out `[row][map][len]` with `n_rows` rows; rows outside are zero.
 #[allow(clippy::too_many_arguments)]
+#[inline(always)]
 fn vertical_pass(
     rows: &[f64],
     maps: usize,
@@ -504,28 +507,22 @@ where
     // Per map row: the sum of S, and the three weighted partial maps.
     let mut dbuf = vec![0.0f64; geo.oh * PARTIALS * lout];
     let mut row_sums = vec![0.0f64; geo.oh];
+    let wide = crate::raster::lanes::wide_lanes();
     dbuf.par_chunks_mut(PARTIALS * lout)
         .zip(row_sums.par_iter_mut())
         .enumerate()
         .for_each_init(
             || Scratch::new(geo),
             |scratch, (oy, (drow, sum))| {
-                let [ma, mb, saa, sbb, sab] = scratch.row_moments(a, b, geo, oy);
-                let (d_mu, rest) = drow.split_at_mut(lout);
-                let (d_saa, d_sab) = rest.split_at_mut(lout);
-                let mut acc = 0.0f64;
-                for j in 0..lout {
-                    let [s, p_mu, p_saa, p_sab] = partials(ma[j], mb[j], saa[j], sbb[j], sab[j]);
-                    let w = match cot {
-                        Cotangent::Uniform(w) => w,
-                        Cotangent::Map(m) => m[oy * lout + j] as f64,
-                    };
-                    acc += s;
-                    d_mu[j] = w * p_mu;
-                    d_saa[j] = w * p_saa;
-                    d_sab[j] = w * p_sab;
+                let row = MapRow { oy, drow, sum };
+                #[cfg(target_arch = "x86_64")]
+                if wide {
+                    // SAFETY: `wide_lanes` checked that the CPU has AVX2 and FMA.
+                    unsafe { map_row_avx2(scratch, (a, b), geo, cot, &partials, row) };
+                    return;
                 }
-                *sum = acc;
+                let _ = wide;
+                map_row(scratch, (a, b), geo, cot, &partials, row);
             },
         );
 
@@ -534,18 +531,117 @@ where
     let mut grad = vec![0.0f32; geo.h * lin];
     grad.par_chunks_mut(lin).enumerate().for_each_init(
         || (vec![0.0f64; PARTIALS * lout], vec![0.0f64; PARTIALS * lin]),
-        |(vertical, horizontal), (y, out)| {
-            vertical_pass(&dbuf, PARTIALS, lout, geo.oh, y, -geo.off, &geo.g, vertical);
-            for (src, dst) in vertical.chunks(lout).zip(horizontal.chunks_mut(lin)) {
-                correlate_row(src, dst, geo.ow, geo.c, -geo.off, &geo.g);
+        |buffers, (y, out)| {
+            #[cfg(target_arch = "x86_64")]
+            if wide {
+                // SAFETY: `wide_lanes` checked that the CPU has AVX2 and FMA.
+                unsafe { grad_row_avx2(buffers, (a, b), geo, &dbuf, y, out) };
+                return;
             }
-            let (t_mu, rest) = horizontal.split_at(lin);
-            let (t_saa, t_sab) = rest.split_at(lin);
-            let (ra, rb) = (&a[y * lin..(y + 1) * lin], &b[y * lin..(y + 1) * lin]);
-            for j in 0..lin {
-                out[j] = (t_mu[j] + 2.0 * ra[j] as f64 * t_saa[j] + rb[j] as f64 * t_sab[j]) as f32;
-            }
+            grad_row(buffers, (a, b), geo, &dbuf, y, out);
         },
     );
     (row_sums.iter().sum(), grad)
+}
+
+/// One map row of [`value_and_grad`]'s forward: map row `oy`, its three weighted partial rows
+/// `drow` and its sum of `S`.
+struct MapRow<'r> {
+    oy: usize,
+    drow: &'r mut [f64],
+    sum: &'r mut f64,
+}
+
+/// [`map_row`] compiled for AVX2 and FMA: f64 in four lanes instead of two, the same operations
+/// (Rust fuses no multiply-add by itself), so the same bits as the baseline build
+/// (`crate::raster::lanes::force_baseline` selects that one; tested in `loss_ssim`).
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn map_row_avx2<P>(
+    scratch: &mut Scratch,
+    ab: (&[f32], &[f32]),
+    geo: &Geometry,
+    cot: Cotangent<'_>,
+    partials: &P,
+    row: MapRow<'_>,
+) where
+    P: Fn(f64, f64, f64, f64, f64) -> [f64; 4],
+{
+    map_row(scratch, ab, geo, cot, partials, row);
+}
+
+/// The moments of one map row, its `S` values summed and its weighted partials.
+#[inline(always)]
+fn map_row<P>(
+    scratch: &mut Scratch,
+    (a, b): (&[f32], &[f32]),
+    geo: &Geometry,
+    cot: Cotangent<'_>,
+    partials: &P,
+    row: MapRow<'_>,
+) where
+    P: Fn(f64, f64, f64, f64, f64) -> [f64; 4],
+{
+    let MapRow { oy, drow, sum } = row;
+    let lout = geo.out_row();
+    let [ma, mb, saa, sbb, sab] = scratch.row_moments(a, b, geo, oy);
+    let (d_mu, rest) = drow.split_at_mut(lout);
+    let (d_saa, d_sab) = rest.split_at_mut(lout);
+    let mut acc = 0.0f64;
+    for j in 0..lout {
+        let [s, p_mu, p_saa, p_sab] = partials(ma[j], mb[j], saa[j], sbb[j], sab[j]);
+        let w = match cot {
+            Cotangent::Uniform(w) => w,
+            Cotangent::Map(m) => m[oy * lout + j] as f64,
+        };
+        acc += s;
+        d_mu[j] = w * p_mu;
+        d_saa[j] = w * p_saa;
+        d_sab[j] = w * p_sab;
+    }
+    *sum = acc;
+}
+
+/// [`grad_row`] compiled for AVX2 and FMA (the same bits; see [`map_row_avx2`]).
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn grad_row_avx2(
+    buffers: &mut (Vec<f64>, Vec<f64>),
+    ab: (&[f32], &[f32]),
+    geo: &Geometry,
+    dbuf: &[f64],
+    y: usize,
+    out: &mut [f32],
+) {
+    grad_row(buffers, ab, geo, dbuf, y, out);
+}
+
+/// The gradient of image row `y`: the adjoint of the vertical pass (map rows to image rows,
+/// shift −off), the adjoint of the horizontal pass, then the chain rule through a, a², a·b.
+#[inline(always)]
+fn grad_row(
+    (vertical, horizontal): &mut (Vec<f64>, Vec<f64>),
+    (a, b): (&[f32], &[f32]),
+    geo: &Geometry,
+    dbuf: &[f64],
+    y: usize,
+    out: &mut [f32],
+) {
+    let (lout, lin) = (geo.out_row(), geo.in_row());
+    vertical_pass(dbuf, PARTIALS, lout, geo.oh, y, -geo.off, &geo.g, vertical);
+    for (src, dst) in vertical.chunks(lout).zip(horizontal.chunks_mut(lin)) {
+        correlate_row(src, dst, geo.ow, geo.c, -geo.off, &geo.g);
+    }
+    let (t_mu, rest) = horizontal.split_at(lin);
+    let (t_saa, t_sab) = rest.split_at(lin);
+    let (ra, rb) = (&a[y * lin..(y + 1) * lin], &b[y * lin..(y + 1) * lin]);
+    for j in 0..lin {
+        out[j] = (t_mu[j] + 2.0 * ra[j] as f64 * t_saa[j] + rb[j] as f64 * t_sab[j]) as f32;
+    }
 }

@@ -853,3 +853,29 @@ fn window_is_normalised_and_symmetric() {
     }
     assert!(g[5] > g[4] && g[0] > 0.0);
 }
+
+/// The SSIM forward and backward rows run an AVX2 build where the CPU has it: the same bits as
+/// the baseline build, on one thread and on two, for both paddings and both cotangents.
+#[test]
+fn ssim_builds_and_thread_counts_give_the_same_bits() {
+    use bbsplat::raster::lanes;
+    let (w, h, c) = (41, 23, 3);
+    let mut rng = Rng::new(7);
+    let a: Vec<f32> = (0..w * h * c).map(|_| rng.uniform()).collect();
+    let b: Vec<f32> = (0..w * h * c).map(|_| rng.uniform()).collect();
+    let bits = |x: &[f32]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    for padding in [Padding::Same, Padding::Valid] {
+        let (mw, mh) = map_size(w, h, padding).unwrap();
+        let d_map: Vec<f32> = (0..mw * mh * c).map(|_| rng.uniform() - 0.5).collect();
+        let mut results = Vec::new();
+        for (threads, baseline) in [(1, true), (2, true), (1, false), (2, false)] {
+            lanes::force_baseline(baseline);
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let (value, grad) = pool.install(|| ssim_with_grad(&a, &b, w, h, c, padding, 0.8).unwrap());
+            let vjp = pool.install(|| ssim_map_vjp(&a, &b, w, h, c, padding, &d_map).unwrap());
+            lanes::force_baseline(false);
+            results.push((value.to_bits(), bits(&grad), bits(&vjp)));
+        }
+        assert!(results.iter().all(|r| *r == results[0]), "{padding:?}");
+    }
+}
