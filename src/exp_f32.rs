@@ -40,8 +40,7 @@ const ROUND: f32 = 12_582_912.0;
 #[inline]
 pub fn exp_f32(x: f32) -> f32 {
     let xc = x.clamp(MIN_ARG, MAX_ARG);
-    let shifted = xc * std::f32::consts::LOG2_E + ROUND;
-    let n = shifted - ROUND;
+    let (n, n_int) = exponent(xc);
     let r = (xc - n * LN2_HI) - n * LN2_LO;
     let p = 1.0
         + r * (1.0
@@ -49,10 +48,6 @@ pub fn exp_f32(x: f32) -> f32 {
                 + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0 + r * (1.0 / 5040.0)))))));
     // `2ⁿ⁻¹ · 2` rather than `2ⁿ`: `n` reaches 128 just below MAX_ARG, whose `2ⁿ` has no `f32`
     // exponent; `n ≥ −125` above MIN_ARG keeps `2ⁿ⁻¹` normal. (`n` is integral and in range.)
-    // `n` as an integer without a float-to-integer conversion (whose saturating form is a long
-    // sequence): `shifted` lies in ROUND's binade, where one unit is one ulp, so its bits differ
-    // from ROUND's by `n` exactly (for NaN the bits are arbitrary, and `p`, hence `y`, is NaN).
-    let n_int = (shifted.to_bits() as i32).wrapping_sub(ROUND.to_bits() as i32);
     let half_scale = f32::from_bits((n_int.wrapping_add(126) as u32) << 23);
     let y = (p * half_scale) * 2.0;
     if x < MIN_ARG {
@@ -62,4 +57,17 @@ pub fn exp_f32(x: f32) -> f32 {
     } else {
         y
     }
+}
+
+/// `n = round(x·log₂e)` for a clamped argument `x`, by adding and subtracting [`ROUND`]: as a
+/// float and as an integer. The integer is read from the bits of the rounded sum, not converted
+/// from the float (Rust's saturating float-to-integer conversion is a long instruction
+/// sequence): the sum lies in ROUND's binade, where one ulp is one unit, so its bits differ
+/// from ROUND's by `n` exactly (checked against the conversion over the clamped range in
+/// `tests/suite/exp_f32.rs`). For NaN the integer is arbitrary; `exp_f32` is NaN there anyway.
+#[inline(always)]
+pub(crate) fn exponent(x: f32) -> (f32, i32) {
+    let shifted = x * std::f32::consts::LOG2_E + ROUND;
+    let n = shifted - ROUND;
+    (n, (shifted.to_bits() as i32).wrapping_sub(ROUND.to_bits() as i32))
 }

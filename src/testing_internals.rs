@@ -36,6 +36,14 @@ pub mod fps {
     }
 }
 
+/// The exponential's internals (`exp_f32`).
+pub mod exp_f32 {
+    /// `round(x·log₂e)` as a float and as the integer read from its bits.
+    pub fn exponent(x: f32) -> (f32, i32) {
+        crate::exp_f32::exponent(x)
+    }
+}
+
 /// Visual hull internals (`init::hull`).
 pub mod hull {
     /// The square max filter of radius `radius` applied to a `width × height` mask.

@@ -65,3 +65,28 @@ fn sigmoid_matches_the_exact_one() {
     assert_eq!(sigmoid(f32::INFINITY), 1.0);
     assert_eq!(sigmoid(f32::NEG_INFINITY), 0.0);
 }
+
+/// The exponent `n = round(x·log₂e)` that `exp_f32` reads from the bits of the rounded sum is
+/// the float-to-integer conversion of the same `n`, and `n` is an integer, for every 97th `f32`
+/// of the clamped range [MIN_ARG, MAX_ARG] and its ends (the function's own claim; a
+/// conversion off by one would scale the result by 2).
+#[test]
+fn the_exponent_read_from_the_bits_is_the_converted_one() {
+    use bbsplat::testing_internals::exp_f32::exponent;
+    let mut checked = 0;
+    let mut check = |x: f32| {
+        let (n, n_int) = exponent(x);
+        assert_eq!(n.fract(), 0.0, "x = {x:e}");
+        assert_eq!(n_int, n as i32, "x = {x:e}");
+        checked += 1;
+    };
+    for (lo, hi) in [(0.0f32, MAX_ARG), (-0.0f32, MIN_ARG)] {
+        let (mut bits, end) = (lo.to_bits(), hi.to_bits());
+        while bits <= end {
+            check(f32::from_bits(bits));
+            bits += 97;
+        }
+        check(hi);
+    }
+    assert!(checked > 20_000_000);
+}
