@@ -77,23 +77,25 @@ impl AdamGroup {
     /// the caller calls it for every row, with a zero gradient for unseen rows, and advances
     /// [`AdamGroup::global_step`] once per optimiser step). Also counts the update in `steps`.
     pub fn step_row_global(&mut self, row: usize, params: &mut [f32], grads: &[f32], lr: f32, hp: &AdamParams, t: u64) {
-        self.steps[row] = self.steps[row].saturating_add(1);
-        self.update(row, params, grads, lr, hp, t);
+        self.step_row_with(row, params, grads, StepFactors::new(lr, hp, t), hp);
     }
 
     /// One Adam step for billboard `row`: `params -= lr · m̂ / (√v̂ + ε)`, with bias correction by
     /// the number of updates this row has received. Dense PyTorch Adam would also decay the
     /// moments of rows with zero gradient and keep moving them; here a billboard that is not
-    /// seen in a view is left exactly as it is. This saves the work on unseen rows; how much it saves
-    /// and what it changes in quality against dense Adam has not been measured yet.
+    /// seen in a view is left exactly as it is. This saves the work on unseen rows; what it saves
+    /// and costs in quality against dense Adam is measured in `docs/quality.md` ("Dense against
+    /// row-sparse Adam").
     pub fn step_row(&mut self, row: usize, params: &mut [f32], grads: &[f32], lr: f32, hp: &AdamParams) {
-        self.steps[row] = self.steps[row].saturating_add(1);
-        let t = self.steps[row] as u64;
-        self.update(row, params, grads, lr, hp, t);
+        // The count this update brings the row to (`step_row_with` stores it).
+        let t = u64::from(self.steps[row].saturating_add(1));
+        self.step_row_with(row, params, grads, StepFactors::new(lr, hp, t), hp);
     }
 
-    /// [`AdamGroup::step_row_global`] with its bias-corrected factors computed beforehand (once
-    /// per step for all rows, as dense mode's rows share the step count): the same bits.
+    /// One Adam step of `row` with its bias-corrected `factors` (see [`StepFactors`]), counting the
+    /// update in `steps`. [`AdamGroup::step_row_global`] and [`AdamGroup::step_row`] compute the
+    /// factors per call; the dense trainer computes them once per group and step, as its rows
+    /// share the step count.
     pub fn step_row_with(
         &mut self,
         row: usize,
@@ -106,17 +108,12 @@ impl AdamGroup {
         let span = row * self.row_len..(row + 1) * self.row_len;
         update_row_with(&mut self.m[span.clone()], &mut self.v[span], params, grads, factors, hp);
     }
-
-    fn update(&mut self, row: usize, params: &mut [f32], grads: &[f32], lr: f32, hp: &AdamParams, t: u64) {
-        let span = row * self.row_len..(row + 1) * self.row_len;
-        update_row(&mut self.m[span.clone()], &mut self.v[span], params, grads, lr, hp, t);
-    }
 }
 
 /// The scalars of one Adam update at bias-correction step `t ≥ 1` with learning rate `lr`: the
 /// step size `lr / (1 − β₁ᵗ)` and `√(1 − β₂ᵗ)`. Computing them costs two integer powers and a
 /// square root, more than the update of a row of three values, so rows that share `t` share
-/// them ([`update_row_with`]).
+/// them ([`AdamGroup::step_row_with`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepFactors {
     step_size: f32,
@@ -135,16 +132,11 @@ impl StepFactors {
     }
 }
 
-/// The Adam update of one row (`m`, `v`, `params` and `grads` of equal length) at bias-correction
-/// step `t ≥ 1`, in PyTorch's arrangement `p -= (lr / (1 − β₁ᵗ)) · m / (√v / √(1 − β₂ᵗ) + ε)`.
-/// The one copy of the update: [`AdamGroup::step_row`], [`AdamGroup::step_row_global`] and the
-/// parallel texture step ([`super::texture_step`]) all call it.
-#[inline]
-pub fn update_row(m: &mut [f32], v: &mut [f32], params: &mut [f32], grads: &[f32], lr: f32, hp: &AdamParams, t: u64) {
-    update_row_with(m, v, params, grads, StepFactors::new(lr, hp, t), hp);
-}
-
-/// [`update_row`] with its step's [`StepFactors`] given (the one copy of the update's loop).
+/// The Adam update of one row (`m`, `v`, `params` and `grads` of equal length) with the
+/// [`StepFactors`] of its bias-correction step `t ≥ 1`, in PyTorch's arrangement
+/// `p -= (lr / (1 − β₁ᵗ)) · m / (√v / √(1 − β₂ᵗ) + ε)`. The one copy of the update:
+/// [`AdamGroup::step_row_with`] (which [`AdamGroup::step_row`] and
+/// [`AdamGroup::step_row_global`] call) and the parallel texture step ([`super::texture_step`]).
 /// Always inlined, so that it is compiled into the caller's instruction-set variant (the
 /// texture step's AVX2 build).
 #[inline(always)]

@@ -6,7 +6,7 @@
 //! 1. draws the next view from a shuffled stack (without replacement, refilled when empty);
 //! 2. renders it, evaluates `0.8·L1 + 0.2·(1 − SSIM)` and back-propagates it to every billboard;
 //! 3. adds the texture regulariser of paper Eq. 9 on the view's impact `Σ α·T` with threshold σ
-//!    (default 500) and the opacity regulariser `0.01 · mean alpha` ([`regularise`]);
+//!    (default 500) and the opacity regulariser `0.01 · mean alpha` ([`mod@regularise`]);
 //! 4. steps Adam ([`adam`]) with the learning rates of [`learning_rates`]: dense (every billboard,
 //!    PyTorch semantics, default) or row-sparse (only billboards the view touched), see
 //!    [`AdamMode`];

@@ -20,7 +20,7 @@ pub const OPACITY_REG_WEIGHT: f32 = 0.01;
 /// Impact threshold σ of the texture regulariser (paper-era value; current reference code: 100).
 pub const IMPACT_THRESHOLD: f32 = 500.0;
 
-/// What the texture regulariser of [`regularise`] reads besides the textures: the reference alpha
+/// What the texture regulariser of [`regularise()`] reads besides the textures: the reference alpha
 /// `alpha0` (`T` values), the view's per-billboard `impact`, the threshold σ and the weight λ.
 #[derive(Clone, Copy, Debug)]
 pub struct TextureTerm<'a> {
@@ -53,7 +53,7 @@ pub struct RegulariserValues {
 ///
 /// # Panics
 /// When `d_textures` and `textures` differ in length, `textures` is not whole rows of
-/// `texels_per_row` (`TS²`, positive) texels, or `texture` is given with `alpha0` not of
+/// `texels_per_row` (`TS²`; 0 only for an empty set) texels, or `texture` is given with `alpha0` not of
 /// `texels_per_row` values or `impact` not one per row.
 pub fn regularise(
     textures: &[[f32; 4]],
@@ -64,7 +64,12 @@ pub fn regularise(
 ) -> RegulariserValues {
     let t = texels_per_row;
     assert_eq!(d_textures.len(), textures.len(), "texture gradient buffer");
-    assert!(t > 0 && textures.len().is_multiple_of(t), "whole rows of TS² texels");
+    // Rows of no texels hold nothing: only an empty set has them.
+    if t == 0 {
+        assert!(textures.is_empty(), "whole rows of TS² texels");
+        return RegulariserValues::default();
+    }
+    assert!(textures.len().is_multiple_of(t), "whole rows of TS² texels");
     // The texture term with |vis|; off when no billboard is visible (the reference divides by
     // zero there).
     let texture = texture.and_then(|term| {
@@ -160,7 +165,7 @@ fn row_texture_term(term: TextureTerm<'_>, vis: f64, i: usize, tex: &[[f32; 4]])
 /// `m_i` the signed mean alpha difference (`sign(0) = 0`, the subgradient at the kink). When no
 /// billboard is visible the value is 0 and nothing is added (the reference divides by zero).
 /// `alpha0` is the reference alpha texture `A0` (`T` values, shared by all billboards).
-/// [`regularise`] with only this term.
+/// [`regularise()`] with only this term.
 pub fn texture_regulariser(
     textures: &[[f32; 4]],
     alpha0: &[f32],
@@ -169,11 +174,6 @@ pub fn texture_regulariser(
     weight: f32,
     d_textures: &mut [[f32; 4]],
 ) -> f64 {
-    if alpha0.is_empty() {
-        assert_eq!(d_textures.len(), textures.len(), "texture gradient buffer");
-        assert!(textures.is_empty(), "TS² RGBA texels per billboard");
-        return 0.0;
-    }
     let term = TextureTerm {
         alpha0,
         impact,
@@ -186,7 +186,7 @@ pub fn texture_regulariser(
 /// Global opacity regulariser: `L = λ · mean over all billboards and texels of alpha`, including
 /// texels held at zero by the alpha mask (the reference's mean runs over all `TS²`). Adds
 /// `λ / (N·T)` to the alpha channel of every texel of `d_textures`. An empty model gives 0.
-/// [`regularise`] with only this term (`texels_per_row = T`: the value is summed row by row).
+/// [`regularise()`] with only this term (`texels_per_row = T`: the value is summed row by row).
 pub fn opacity_regulariser(
     textures: &[[f32; 4]],
     texels_per_row: usize,
