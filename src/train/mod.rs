@@ -941,24 +941,25 @@ impl Trainer {
         // the late freeze the textures never move again, so their groups are skipped.
         let textures_live = !past_milestone(self.step, self.config.iterations, 30_000);
         // Geometry, SH and (Gaussian mode) opacity: 57 floats a row, stepped row by row.
-        let group_lr = [
-            lr.position,
-            lr.rotation,
-            lr.scale,
-            lr.sh_dc,
-            lr.sh_rest,
-            lr.alpha,
-            lr.colour,
-            lr.opacity,
-        ];
-        let factors: [StepFactors; 8] =
-            std::array::from_fn(|i| StepFactors::new(group_lr[i], &hp, self.adam[i].global_step));
+        // Dense rows share each group's step count: its Adam factors, once per step (the texture
+        // groups compute theirs in the texture step).
+        let [f_pos, f_rot, f_scale, f_sh_dc, f_sh_rest, f_opacity] = {
+            let [a_pos, a_rot, a_scale, a_sh_dc, a_sh_rest, _, _, a_opacity] = &self.adam;
+            let at = |group: &AdamGroup, lr: f32| StepFactors::new(lr, &hp, group.global_step);
+            [
+                at(a_pos, lr.position),
+                at(a_rot, lr.rotation),
+                at(a_scale, lr.scale),
+                at(a_sh_dc, lr.sh_dc),
+                at(a_sh_rest, lr.sh_rest),
+                at(a_opacity, lr.opacity),
+            ]
+        };
         for &b in rows {
             let b = b as usize;
             let m = &mut self.model;
             let g = &self.grads;
             let [a_pos, a_rot, a_scale, a_sh_dc, a_sh_rest, _, _, a_opacity] = &mut self.adam;
-            // Dense rows share each group's step count: its factors are computed once, above.
             let step = |group: &mut AdamGroup, params: &mut [f32], grads: &[f32], lr: f32, factors: StepFactors| {
                 if dense {
                     group.step_row_with(b, params, grads, factors, &hp);
@@ -966,7 +967,6 @@ impl Trainer {
                     group.step_row(b, params, grads, lr, &hp);
                 }
             };
-            let [f_pos, f_rot, f_scale, f_sh_dc, f_sh_rest, _, _, f_opacity] = factors;
             step(
                 a_pos,
                 m.positions[b].as_mut(),
