@@ -201,11 +201,11 @@ pub mod raster {
             self.0.finish(slots)
         }
 
-        /// Whether every cell is untouched and no touched cell is listed (the state `finish`
-        /// must leave for the next tile).
+        /// Whether every cell and every slot is marked untouched (the state `finish` must leave
+        /// for the next tile).
         pub fn is_clean(&self) -> bool {
             let sums = &self.0;
-            sums.cell_of.iter().all(|&c| c == crate::raster::backward::UNTOUCHED) && sums.cells.is_empty()
+            sums.touched.iter().all(|&t| t == 0) && sums.slot_touched.iter().all(|&t| !t)
         }
     }
 }

@@ -9,8 +9,8 @@
 //! Gradients are first accumulated per tile entry (one (tile, billboard) pair) in a record at
 //! the entry's global index, then summed per billboard over its entries in tile order, so the
 //! result does not depend on how rayon schedules tiles. Texture gradients are summed per
-//! (entry, texel) as the pixels produce them, in a per-thread accumulator whose sums list only
-//! the touched cells, and handed on sparse per entry (only the texels some pixel of the tile
+//! (entry, texel) as the pixels produce them, in a per-thread accumulator of dense cells with
+//! touched flags, and handed on sparse per entry (only the texels some pixel of the tile
 //! touched); see `TexelSums`. A billboard with a single tile entry (most billboards of a dense
 //! view) has nothing to sum across tiles: its tile adds each texel contribution straight to the
 //! billboard's gradient row as the pixels produce it (see `SoleEntryRows`).
@@ -29,7 +29,7 @@ use crate::stages::depth_distortion::{DistortionTotals, depth_gradient, mapped_d
 use crate::stages::ray_plane::{intersect_vjp_with, pixel_ray};
 use crate::stages::sh::sh_colour_vjp_clamped;
 use crate::stages::splat_transform::{CameraGrads, SplatTransform, camera_vjp, project_splat_vjp_visible};
-use glam::{DVec2, DVec3, Vec2, Vec3};
+use glam::{BVec4A, DVec2, DVec3, Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 
 /// Gradients of a scalar loss with respect to every billboard parameter and the background.
@@ -315,84 +315,97 @@ struct Scratch {
 /// is the sum of its contributions in pixel order, starting from the first one (assigned, not
 /// added to 0, so that a lone `−0.0` stays `−0.0`): the same sums, in the same order, as a
 /// stable sort of all contributions by (slot, texel) followed by a merge of equal keys
-/// (`texel_sums_reference` in tests/suite/raster_backward.rs, tested). A dense `slots × TS²`
-/// index (4 bytes a cell) maps each cell to its position in a compact list of the touched
-/// cells, in first-touch order; only the touched cells are read out and reset, so a tile costs
-/// `O(contributions + touched cells)` whatever its number of entries, and the sums themselves
-/// stay in a few cache lines even when the index is sparse (a benchmark tile: 180 entries
-/// touching ~6 texels each).
+/// (`texel_sums_reference` in tests/suite/raster_backward.rs, tested).
+///
+/// The cells are dense, `slots × TS²` sums of 16 bytes with a one-byte touched flag each, so an
+/// add has no branch: it adds `g` to the sum, or to `−0.0` on a first touch, chosen by a bit
+/// mask (a branch on a first touch is mispredicted about as often as it is taken). Only the flags are reset after a tile;
+/// an untouched cell's stale sum is never read. [`TexelSums::finish`] reads the flags of the
+/// slots something was added to, eight at a time.
 #[derive(Default)]
 pub(crate) struct TexelSums {
-    /// Per cell `slot · texels + texel`: its position in `sums`, or [`UNTOUCHED`].
-    pub(crate) cell_of: Vec<u32>,
-    /// `[∂r, ∂g, ∂b, ∂alpha]` of the touched cells, in first-touch order.
+    /// Per cell `slot · texels + texel`: the sum of its contributions in the current tile, valid
+    /// only where `touched` is set.
     sums: Vec<[f32; 4]>,
-    /// `(slot, texel)` of the touched cells, in the order of `sums`.
-    pub(crate) cells: Vec<(u32, u32)>,
+    /// Per cell: 1 when some contribution was added in the current tile, else 0.
+    pub(crate) touched: Vec<u8>,
+    /// Per slot: some contribution was added in the current tile.
+    pub(crate) slot_touched: Vec<bool>,
     /// Cells per slot (`TS²`) of the current tile.
     texels: usize,
-    /// Per-slot write cursors of [`TexelSums::finish`].
-    cursor: Vec<u32>,
 }
-
-/// [`TexelSums::cell_of`] of a cell not touched in the current tile.
-pub(crate) const UNTOUCHED: u32 = u32::MAX;
 
 impl TexelSums {
     /// Prepares for a tile of `slots` entries with `texels` texels per channel.
     pub(crate) fn start(&mut self, slots: usize, texels: usize) {
-        debug_assert!(self.cells.is_empty(), "the previous tile was finished");
+        debug_assert!(self.slot_touched.iter().all(|&t| !t), "the previous tile was finished");
         let cells = slots * texels;
-        if self.cell_of.len() < cells {
-            self.cell_of.resize(cells, UNTOUCHED);
+        if self.sums.len() < cells {
+            self.sums.resize(cells, [0.0; 4]);
+            self.touched.resize(cells, 0);
+        }
+        if self.slot_touched.len() < slots {
+            self.slot_touched.resize(slots, false);
         }
         self.texels = texels;
     }
 
-    /// Start of the cell index ([`TexelSums::cell_of`]), for prefetches only (never
-    /// dereferenced through this pointer; valid until the next [`TexelSums::start`]).
-    pub(crate) fn cell_index(&self) -> *const u32 {
-        self.cell_of.as_ptr()
+    /// Start of the cell sums (`slots × texels` values of `[f32; 4]`), for prefetches only
+    /// (never dereferenced through this pointer; valid until the next [`TexelSums::start`]).
+    pub(crate) fn cell_sums(&self) -> *const [f32; 4] {
+        self.sums.as_ptr()
     }
 
     /// Adds one contribution to cell (`slot`, `texel`).
-    #[inline]
+    #[inline(always)]
     pub(crate) fn add(&mut self, slot: u32, texel: u32, g: [f32; 4]) {
-        let cell = &mut self.cell_of[slot as usize * self.texels + texel as usize];
-        if *cell == UNTOUCHED {
-            *cell = self.sums.len() as u32;
-            self.sums.push(g);
-            self.cells.push((slot, texel));
-        } else {
-            let s = &mut self.sums[*cell as usize];
-            for c in 0..4 {
-                s[c] += g[c];
-            }
-        }
+        let cell = slot as usize * self.texels + texel as usize;
+        let seen = BVec4A::splat(self.touched[cell] != 0);
+        let s = &mut self.sums[cell];
+        // The running sum, or −0.0 on a first touch: `−0.0 + g` is `g` bit for bit (`−0.0`
+        // included), so the first contribution is assigned. A bitwise select, not a branch.
+        let prior = Vec4::select(seen, Vec4::from_array(*s), Vec4::splat(-0.0));
+        *s = (prior + Vec4::from_array(g)).to_array();
+        self.touched[cell] = 1;
+        self.slot_touched[slot as usize] = true;
     }
 
-    /// The touched cells grouped by slot (a stable counting sort: first-touch order within a
-    /// slot), resetting them for the next tile. Returns `(offsets, texels)`: the texels of slot
-    /// `k` are `texels[offsets[k]..offsets[k + 1]]`.
+    /// The touched cells grouped by slot, in texel order within a slot, resetting the flags for
+    /// the next tile. Returns `(offsets, texels)`: the texels of slot `k` are
+    /// `texels[offsets[k]..offsets[k + 1]]`.
     pub(crate) fn finish(&mut self, slots: usize) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
-        let mut offsets = vec![0u32; slots + 1];
-        for &(slot, _) in &self.cells {
-            offsets[slot as usize + 1] += 1;
+        let texels = self.texels;
+        let mut offsets = Vec::with_capacity(slots + 1);
+        offsets.push(0u32);
+        let mut out = Vec::new();
+        for slot in 0..slots {
+            if std::mem::take(&mut self.slot_touched[slot]) {
+                let flags = &mut self.touched[slot * texels..(slot + 1) * texels];
+                let sums = &self.sums[slot * texels..(slot + 1) * texels];
+                let mut chunks = flags.chunks_exact_mut(8);
+                let mut base = 0usize;
+                for chunk in &mut chunks {
+                    let word = u64::from_le_bytes(chunk.try_into().expect("eight flags"));
+                    if word != 0 {
+                        // One set bit per touched flag (each flag is 0 or 1), lowest first.
+                        let mut bits = word;
+                        while bits != 0 {
+                            let t = base + bits.trailing_zeros() as usize / 8;
+                            out.push((t as u32, sums[t]));
+                            bits &= bits - 1;
+                        }
+                        chunk.fill(0);
+                    }
+                    base += 8;
+                }
+                for (t, flag) in chunks.into_remainder().iter_mut().enumerate() {
+                    if std::mem::take(flag) != 0 {
+                        out.push(((base + t) as u32, sums[base + t]));
+                    }
+                }
+            }
+            offsets.push(out.len() as u32);
         }
-        for k in 0..slots {
-            offsets[k + 1] += offsets[k];
-        }
-        self.cursor.clear();
-        self.cursor.extend_from_slice(&offsets[..slots]);
-        let mut out = vec![(0u32, [0.0f32; 4]); self.cells.len()];
-        for (&(slot, texel), &sum) in self.cells.iter().zip(&self.sums) {
-            let c = &mut self.cursor[slot as usize];
-            out[*c as usize] = (texel, sum);
-            *c += 1;
-            self.cell_of[slot as usize * self.texels + texel as usize] = UNTOUCHED;
-        }
-        self.cells.clear();
-        self.sums.clear();
         (offsets, out)
     }
 }
@@ -448,14 +461,14 @@ fn backward_tile(
     );
     let sole: &[bool] = sole;
     // Where each candidate's texel gradients will go is prefetched with its texels: the
-    // billboard's gradient row for a sole entry, else the (slot, texel) cells of the sums' index
+    // billboard's gradient row for a sole entry, else the (slot, texel) cells of the sums
     // (a `slots × TS²` array, a random cache line per candidate otherwise).
-    let cell_index = sums.cell_index();
+    let cell_sums = sums.cell_sums();
     let prefetch_gradient_cells = |k: u32, taps: &BilinearTaps| {
         if sole[k as usize] {
             sole_rows.prefetch(list[k as usize] as usize, taps);
         } else {
-            prefetch_taps(cell_index.wrapping_add(k as usize * ts * ts), taps.indices());
+            prefetch_taps(cell_sums.wrapping_add(k as usize * ts * ts), taps.indices());
         }
     };
     let rect = (i0, j0, i1, j1);

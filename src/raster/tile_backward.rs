@@ -236,7 +236,7 @@ fn by_entry_body(
                 if sole[ahead] {
                     prefetch_texel_rect(sole_rows.row_start(b), ts, rect);
                 } else {
-                    prefetch_texel_rect(sums.cell_index().wrapping_add(ahead * ts * ts), ts, rect);
+                    prefetch_texel_rect(sums.cell_sums().wrapping_add(ahead * ts * ts), ts, rect);
                 }
             }
         }
