@@ -88,7 +88,7 @@ impl SampleTaps {
         check_rgba_texels(texels.len(), self.ts);
         let n = self.len as usize;
         if n == 4 {
-            return sample_four(texels, self.index, self.weight, [true; 4]);
+            return sample_four(|i| texels[i as usize], self.index, self.weight, [true; 4]);
         }
         let mut acc = Vec4::ZERO;
         for k in 0..n {
@@ -108,18 +108,31 @@ fn check_rgba_texels(texels: usize, ts: u32) {
     );
 }
 
+/// Texel `index` of `texels`, for the indices of a [`RowTaps`] only: [`taps_row`] clamps every
+/// index's row and column into `0..ts`, so it is below `ts²`, and the callers check
+/// `texels.len() == ts²` first ([`check_rgba_texels`]); the read skips the bounds check that
+/// the compiler cannot prove away (two instructions per tap in the tile loops).
+#[inline(always)]
+fn rgba_texel(texels: &[[f32; 4]], index: u32) -> [f32; 4] {
+    debug_assert!(
+        (index as usize) < texels.len(),
+        "a row tap's index is inside the texture"
+    );
+    // SAFETY: see above; `RowTaps` has private fields and `taps_row` is its only constructor.
+    unsafe { *texels.get_unchecked(index as usize) }
+}
+
 /// The four-tap RGBA sample `Σ wₖ·texel[iₖ]` over the taps with `inside[k]`, summed in tap
 /// order from zero, each outside tap's product replaced by zero (the one copy of the sampling
 /// arithmetic: [`SampleTaps::sample_rgba`] and [`RowTaps::sample_rgba`]). Replacing the product,
 /// not the weight, keeps an outside tap from adding `0 · ∞ = NaN`.
 #[inline(always)]
-fn sample_four(texels: &[[f32; 4]], index: [u32; 4], w: [f32; 4], inside: [bool; 4]) -> [f32; 4] {
-    let [i0, i1, i2, i3] = index.map(|i| i as usize);
+fn sample_four(texel: impl Fn(u32) -> [f32; 4], index: [u32; 4], w: [f32; 4], inside: [bool; 4]) -> [f32; 4] {
     let (t0, t1, t2, t3) = (
-        Vec4::from_array(texels[i0]),
-        Vec4::from_array(texels[i1]),
-        Vec4::from_array(texels[i2]),
-        Vec4::from_array(texels[i3]),
+        Vec4::from_array(texel(index[0])),
+        Vec4::from_array(texel(index[1])),
+        Vec4::from_array(texel(index[2])),
+        Vec4::from_array(texel(index[3])),
     );
     let keep = |k: usize, x: Vec4| Vec4::select(BVec4A::splat(inside[k]), x, Vec4::ZERO);
     (Vec4::ZERO + keep(0, w[0] * t0) + keep(1, w[1] * t1) + keep(2, w[2] * t2) + keep(3, w[3] * t3)).to_array()
@@ -132,7 +145,7 @@ fn sample_four(texels: &[[f32; 4]], index: [u32; 4], w: [f32; 4], inside: [bool;
 /// read through `tap` so that each caller reads its own layout in place, with no copies.
 #[inline(always)]
 fn vjp_taps(
-    texels: &[[f32; 4]],
+    texel: impl Fn(u32) -> [f32; 4],
     taps: usize,
     tap: impl Fn(usize) -> Option<(u32, f32, f32, f32)>,
     d_rgba: [f32; 4],
@@ -144,7 +157,7 @@ fn vjp_taps(
         let Some((index, weight, d_weight_du, d_weight_dv)) = tap(k) else {
             continue;
         };
-        let t = texels[index as usize];
+        let t = texel(index);
         // The texel's value seen through the upstream gradient: alpha first, then r, g, b.
         let seen = t[3] * d_rgba[3] + t[0] * d_rgba[0] + t[1] * d_rgba[1] + t[2] * d_rgba[2];
         du += d_weight_du * seen;
@@ -436,7 +449,7 @@ impl BilinearTaps {
     pub fn vjp_rgba(&self, texels: &[[f32; 4]], d_rgba: [f32; 4], emit: impl FnMut(u32, [f32; 4])) -> (f32, f32) {
         check_rgba_texels(texels.len(), self.ts);
         let tap = |k: usize| Some((self.index[k], self.weight[k], self.d_weight_du[k], self.d_weight_dv[k]));
-        vjp_taps(texels, self.len as usize, tap, d_rgba, emit)
+        vjp_taps(|i| texels[i as usize], self.len as usize, tap, d_rgba, emit)
     }
 }
 
@@ -597,7 +610,7 @@ impl RowTaps {
         }
         check_rgba_texels(texels.len(), self.ts);
         Some(sample_four(
-            texels,
+            |i| rgba_texel(texels, i),
             std::array::from_fn(|k| self.index[k][lane]),
             std::array::from_fn(|k| self.weight[k][lane]),
             std::array::from_fn(|k| self.inside[k][lane]),
@@ -633,7 +646,7 @@ impl RowTaps {
                 )
             })
         };
-        Some(vjp_taps(texels, 4, tap, d_rgba, emit))
+        Some(vjp_taps(|i| rgba_texel(texels, i), 4, tap, d_rgba, emit))
     }
 
     /// The taps and weights of lane `lane` (what sampling reads): [`RowTaps::lane`] followed by
