@@ -261,11 +261,11 @@ fn by_entry_body(
             // the hits' gradients lane-wise, added to the record in pixel order.
             let (mut d_u, mut d_v, mut d_depth) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
             // The samples of the chunk's pairs first, so that their texel reads overlap.
-            let samples: [Option<[f32; 4]>; LANES] = std::array::from_fn(|lane| {
-                (lane < chunk.len())
-                    .then(|| lane_taps.sample_rgba(lane, texture))
-                    .flatten()
-            });
+            // (A loop: `array::from_fn` here was compiled out of line, for the baseline.)
+            let mut samples: [Option<[f32; 4]>; LANES] = [None; LANES];
+            for (lane, sample) in samples.iter_mut().enumerate().take(chunk.len()) {
+                *sample = lane_taps.sample_rgba(lane, texture);
+            }
             for (lane, pair) in chunk.iter().enumerate() {
                 debug_assert!(hits.valid[lane], "a blended pair hits its billboard");
                 let depth = hits.depth[lane];
