@@ -193,6 +193,7 @@ pub mod raster {
 
         /// Adds `g` to the cell (`slot`, `texel`).
         pub fn add(&mut self, slot: u32, texel: u32, g: [f32; 4]) {
+            self.0.mark(slot);
             self.0.add(slot, texel, g)
         }
 

@@ -373,6 +373,12 @@ impl TexelSums {
         let prior = Vec4::select(seen, Vec4::from_array(*s), Vec4::splat(-0.0));
         *s = (prior + Vec4::from_array(g)).to_array();
         self.touched[cell] = 1;
+    }
+
+    /// Marks `slot` as added to: [`TexelSums::finish`] reads out only marked slots. Every
+    /// caller of [`TexelSums::add`] marks the slot too, once per entry or per contribution.
+    #[inline(always)]
+    pub(crate) fn mark(&mut self, slot: u32) {
         self.slot_touched[slot as usize] = true;
     }
 
@@ -563,6 +569,7 @@ fn backward_tile(
                         sole_rows.add(b, texel, g)
                     })
                 } else {
+                    sums.mark(slot);
                     taps.vjp_rgba(set.texture_of(b), d_rgba, |texel, g| sums.add(slot, texel, g))
                 };
                 let pr = prepared[b].as_ref().expect("blended entries are prepared");

@@ -249,6 +249,9 @@ fn by_entry_body(
         let plane = pr.view_plane();
         let texture = set.texture_of(b);
         let record = &mut records[k];
+        if !sole[k] {
+            sums.mark(k as u32);
+        }
         for chunk in of.chunks(LANES) {
             // Hits and taps lane-wise (unused lanes repeat the last pair), then the pairs one by
             // one in pixel order.
