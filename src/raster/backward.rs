@@ -332,9 +332,6 @@ pub(crate) struct TexelSums {
     pub(crate) touched: Vec<u8>,
     /// Per slot: some contribution was added in the current tile.
     pub(crate) slot_touched: Vec<bool>,
-    /// The number of touched cells of the current tile (the length of [`TexelSums::finish`]'s
-    /// list, allocated once at that size).
-    touched_cells: usize,
     /// Cells per slot (`TS²`) of the current tile.
     texels: usize,
 }
@@ -364,9 +361,7 @@ impl TexelSums {
     #[inline(always)]
     pub(crate) fn add(&mut self, slot: u32, texel: u32, g: [f32; 4]) {
         let cell = slot as usize * self.texels + texel as usize;
-        let flag = self.touched[cell];
-        self.touched_cells += usize::from(1 - flag);
-        let seen = BVec4A::splat(flag != 0);
+        let seen = BVec4A::splat(self.touched[cell] != 0);
         let s = &mut self.sums[cell];
         // The running sum, or −0.0 on a first touch: `−0.0 + g` is `g` bit for bit (`−0.0`
         // included), so the first contribution is assigned. A bitwise select, not a branch.
@@ -389,7 +384,16 @@ impl TexelSums {
         let texels = self.texels;
         let mut offsets = Vec::with_capacity(slots + 1);
         offsets.push(0u32);
-        let mut out = Vec::with_capacity(std::mem::take(&mut self.touched_cells));
+        // The list's length first (a count of the flags of the marked slots), so that it is
+        // allocated once.
+        let touched: usize = (0..slots)
+            .filter(|&slot| self.slot_touched[slot])
+            .map(|slot| {
+                let flags = &self.touched[slot * texels..(slot + 1) * texels];
+                flags.iter().map(|&f| usize::from(f)).sum::<usize>()
+            })
+            .sum();
+        let mut out = Vec::with_capacity(touched);
         for slot in 0..slots {
             if std::mem::take(&mut self.slot_touched[slot]) {
                 let flags = &mut self.touched[slot * texels..(slot + 1) * texels];
