@@ -357,9 +357,12 @@ impl TexelSums {
         self.sums.as_ptr()
     }
 
-    /// Adds one contribution to cell (`slot`, `texel`).
+    /// Adds one contribution to cell (`slot`, `texel`). The slot must have been marked
+    /// ([`TexelSums::mark`]) in this tile: an unmarked slot's cells would be neither read out nor
+    /// reset (checked in debug builds).
     #[inline(always)]
     pub(crate) fn add(&mut self, slot: u32, texel: u32, g: [f32; 4]) {
+        debug_assert!(self.slot_touched[slot as usize], "the slot was marked before its adds");
         let cell = slot as usize * self.texels + texel as usize;
         let seen = BVec4A::splat(self.touched[cell] != 0);
         let s = &mut self.sums[cell];
@@ -370,8 +373,8 @@ impl TexelSums {
         self.touched[cell] = 1;
     }
 
-    /// Marks `slot` as added to: [`TexelSums::finish`] reads out only marked slots. Every
-    /// caller of [`TexelSums::add`] marks the slot too, once per entry or per contribution.
+    /// Marks `slot` as added to: [`TexelSums::finish`] reads out (and resets) only marked
+    /// slots. Callers of [`TexelSums::add`] mark the slot first, once per entry or per pair.
     #[inline(always)]
     pub(crate) fn mark(&mut self, slot: u32) {
         self.slot_touched[slot as usize] = true;
