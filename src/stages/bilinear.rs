@@ -40,7 +40,7 @@
 //! ```
 
 use crate::stages::ray_plane::LANES;
-use glam::{BVec4A, Vec4};
+use glam::Vec4;
 
 /// The (at most four) texels that contribute to a bilinear sample at one `(u, v)`, with their
 /// weights and the derivatives of the weights with respect to `u` and `v`.
@@ -88,7 +88,7 @@ impl SampleTaps {
         check_rgba_texels(texels.len(), self.ts);
         let n = self.len as usize;
         if n == 4 {
-            return sample_four(|i| texels[i as usize], self.index, self.weight, [true; 4]);
+            return sample_four(|i| texels[i as usize], self.index, self.weight, [KEEP; 4]);
         }
         let mut acc = Vec4::ZERO;
         for k in 0..n {
@@ -108,6 +108,9 @@ fn check_rgba_texels(texels: usize, ts: u32) {
     );
 }
 
+/// The tap mask of a tap inside the texture (see [`sample_four`]): all bits set.
+const KEEP: u32 = u32::MAX;
+
 /// Texel `index` of `texels`, for the indices of a [`RowTaps`] only: [`taps_row`] clamps every
 /// index's row and column into `0..ts`, so it is below `ts²`, and the callers check
 /// `texels.len() == ts²` first ([`check_rgba_texels`]); the read skips the bounds check that
@@ -122,19 +125,20 @@ fn rgba_texel(texels: &[[f32; 4]], index: u32) -> [f32; 4] {
     unsafe { *texels.get_unchecked(index as usize) }
 }
 
-/// The four-tap RGBA sample `Σ wₖ·texel[iₖ]` over the taps with `inside[k]`, summed in tap
+/// The four-tap RGBA sample `Σ wₖ·texel[iₖ]` over the taps whose mask `keep[k]` is [`KEEP`], summed in tap
 /// order from zero, each outside tap's product replaced by zero (the one copy of the sampling
 /// arithmetic: [`SampleTaps::sample_rgba`] and [`RowTaps::sample_rgba`]). Replacing the product,
 /// not the weight, keeps an outside tap from adding `0 · ∞ = NaN`.
 #[inline(always)]
-fn sample_four(texel: impl Fn(u32) -> [f32; 4], index: [u32; 4], w: [f32; 4], inside: [bool; 4]) -> [f32; 4] {
+fn sample_four(texel: impl Fn(u32) -> [f32; 4], index: [u32; 4], w: [f32; 4], keep: [u32; 4]) -> [f32; 4] {
     let (t0, t1, t2, t3) = (
         Vec4::from_array(texel(index[0])),
         Vec4::from_array(texel(index[1])),
         Vec4::from_array(texel(index[2])),
         Vec4::from_array(texel(index[3])),
     );
-    let keep = |k: usize, x: Vec4| Vec4::select(BVec4A::splat(inside[k]), x, Vec4::ZERO);
+    // A bitwise and with the tap's mask: the product, or +0 for an outside tap.
+    let keep = |k: usize, x: Vec4| Vec4::from_array(x.to_array().map(|c| f32::from_bits(c.to_bits() & keep[k])));
     (Vec4::ZERO + keep(0, w[0] * t0) + keep(1, w[1] * t1) + keep(2, w[2] * t2) + keep(3, w[3] * t3)).to_array()
 }
 
@@ -504,8 +508,9 @@ pub struct RowTaps {
     d_weight_du: [[f32; LANES]; 4],
     /// `∂weight/∂v` per tap.
     d_weight_dv: [[f32; LANES]; 4],
-    /// Per tap and lane: the tap lies inside the texture.
-    inside: [[bool; LANES]; 4],
+    /// Per tap and lane: [`KEEP`] (all bits set) when the tap lies inside the texture, else 0;
+    /// a mask so that sampling keeps or zeroes the tap's product with one bitwise and.
+    keep: [[u32; LANES]; 4],
     /// The lane has taps: `X, Y ∈ [−1, ts)` (false for non-finite coordinates).
     has_taps: [bool; LANES],
 }
@@ -530,7 +535,7 @@ pub fn taps_row(u: &[f32; LANES], v: &[f32; LANES], ts: usize) -> RowTaps {
         weight: [[0.0; LANES]; 4],
         d_weight_du: [[0.0; LANES]; 4],
         d_weight_dv: [[0.0; LANES]; 4],
-        inside: [[false; LANES]; 4],
+        keep: [[0; LANES]; 4],
         has_taps: [false; LANES],
     };
     for lane in 0..LANES {
@@ -561,7 +566,7 @@ pub fn taps_row(u: &[f32; LANES], v: &[f32; LANES], ts: usize) -> RowTaps {
         let row = [iy.clamp(0, n - 1) as u32, (iy + 1).clamp(0, n - 1) as u32];
         for (k, (dy, dx)) in [(0, 0), (0, 1), (1, 0), (1, 1)].into_iter().enumerate() {
             out.index[k][lane] = row[dy] * ts as u32 + col[dx];
-            out.inside[k][lane] = row_inside[dy] & col_inside[dx];
+            out.keep[k][lane] = if row_inside[dy] & col_inside[dx] { KEEP } else { 0 };
             out.weight[k][lane] = gx[dx] * gy[dy];
             out.d_weight_du[k][lane] = dg[dx] * gy[dy];
             out.d_weight_dv[k][lane] = gx[dx] * dg[dy];
@@ -585,7 +590,7 @@ impl RowTaps {
             d_weight_du: [0.0; 4],
             d_weight_dv: [0.0; 4],
         };
-        for k in (0..4).filter(|&k| self.inside[k][lane]) {
+        for k in (0..4).filter(|&k| self.keep[k][lane] == KEEP) {
             let at = t.len as usize;
             t.index[at] = self.index[k][lane];
             t.weight[at] = self.weight[k][lane];
@@ -613,7 +618,7 @@ impl RowTaps {
             |i| rgba_texel(texels, i),
             std::array::from_fn(|k| self.index[k][lane]),
             std::array::from_fn(|k| self.weight[k][lane]),
-            std::array::from_fn(|k| self.inside[k][lane]),
+            std::array::from_fn(|k| self.keep[k][lane]),
         ))
     }
 
@@ -637,7 +642,7 @@ impl RowTaps {
         // Each value read in place (`w.map(|w| w[lane])` would copy every tap's whole lane
         // array to the stack first).
         let tap = |k: usize| {
-            self.inside[k][lane].then(|| {
+            (self.keep[k][lane] == KEEP).then(|| {
                 (
                     self.index[k][lane],
                     self.weight[k][lane],
