@@ -39,6 +39,8 @@
 //! assert_eq!(out.n_used, 2);
 //! ```
 
+use glam::Vec4;
+
 /// How the gradient goes through the clamp `α = min(max_alpha, a)`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ClampGradient {
@@ -326,8 +328,29 @@ fn back_step(
     params: &CompositeParams,
 ) -> f32 {
     let alpha = blend.alpha;
+    let n = behind.len();
+    assert!(
+        features.len() == n && d_out.len() == n && d_features.len() == n,
+        "features, upstream gradients, state and feature gradients hold the same channels"
+    );
     let mut dot = 0.0f32;
-    for ch in 0..behind.len() {
+    // Four channels at a time in vector registers (each lane the scalar operations below, so
+    // the same bits), the products summed into `dot` one by one in channel order.
+    let mut ch = 0;
+    while ch + 4 <= n {
+        let lanes = ch..ch + 4;
+        let (c, g) = (
+            Vec4::from_slice(&features[lanes.clone()]),
+            Vec4::from_slice(&d_out[lanes.clone()]),
+        );
+        let b = Vec4::from_slice(&behind[lanes.clone()]);
+        let [p0, p1, p2, p3] = ((c - b) * g).to_array();
+        dot = dot + p0 + p1 + p2 + p3;
+        (blend.weight * g).write_to_slice(&mut d_features[lanes.clone()]);
+        (alpha * c + (1.0 - alpha) * b).write_to_slice(&mut behind[lanes]);
+        ch += 4;
+    }
+    for ch in ch..n {
         let c = features[ch];
         let g = d_out[ch];
         dot += (c - behind[ch]) * g;
