@@ -17,7 +17,7 @@ use super::forward::{EntrySpans, prefetch_ptr, prefetch_record};
 use super::preprocess::Prepared;
 use super::{ActivatedRef, RenderSettings};
 use crate::camera::Camera;
-use crate::stages::bilinear::taps_row;
+use crate::stages::bilinear::taps_row_with;
 use crate::stages::composite::{CompositeState, Step};
 use crate::stages::depth_distortion::{DistortionState, mapped_depth};
 use crate::stages::ray_plane::{LANES, intersect_lanes};
@@ -203,7 +203,7 @@ fn composite_tile_body<const DISTORTION: bool>(
                 let first = i0 + (lanes.start - row) as u32;
                 let px: [f32; LANES] = std::array::from_fn(|l| (first + l as u32) as f32 + 0.5);
                 let hits = intersect_lanes(&p.transform, &plane, camera, &px, &[py; LANES]);
-                let taps = taps_row(&hits.u, &hits.v, ts);
+                let taps = taps_row_with::<false>(&hits.u, &hits.v, ts);
                 // The samples of the chunk's pixels first, so that their texel reads overlap
                 // instead of each waiting behind the previous pixel's compositing.
                 let mut samples = [None; LANES];

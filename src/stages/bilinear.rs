@@ -500,6 +500,8 @@ pub fn sample_vjp(
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RowTaps {
     ts: u32,
+    /// The derivative arrays were computed (see [`taps_row_with`]).
+    derivatives: bool,
     /// Texel index (`row · ts + column`, clamped into the texture) per tap and lane.
     index: [[u32; LANES]; 4],
     /// Weights per tap (`[tap][lane]`, taps in [`BilinearTaps`] order).
@@ -525,12 +527,21 @@ pub struct RowTaps {
 /// If `ts` is out of `2..=65536`.
 #[inline(always)]
 pub fn taps_row(u: &[f32; LANES], v: &[f32; LANES], ts: usize) -> RowTaps {
+    taps_row_with::<true>(u, v, ts)
+}
+
+/// [`taps_row`] with the weights' derivatives only when `DERIVATIVES` (else they are left zero
+/// and the taps are for sampling only: [`RowTaps::vjp_rgba`] must not be called on them, which
+/// debug builds check). The forward pass, which only samples, skips their 32 products.
+#[inline(always)]
+pub(crate) fn taps_row_with<const DERIVATIVES: bool>(u: &[f32; LANES], v: &[f32; LANES], ts: usize) -> RowTaps {
     assert!((2..=65536).contains(&ts), "texture size must be in 2..=65536, got {ts}");
     let n = ts as i32;
     let limit = ts as f64;
     let s = (0.5 * (ts - 1) as f64) as f32;
     let mut out = RowTaps {
         ts: ts as u32,
+        derivatives: DERIVATIVES,
         index: [[0; LANES]; 4],
         weight: [[0.0; LANES]; 4],
         d_weight_du: [[0.0; LANES]; 4],
@@ -568,8 +579,10 @@ pub fn taps_row(u: &[f32; LANES], v: &[f32; LANES], ts: usize) -> RowTaps {
             out.index[k][lane] = row[dy] * ts as u32 + col[dx];
             out.keep[k][lane] = if row_inside[dy] & col_inside[dx] { KEEP } else { 0 };
             out.weight[k][lane] = gx[dx] * gy[dy];
-            out.d_weight_du[k][lane] = dg[dx] * gy[dy];
-            out.d_weight_dv[k][lane] = gx[dx] * dg[dy];
+            if DERIVATIVES {
+                out.d_weight_du[k][lane] = dg[dx] * gy[dy];
+                out.d_weight_dv[k][lane] = gx[dx] * dg[dy];
+            }
         }
     }
     out
@@ -579,6 +592,7 @@ impl RowTaps {
     /// The taps of lane `lane`: `taps(u, v, ts)` for its coordinates `(u, v)`, bit for bit (its
     /// inside taps, in order), or `None` without taps.
     pub fn lane(&self, lane: usize) -> Option<BilinearTaps> {
+        debug_assert!(self.derivatives, "taps for sampling only have no derivatives");
         if !self.has_taps[lane] {
             return None;
         }
@@ -635,6 +649,7 @@ impl RowTaps {
         d_rgba: [f32; 4],
         emit: impl FnMut(u32, [f32; 4]),
     ) -> Option<(f32, f32)> {
+        debug_assert!(self.derivatives, "taps for sampling only have no derivatives");
         if !self.has_taps[lane] {
             return None;
         }
