@@ -190,12 +190,13 @@ fn by_entry_body(
     pairs.resize(slots.len(), Pair::default());
     let base = offsets[0];
     for q in 0..n_q {
+        let (x, y) = ((q % tw) as u8, (q / tw) as u8);
         for r in (offsets[q] - base) as usize..(offsets[q + 1] - base) as usize {
             let c = &mut cursor[slots[r] as usize];
             pairs[*c as usize] = Pair {
                 pixel: q as u16,
-                x: (q % tw) as u8,
-                y: (q / tw) as u8,
+                x,
+                y,
                 transmittance: transmittance[r],
             };
             *c += 1;
