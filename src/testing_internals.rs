@@ -202,11 +202,17 @@ pub mod raster {
             self.0.finish(slots)
         }
 
-        /// Whether every cell and every slot is marked untouched (the state `finish` must leave
-        /// for the next tile).
+        /// Whether every cell and every slot is marked untouched and every cell holds `−0.0`
+        /// in each channel (the state `finish` must leave for the next tile).
         pub fn is_clean(&self) -> bool {
             let sums = &self.0;
-            sums.touched.iter().all(|&t| t == 0) && sums.slot_touched.iter().all(|&t| !t)
+            sums.touched.iter().all(|&t| t == 0)
+                && sums.slot_touched.iter().all(|&t| !t)
+                && sums
+                    .cells()
+                    .iter()
+                    .flatten()
+                    .all(|x| x.to_bits() == (-0.0f32).to_bits())
         }
     }
 }

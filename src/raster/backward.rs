@@ -29,7 +29,7 @@ use crate::stages::depth_distortion::{DistortionTotals, depth_gradient, mapped_d
 use crate::stages::ray_plane::{intersect_vjp_with, pixel_ray};
 use crate::stages::sh::sh_colour_vjp_clamped;
 use crate::stages::splat_transform::{CameraGrads, SplatTransform, camera_vjp, project_splat_vjp_visible};
-use glam::{BVec4A, DVec2, DVec3, Vec2, Vec3, Vec4};
+use glam::{DVec2, DVec3, Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 
 /// Gradients of a scalar loss with respect to every billboard parameter and the background.
@@ -317,16 +317,17 @@ struct Scratch {
 /// stable sort of all contributions by (slot, texel) followed by a merge of equal keys
 /// (`texel_sums_reference` in tests/suite/raster_backward.rs, tested).
 ///
-/// The cells are dense, `slots × TS²` sums of 16 bytes with a one-byte touched flag each, so an
-/// add has no branch: it adds `g` to the sum, or to `−0.0` on a first touch, chosen by a bit
-/// mask. (A branch on the first touch depends on the data; cachegrind's branch simulation
-/// counted 1.5 M mispredictions of it per forward + backward of the trained-like object scene.)
-/// Only the flags are reset after a tile; an untouched cell's stale sum is never read.
-/// [`TexelSums::finish`] reads the flags of the slots something was added to, eight at a time.
+/// The cells are dense, `slots × TS²` sums of 16 bytes with a one-byte touched flag each. An
+/// untouched cell holds `−0.0` in every channel, so an add has no branch and reads no flag: it
+/// adds `g` to the cell, and `−0.0 + g` is `g` bit for bit. (A branch on the first touch depends
+/// on the data; cachegrind's branch simulation counted 1.5 M mispredictions of it per forward +
+/// backward of the trained-like object scene. A select on the flag, the previous form, put the
+/// flag's load on every add's path.) [`TexelSums::finish`] reads the flags of the slots
+/// something was added to, eight at a time, and resets each cell it reads out to `−0.0`.
 #[derive(Default)]
 pub(crate) struct TexelSums {
-    /// Per cell `slot · texels + texel`: the sum of its contributions in the current tile, valid
-    /// only where `touched` is set.
+    /// Per cell `slot · texels + texel`: the sum of its contributions in the current tile
+    /// (`−0.0` in every channel where `touched` is not set).
     sums: Vec<[f32; 4]>,
     /// Per cell: 1 when some contribution was added in the current tile, else 0.
     pub(crate) touched: Vec<u8>,
@@ -342,13 +343,18 @@ impl TexelSums {
         debug_assert!(self.slot_touched.iter().all(|&t| !t), "the previous tile was finished");
         let cells = slots * texels;
         if self.sums.len() < cells {
-            self.sums.resize(cells, [0.0; 4]);
+            self.sums.resize(cells, [-0.0; 4]);
             self.touched.resize(cells, 0);
         }
         if self.slot_touched.len() < slots {
             self.slot_touched.resize(slots, false);
         }
         self.texels = texels;
+    }
+
+    /// Every cell's sum (for tests of the state between tiles).
+    pub(crate) fn cells(&self) -> &[[f32; 4]] {
+        &self.sums
     }
 
     /// Start of the cell sums (`slots × texels` values of `[f32; 4]`), for prefetches only
@@ -364,12 +370,10 @@ impl TexelSums {
     pub(crate) fn add(&mut self, slot: u32, texel: u32, g: [f32; 4]) {
         debug_assert!(self.slot_touched[slot as usize], "the slot was marked before its adds");
         let cell = slot as usize * self.texels + texel as usize;
-        let seen = BVec4A::splat(self.touched[cell] != 0);
+        // An untouched cell holds −0.0 (`finish` resets what it reads out), and `−0.0 + g` is
+        // `g` bit for bit (`−0.0` included): the first contribution is assigned.
         let s = &mut self.sums[cell];
-        // The running sum, or −0.0 on a first touch: `−0.0 + g` is `g` bit for bit (`−0.0`
-        // included), so the first contribution is assigned. A bitwise select, not a branch.
-        let prior = Vec4::select(seen, Vec4::from_array(*s), Vec4::splat(-0.0));
-        *s = (prior + Vec4::from_array(g)).to_array();
+        *s = (Vec4::from_array(*s) + Vec4::from_array(g)).to_array();
         self.touched[cell] = 1;
     }
 
@@ -400,7 +404,7 @@ impl TexelSums {
         for slot in 0..slots {
             if std::mem::take(&mut self.slot_touched[slot]) {
                 let flags = &mut self.touched[slot * texels..(slot + 1) * texels];
-                let sums = &self.sums[slot * texels..(slot + 1) * texels];
+                let sums = &mut self.sums[slot * texels..(slot + 1) * texels];
                 let mut chunks = flags.chunks_exact_mut(8);
                 let mut base = 0usize;
                 for chunk in &mut chunks {
@@ -410,7 +414,7 @@ impl TexelSums {
                         let mut bits = word;
                         while bits != 0 {
                             let t = base + bits.trailing_zeros() as usize / 8;
-                            out.push((t as u32, sums[t]));
+                            out.push((t as u32, std::mem::replace(&mut sums[t], [-0.0; 4])));
                             bits &= bits - 1;
                         }
                         chunk.fill(0);
@@ -419,7 +423,7 @@ impl TexelSums {
                 }
                 for (t, flag) in chunks.into_remainder().iter_mut().enumerate() {
                     if std::mem::take(flag) != 0 {
-                        out.push(((base + t) as u32, sums[base + t]));
+                        out.push(((base + t) as u32, std::mem::replace(&mut sums[base + t], [-0.0; 4])));
                     }
                 }
             }
