@@ -208,11 +208,7 @@ pub mod raster {
             let sums = &self.0;
             sums.touched.iter().all(|&t| t == 0)
                 && sums.slot_touched.iter().all(|&t| !t)
-                && sums
-                    .cells()
-                    .iter()
-                    .flatten()
-                    .all(|x| x.to_bits() == (-0.0f32).to_bits())
+                && sums.sums.iter().flatten().all(|x| x.to_bits() == (-0.0f32).to_bits())
         }
     }
 }

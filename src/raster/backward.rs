@@ -328,7 +328,7 @@ struct Scratch {
 pub(crate) struct TexelSums {
     /// Per cell `slot · texels + texel`: the sum of its contributions in the current tile
     /// (`−0.0` in every channel where `touched` is not set).
-    sums: Vec<[f32; 4]>,
+    pub(crate) sums: Vec<[f32; 4]>,
     /// Per cell: 1 when some contribution was added in the current tile, else 0.
     pub(crate) touched: Vec<u8>,
     /// Per slot: some contribution was added in the current tile.
@@ -350,11 +350,6 @@ impl TexelSums {
             self.slot_touched.resize(slots, false);
         }
         self.texels = texels;
-    }
-
-    /// Every cell's sum (for tests of the state between tiles).
-    pub(crate) fn cells(&self) -> &[[f32; 4]] {
-        &self.sums
     }
 
     /// Start of the cell sums (`slots × texels` values of `[f32; 4]`), for prefetches only
