@@ -186,8 +186,8 @@ fn by_entry_body(
     }
     cursor.clear();
     cursor.extend_from_slice(&starts[..list.len()]);
-    pairs.clear();
-    pairs.resize(slots.len(), Pair::default());
+    // Every position is written below (the counts sum to `slots.len()`): only new ones filled.
+    crate::memory::resize_for_overwrite(pairs, slots.len(), Pair::default());
     let base = offsets[0];
     for q in 0..n_q {
         let (x, y) = ((q % tw) as u8, (q / tw) as u8);
