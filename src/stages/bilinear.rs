@@ -125,12 +125,12 @@ fn rgba_texel(texels: &[[f32; 4]], index: u32) -> [f32; 4] {
     unsafe { *texels.get_unchecked(index as usize) }
 }
 
-/// The four-tap RGBA sample `Σ wₖ·texel[iₖ]` over the taps whose mask `keep[k]` is [`KEEP`], summed in tap
-/// order from zero, each outside tap's product replaced by zero (the one copy of the sampling
-/// arithmetic: [`SampleTaps::sample_rgba`] and [`RowTaps::sample_rgba`]). Replacing the product,
-/// not the weight, keeps an outside tap from adding `0 · ∞ = NaN`.
+/// The four-tap RGBA sample `Σ wₖ·texel[iₖ]` over the taps whose mask `masks[k]` is [`KEEP`],
+/// summed in tap order from zero, each outside tap's product replaced by zero (mask 0; the one
+/// copy of the sampling arithmetic: [`SampleTaps::sample_rgba`] and [`RowTaps::sample_rgba`]).
+/// Replacing the product, not the weight, keeps an outside tap from adding `0 · ∞ = NaN`.
 #[inline(always)]
-fn sample_four(texel: impl Fn(u32) -> [f32; 4], index: [u32; 4], w: [f32; 4], keep: [u32; 4]) -> [f32; 4] {
+fn sample_four(texel: impl Fn(u32) -> [f32; 4], index: [u32; 4], w: [f32; 4], masks: [u32; 4]) -> [f32; 4] {
     let (t0, t1, t2, t3) = (
         Vec4::from_array(texel(index[0])),
         Vec4::from_array(texel(index[1])),
@@ -138,7 +138,7 @@ fn sample_four(texel: impl Fn(u32) -> [f32; 4], index: [u32; 4], w: [f32; 4], ke
         Vec4::from_array(texel(index[3])),
     );
     // A bitwise and with the tap's mask: the product, or +0 for an outside tap.
-    let keep = |k: usize, x: Vec4| Vec4::from_array(x.to_array().map(|c| f32::from_bits(c.to_bits() & keep[k])));
+    let keep = |k: usize, x: Vec4| Vec4::from_array(x.to_array().map(|c| f32::from_bits(c.to_bits() & masks[k])));
     (Vec4::ZERO + keep(0, w[0] * t0) + keep(1, w[1] * t1) + keep(2, w[2] * t2) + keep(3, w[3] * t3)).to_array()
 }
 
