@@ -5,6 +5,18 @@
 //! unchanged, so that the items stay out of the public API. Not for use outside the tests: no
 //! stability promise.
 
+/// Bilinear stage internals (`stages::bilinear`).
+pub mod bilinear {
+    use crate::stages::bilinear::RowTaps;
+    use crate::stages::ray_plane::LANES;
+
+    /// The forward pass's row taps: `taps_row` without the weights' derivatives (for sampling
+    /// only; debug builds refuse to differentiate them).
+    pub fn sampling_taps_row(u: &[f32; LANES], v: &[f32; LANES], ts: usize) -> RowTaps {
+        crate::stages::bilinear::taps_row_with::<false>(u, v, ts)
+    }
+}
+
 /// Farthest-point sampling internals (`init::fps`).
 pub mod fps {
     use glam::Vec3;
@@ -205,10 +217,14 @@ pub mod raster {
         /// Whether every cell and every slot is marked untouched and every cell holds `−0.0`
         /// in each channel (the state `finish` must leave for the next tile).
         pub fn is_clean(&self) -> bool {
+            use crate::raster::backward::UNTOUCHED;
             let sums = &self.0;
             sums.touched.iter().all(|&t| t == 0)
                 && sums.slot_touched.iter().all(|&t| !t)
-                && sums.sums.iter().flatten().all(|x| x.to_bits() == (-0.0f32).to_bits())
+                && sums
+                    .sums
+                    .iter()
+                    .all(|c| c.map(f32::to_bits) == UNTOUCHED.map(f32::to_bits))
         }
     }
 }

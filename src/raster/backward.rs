@@ -308,6 +308,10 @@ struct Scratch {
     by_entry: EntryScratch,
 }
 
+/// What an untouched cell of [`TexelSums`] holds: `−0.0` in every channel, so that adding the
+/// first contribution `g` gives `g` bit for bit.
+pub(crate) const UNTOUCHED: [f32; 4] = [-0.0; 4];
+
 /// Per-tile texture-gradient sums over (entry slot, texel) cells, reused by every tile a
 /// thread processes (see [`TEXEL_SUMS`]).
 ///
@@ -343,7 +347,7 @@ impl TexelSums {
         debug_assert!(self.slot_touched.iter().all(|&t| !t), "the previous tile was finished");
         let cells = slots * texels;
         if self.sums.len() < cells {
-            self.sums.resize(cells, [-0.0; 4]);
+            self.sums.resize(cells, UNTOUCHED);
             self.touched.resize(cells, 0);
         }
         if self.slot_touched.len() < slots {
@@ -409,7 +413,7 @@ impl TexelSums {
                         let mut bits = word;
                         while bits != 0 {
                             let t = base + bits.trailing_zeros() as usize / 8;
-                            out.push((t as u32, std::mem::replace(&mut sums[t], [-0.0; 4])));
+                            out.push((t as u32, std::mem::replace(&mut sums[t], UNTOUCHED)));
                             bits &= bits - 1;
                         }
                         chunk.fill(0);
@@ -418,7 +422,7 @@ impl TexelSums {
                 }
                 for (t, flag) in chunks.into_remainder().iter_mut().enumerate() {
                     if std::mem::take(flag) != 0 {
-                        out.push(((base + t) as u32, std::mem::replace(&mut sums[base + t], [-0.0; 4])));
+                        out.push(((base + t) as u32, std::mem::replace(&mut sums[base + t], UNTOUCHED)));
                     }
                 }
             }

@@ -202,6 +202,11 @@ fn by_entry_body(
             *c += 1;
         }
     }
+    // Each slot's cursor ran exactly to the next slot's start: every position was written.
+    debug_assert!(
+        cursor.iter().zip(&starts[1..]).all(|(c, s)| c == s),
+        "the regroup filled every pair"
+    );
     let starts: &[u32] = starts;
     let pairs: &[Pair] = pairs;
     // The tile-local rectangle of the pixels of an entry's pairs.

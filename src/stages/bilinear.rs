@@ -494,7 +494,7 @@ pub fn sample_vjp(
 /// taps keeps all four of its cell's taps, in [`BilinearTaps`] order: a tap outside the texture
 /// (zero padding, on the border ring `X` or `Y ∈ [−1, 0) ∪ [ts − 1, ts)`) has its row and column
 /// clamped into the texture, so that it reads a texel the lane's inside taps read too, and a
-/// cleared `inside` flag, so that its product is replaced by zero and it emits no gradient. Over
+/// zero mask in `keep`, so that its product is replaced by zero and it emits no gradient. Over
 /// the inside taps this is [`taps`] exactly; the zeros added in between change no bit (a sum
 /// that starts at +0 is never −0, and adding ±0 to anything else is exact).
 #[derive(Clone, Copy, Debug, PartialEq)]

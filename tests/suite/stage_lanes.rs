@@ -13,6 +13,7 @@ use bbsplat::stages::ray_plane::{
 };
 use bbsplat::stages::splat_transform::{ROW_LANES, SplatTransform, SupportQuad, splat_frame, view_plane};
 use bbsplat::strategies::{billboard_in_front, camera, seeded_config};
+use bbsplat::testing_internals::bilinear::sampling_taps_row;
 use glam::{Vec2, Vec3};
 use proptest::prelude::*;
 
@@ -112,12 +113,20 @@ fn check_samples_of(
     texture_of: impl Fn(usize) -> Vec<[f32; 4]>,
 ) -> Result<(), String> {
     let row = taps_row(u, v, ts);
+    // The forward pass's taps, made without the weights' derivatives, sample the same bits.
+    let sampling_row = sampling_taps_row(u, v, ts);
     for lane in 0..LANES {
         let scalar = taps(u[lane], v[lane], ts);
         let texels = texture_of(lane);
         // Every NaN counts as one value: Rust does not specify NaN payloads and signs.
         let bits = |x: [f32; 4]| x.map(|c| if c.is_nan() { f32::NAN.to_bits() } else { c.to_bits() });
         let sampled = row.sample_rgba(lane, &texels).map(bits);
+        if sampling_row.sample_rgba(lane, &texels).map(bits) != sampled {
+            return Err(format!(
+                "lane {lane} ({}, {}): sampling-only taps sample differently",
+                u[lane], v[lane]
+            ));
+        }
         if sampled != scalar.map(|t| bits(t.sample_rgba(&texels))) {
             return Err(format!(
                 "lane {lane} ({}, {}): samples differ: {:?} against {:?}",
@@ -384,4 +393,15 @@ fn row_spans_handle_flat_edges_and_non_finite_rows() {
         margin: 0.01,
     };
     check_row_spans(&point, &[2.99, 3.0, 3.01, 3.02, -1.0, 3.005, 2.995, f32::NEG_INFINITY]).unwrap();
+}
+
+/// Taps made for sampling only carry no derivatives: differentiating them is refused (in debug
+/// builds, where the check lives; the suite runs in them).
+#[cfg(debug_assertions)]
+#[test]
+#[should_panic(expected = "taps for sampling only have no derivatives")]
+fn sampling_only_taps_refuse_a_backward() {
+    let (u, v) = ([0.1f32; LANES], [-0.2f32; LANES]);
+    let texels = vec![[0.5f32; 4]; 16 * 16];
+    let _ = sampling_taps_row(&u, &v, 16).vjp_rgba(0, &texels, [1.0; 4], |_, _| {});
 }
