@@ -170,7 +170,14 @@ pub mod model_file {
 
 /// Rasterizer internals (`raster`).
 pub mod raster {
+    use crate::camera::Camera;
+    use crate::raster::binning::{BinScratch, TileBins, bin_into};
+    use crate::raster::forward::{entry_spans_direct, local_spans, tile_pixels};
     use crate::raster::preprocess::Prepared;
+    use crate::raster::preprocess::preprocess_into;
+    use crate::raster::row_spans::BillboardRows;
+    use crate::raster::{ActivatedRef, RenderSettings};
+    use crate::stages::splat_transform::support_half_side;
 
     /// Billboards per chunk of the parallel binning.
     pub const MIN_BIN_CHUNK: usize = crate::raster::binning::MIN_BIN_CHUNK;
@@ -191,6 +198,40 @@ pub mod raster {
     /// Nearest-rank quantile `q` of sorted `values` (0 when empty).
     pub fn quantile<T: Copy + Default>(sorted: &[T], q: f64) -> T {
         crate::raster::workload::quantile(sorted, q)
+    }
+
+    /// One tile entry's spans: its first and last tile row and, per tile row, its first and
+    /// last column (empty when the first exceeds the last).
+    pub type Spans = ([u8; 2], [[u8; 2]; 16]);
+
+    /// For every entry of every tile of the view, in tile order: the entry's spans as the
+    /// forward pass computes them (the per-billboard rows cut to the tile) and as computed for
+    /// the tile alone (the reference).
+    pub fn entry_spans_both_ways(
+        set: &ActivatedRef<'_>,
+        camera: &Camera,
+        settings: &RenderSettings,
+    ) -> Vec<(Spans, Spans)> {
+        let mut prepared = Vec::new();
+        preprocess_into(set, camera, settings, &mut prepared);
+        let (mut bins, mut scratch) = (TileBins::default(), BinScratch::default());
+        bin_into(&prepared, camera.width, camera.height, &mut bins, &mut scratch);
+        let half_side = support_half_side(set.texture_size);
+        let mut rows = BillboardRows::default();
+        rows.build(&prepared, half_side);
+        let mut spans = Vec::new();
+        let mut out = Vec::new();
+        for t in 0..bins.tile_count() {
+            let list = &bins.entries[bins.tile_range(t)];
+            let (i0, j0, _, _) = tile_pixels(&bins, t, camera.width, camera.height);
+            local_spans(&prepared, &rows, list, (i0, j0), half_side, &mut spans);
+            for (fast, &b) in spans.iter().zip(list) {
+                let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
+                let direct = entry_spans_direct(p, (i0, j0), half_side);
+                out.push(((fast.rows, fast.cols), (direct.rows, direct.cols)));
+            }
+        }
+        out
     }
 
     /// The backward pass's per-tile texture-gradient accumulator.

@@ -2,6 +2,7 @@
 
 use super::binning::{BinScratch, TileBins, bin_into};
 use super::preprocess::{Prepared, preprocess_into};
+use super::row_spans::{BillboardRows, is_wide};
 use super::tile_forward::{PixelOut, TileComposite, composite_tile, span_pixels};
 use super::tile_forward_pixels::{PixelWalk, composite_tile_by_pixel};
 use super::{ActivatedRef, RenderSettings, TILE_SIZE};
@@ -274,22 +275,21 @@ pub(crate) struct EntrySpans {
 pub const QUAD_MIN_COLUMNS: u32 = 4;
 
 /// The [`EntrySpans`] of a tile's entries, written to `spans` (its old contents replaced, its
-/// storage reused): the billboard's pixel box clamped to the tile and, when
-/// the box is at least [`QUAD_MIN_COLUMNS`] wide and [`support_quad`] gives the projected support
-/// square, each row narrowed to [`SupportQuad::row_span`] (computed for eight rows at a time by
-/// [`SupportQuad::row_spans`], the same bits; pixels outside it cannot hit the
-/// texture support, so culling them changes no value). The quad is recomputed per tile entry
-/// rather than stored with the billboard's record: the records of the narrow billboards of a
-/// dense view stay small, and the quad costs a few tens of nanoseconds against the candidate
-/// evaluations it saves. The per-pixel reject test then reads these few contiguous bytes instead
-/// of the whole prepared record of each billboard. `half_side` is [`support_half_side`] of the
-/// texture size.
+/// storage reused): the billboard's pixel box clamped to the tile and, when the box is at least
+/// [`QUAD_MIN_COLUMNS`] wide and [`support_quad`] gives the projected support square, each row
+/// narrowed to [`SupportQuad::row_span`] (pixels outside it cannot hit the texture support, so
+/// culling them changes no value). The rows come from `rows` ([`BillboardRows`], each
+/// billboard's rows computed once per view for its whole box), cut to the tile's columns: the
+/// same spans as computing them for the tile ([`entry_spans_direct`], which still serves boxes
+/// that miss the tile; tested on every tile of several scenes). The per-pixel reject test then
+/// reads these few contiguous bytes instead of the whole prepared record of each billboard.
+/// `half_side` is [`support_half_side`] of the texture size.
 ///
 /// [`support_half_side`]: crate::stages::splat_transform::support_half_side
 /// [`SupportQuad::row_span`]: crate::stages::splat_transform::SupportQuad::row_span
-/// [`SupportQuad::row_spans`]: crate::stages::splat_transform::SupportQuad::row_spans
 pub(crate) fn local_spans(
     prepared: &[Option<Prepared>],
+    rows: &BillboardRows,
     list: &[u32],
     (i0, j0): (u32, u32),
     half_side: f32,
@@ -303,43 +303,82 @@ pub(crate) fn local_spans(
             prefetch_record(&prepared[ahead as usize]);
         }
         let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
-        let lo = |v: u32, o: u32| v.saturating_sub(o).min(last) as u8;
-        let hi = |v: u32, o: u32| if v < o { 0 } else { (v - o).min(last) as u8 };
-        // A box entirely left of / above the tile cannot be binned here; keep it exact anyway.
-        let (x0, y0) = (lo(p.pixel_min[0], i0), lo(p.pixel_min[1], j0));
-        let (x1, y1) = (hi(p.pixel_max[0], i0), hi(p.pixel_max[1], j0));
-        let mut spans = EntrySpans {
-            rows: [y0, y1],
-            cols: [[x0, x1]; TILE_SIZE as usize],
-        };
-        let wide = p.pixel_max[0] - p.pixel_min[0] + 1 >= QUAD_MIN_COLUMNS;
-        if let Some(quad) = wide.then(|| support_quad(&p.transform, half_side)).flatten() {
-            // The rows' spans `ROW_LANES` at a time (rows past `y1` repeat it and are unused).
-            for first_row in (y0..=y1).step_by(ROW_LANES) {
-                let py: [f32; ROW_LANES] = std::array::from_fn(|l| {
-                    let y = (usize::from(first_row) + l).min(usize::from(y1));
-                    (j0 + y as u32) as f32 + 0.5
-                });
-                let row_spans = quad.row_spans(&py);
-                for (y, span) in (first_row..=y1).zip(row_spans) {
-                    spans.cols[y as usize] = match span {
-                        // Columns whose centres lie in [lo, hi], within the box.
-                        Some((lo, hi)) => {
-                            let (first, end) = pixel_range(lo, hi, i0 + u32::from(x1) + 1);
-                            let first = first.max(i0 + u32::from(x0));
-                            if first < end {
-                                [(first - i0) as u8, (end - 1 - i0) as u8]
-                            } else {
-                                [1, 0]
-                            }
-                        }
-                        None => [1, 0],
-                    };
-                }
-            }
+        if !is_wide(p) {
+            return box_spans(p, (i0, j0));
+        }
+        let overlaps =
+            p.pixel_min[0] <= i0 + last && p.pixel_max[0] >= i0 && p.pixel_min[1] <= j0 + last && p.pixel_max[1] >= j0;
+        if !overlaps {
+            return entry_spans_direct(p, (i0, j0), half_side);
+        }
+        let box_rows = rows.of(b as usize);
+        let mut spans = box_spans(p, (i0, j0));
+        let [x0, x1] = spans.cols[0];
+        // The tile's columns end at `n`; the box's rows are cut to them (see `row_spans`).
+        let (n, start) = (i0 + u32::from(x1) + 1, i0 + u32::from(x0));
+        for y in spans.rows[0]..=spans.rows[1] {
+            let [first, end] = box_rows[(j0 + u32::from(y) - p.pixel_min[1]) as usize];
+            let (first, end) = (first.min(n).max(start), end.min(n));
+            spans.cols[y as usize] = if first < end {
+                [(first - i0) as u8, (end - 1 - i0) as u8]
+            } else {
+                [1, 0]
+            };
         }
         spans
     }));
+}
+
+/// The [`EntrySpans`] of a billboard's pixel box clamped to the tile at `(i0, j0)`: every row
+/// of the box with the box's columns.
+fn box_spans(p: &Prepared, (i0, j0): (u32, u32)) -> EntrySpans {
+    let last = TILE_SIZE - 1;
+    let lo = |v: u32, o: u32| v.saturating_sub(o).min(last) as u8;
+    let hi = |v: u32, o: u32| if v < o { 0 } else { (v - o).min(last) as u8 };
+    // A box entirely left of / above the tile cannot be binned here; keep it exact anyway.
+    let (x0, y0) = (lo(p.pixel_min[0], i0), lo(p.pixel_min[1], j0));
+    let (x1, y1) = (hi(p.pixel_max[0], i0), hi(p.pixel_max[1], j0));
+    EntrySpans {
+        rows: [y0, y1],
+        cols: [[x0, x1]; TILE_SIZE as usize],
+    }
+}
+
+/// The [`EntrySpans`] of one tile entry computed for the tile alone: the support quad projected
+/// and each of the tile's rows found on it (computed [`ROW_LANES`] rows at a time by
+/// [`SupportQuad::row_spans`], the same bits as `row_span`). The reference of [`local_spans`].
+///
+/// [`SupportQuad::row_spans`]: crate::stages::splat_transform::SupportQuad::row_spans
+pub(crate) fn entry_spans_direct(p: &Prepared, (i0, j0): (u32, u32), half_side: f32) -> EntrySpans {
+    let mut spans = box_spans(p, (i0, j0));
+    let [y0, y1] = spans.rows;
+    let [x0, x1] = spans.cols[0];
+    if let Some(quad) = is_wide(p).then(|| support_quad(&p.transform, half_side)).flatten() {
+        // The rows' spans `ROW_LANES` at a time (rows past `y1` repeat it and are unused).
+        for first_row in (y0..=y1).step_by(ROW_LANES) {
+            let py: [f32; ROW_LANES] = std::array::from_fn(|l| {
+                let y = (usize::from(first_row) + l).min(usize::from(y1));
+                (j0 + y as u32) as f32 + 0.5
+            });
+            let row_spans = quad.row_spans(&py);
+            for (y, span) in (first_row..=y1).zip(row_spans) {
+                spans.cols[y as usize] = match span {
+                    // Columns whose centres lie in [lo, hi], within the box.
+                    Some((lo, hi)) => {
+                        let (first, end) = pixel_range(lo, hi, i0 + u32::from(x1) + 1);
+                        let first = first.max(i0 + u32::from(x0));
+                        if first < end {
+                            [(first - i0) as u8, (end - 1 - i0) as u8]
+                        } else {
+                            [1, 0]
+                        }
+                    }
+                    None => [1, 0],
+                };
+            }
+        }
+    }
+    spans
 }
 
 /// Reusable per-task scratch of the forward tile pass (every field is rebuilt per tile).
@@ -422,6 +461,8 @@ pub(crate) struct ForwardSpare {
     /// Per tile: its pixels' distortion (empty unless [`RenderSettings::distortion`]).
     tile_distortion: Vec<Vec<f32>>,
     tile_blended_base: Vec<u32>,
+    /// Per billboard: the columns of its box's rows that its support quad can reach.
+    billboard_rows: BillboardRows,
 }
 
 impl RenderOutput {
@@ -503,6 +544,8 @@ pub fn render_with(
     bin_into(&prepared, w, h, &mut bins, &mut spare.bin_scratch);
     let n_tiles = bins.tile_count();
     let half_side = crate::stages::splat_transform::support_half_side(set.texture_size);
+    spare.billboard_rows.build(&prepared, half_side);
+    let billboard_rows = &spare.billboard_rows;
     refill(&mut spare.entry_impact, bins.entries.len(), 0.0);
     let impact_chunks = split_by_lengths(&mut spare.entry_impact, (0..n_tiles).map(|t| bins.tile_range(t).len()));
     let tiles = &mut spare.tiles;
@@ -522,7 +565,7 @@ pub fn render_with(
                 let list = &bins.entries[bins.tile_range(t)];
                 let rect @ (i0, j0, _, _) = tile_pixels(&bins, t, w, h);
                 let TileScratch { spans, composite, walk } = scratch;
-                local_spans(&prepared, list, (i0, j0), half_side, spans);
+                local_spans(&prepared, billboard_rows, list, (i0, j0), half_side, spans);
                 let tile = (camera, set, settings, &*prepared, list, rect, &spans[..]);
                 let blended = (slots, transmittance);
                 // Tiles of small billboards go pixel by pixel (the same bits; see

@@ -25,6 +25,7 @@ pub mod forward;
 pub mod lanes;
 pub mod preprocess;
 pub mod reference;
+pub(crate) mod row_spans;
 mod tile_backward;
 mod tile_forward;
 mod tile_forward_pixels;

@@ -1,0 +1,118 @@
+//! The pixel columns of each row of a billboard's screen box where its projected support can be
+//! hit, computed once per billboard and view and cut to each tile the billboard is listed in.
+//!
+//! The forward pass narrows every tile entry's pixels to the rows' spans of the billboard's
+//! projected support quad ([`local_spans`](super::forward::local_spans)). Computed per tile
+//! entry, each image row of a billboard is found again in every tile column the billboard
+//! crosses, and its quad is projected again in every tile (a trained scene's billboard is
+//! listed in about five tiles). [`BillboardRows`] computes each row once, for the whole width of
+//! the box, in image columns; a tile then only clamps the row to its own columns, which gives
+//! the same columns as computing the row for the tile (shown below, and tested against the
+//! per-entry computation on every tile of several scenes).
+//!
+//! Why the clamp is exact: [`pixel_range`]`(lo, hi, n)` is `(clamp(⌈lo − ½⌉, 0, n), clamp(⌊hi −
+//! ½⌋ + 1, 0, n))`, evaluated with its arguments clamped first, and for whole numbers `n₁ ≤ n₂`
+//! every branch of that evaluation gives `pixel_range(lo, hi, n₁) = (min(f₂, n₁), min(e₂, n₁))`
+//! where `(f₂, e₂) = pixel_range(lo, hi, n₂)` (also for NaN bounds, which give 0). A tile's
+//! columns end at `n₁ ≤ pixel_max + 1 = n₂` whenever the box overlaps the tile; a tile whose
+//! rectangle the box misses (not binned there, kept exact anyway) takes the per-entry path.
+
+use super::forward::{QUAD_MIN_COLUMNS, split_by_lengths};
+use super::preprocess::Prepared;
+use crate::memory::resize_for_overwrite;
+use crate::stages::splat_transform::{ROW_LANES, pixel_range, support_quad};
+use rayon::prelude::*;
+
+/// Billboards per parallel task of [`BillboardRows::build`].
+const BUILD_BLOCK: usize = 256;
+
+/// Per billboard of a view, the columns of each row of its pixel box that its support quad can
+/// reach (see the module documentation). Rebuilt per view; its storage is reused.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct BillboardRows {
+    /// The rows of billboard `b` are `cols[offsets[b]..offsets[b + 1]]`, one per image row of its
+    /// box from `pixel_min[1]`; none when the billboard is culled or its box is narrower than
+    /// [`QUAD_MIN_COLUMNS`] (its spans are its box).
+    offsets: Vec<usize>,
+    /// Per row: image columns `first..end`, [`pixel_range`] of the row's quad span with
+    /// `n = pixel_max[0] + 1`, the box's columns when the billboard has no quad, and `[0, 0]`
+    /// when the row misses the quad.
+    cols: Vec<[u32; 2]>,
+}
+
+/// Whether a billboard's spans are narrowed by its support quad: boxes at least
+/// [`QUAD_MIN_COLUMNS`] wide.
+#[inline]
+pub(crate) fn is_wide(p: &Prepared) -> bool {
+    p.pixel_max[0] - p.pixel_min[0] + 1 >= QUAD_MIN_COLUMNS
+}
+
+/// The rows [`BillboardRows`] holds for a billboard.
+fn row_count(p: &Option<Prepared>) -> usize {
+    match p {
+        Some(p) if is_wide(p) => (p.pixel_max[1] - p.pixel_min[1] + 1) as usize,
+        _ => 0,
+    }
+}
+
+impl BillboardRows {
+    /// Computes the rows of every prepared billboard (in parallel; each billboard's rows depend
+    /// on its record only). `half_side` is the support's half side
+    /// ([`support_half_side`](crate::stages::splat_transform::support_half_side)).
+    pub(crate) fn build(&mut self, prepared: &[Option<Prepared>], half_side: f32) {
+        self.offsets.clear();
+        self.offsets.push(0);
+        let mut total = 0;
+        for p in prepared {
+            total += row_count(p);
+            self.offsets.push(total);
+        }
+        // Every row is written below.
+        resize_for_overwrite(&mut self.cols, total, [0, 0]);
+        let offsets = &self.offsets;
+        let block_rows = (0..prepared.len())
+            .step_by(BUILD_BLOCK)
+            .map(|start| offsets[(start + BUILD_BLOCK).min(prepared.len())] - offsets[start]);
+        split_by_lengths(&mut self.cols, block_rows)
+            .into_par_iter()
+            .zip(prepared.par_chunks(BUILD_BLOCK))
+            .for_each(|(mut out, block)| {
+                for p in block {
+                    let (rows, rest) = std::mem::take(&mut out).split_at_mut(row_count(p));
+                    if let Some(p) = p.as_ref().filter(|_| !rows.is_empty()) {
+                        fill_rows(p, half_side, rows);
+                    }
+                    out = rest;
+                }
+            });
+    }
+
+    /// The rows of billboard `b`, from its box's first row (empty when its spans are its box).
+    #[inline]
+    pub(crate) fn of(&self, b: usize) -> &[[u32; 2]] {
+        &self.cols[self.offsets[b]..self.offsets[b + 1]]
+    }
+}
+
+/// The rows of a wide billboard's box (`rows`, one per image row from `pixel_min[1]`).
+fn fill_rows(p: &Prepared, half_side: f32, rows: &mut [[u32; 2]]) {
+    let n = p.pixel_max[0] + 1;
+    let Some(quad) = support_quad(&p.transform, half_side) else {
+        rows.fill([p.pixel_min[0], n]);
+        return;
+    };
+    let (y0, y1) = (p.pixel_min[1], p.pixel_max[1]);
+    for (chunk, first_row) in rows.chunks_mut(ROW_LANES).zip((y0..=y1).step_by(ROW_LANES)) {
+        // Lanes past the last row repeat it and are unused.
+        let py: [f32; ROW_LANES] = std::array::from_fn(|l| (first_row + l as u32).min(y1) as f32 + 0.5);
+        for (row, span) in chunk.iter_mut().zip(quad.row_spans(&py)) {
+            *row = match span {
+                Some((lo, hi)) => {
+                    let (first, end) = pixel_range(lo, hi, n);
+                    [first, end]
+                }
+                None => [0, 0],
+            };
+        }
+    }
+}
