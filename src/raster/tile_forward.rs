@@ -20,7 +20,7 @@ use crate::camera::Camera;
 use crate::stages::bilinear::taps_row_with;
 use crate::stages::composite::{CompositeState, Step};
 use crate::stages::depth_distortion::{DistortionState, mapped_depth};
-use crate::stages::ray_plane::{LANES, intersect_lanes};
+use crate::stages::ray_plane::{LANES, intersect_lanes, row_centres};
 use glam::Vec3;
 
 /// Features composited per pixel by the forward pass: colour (3), opacity (the constant 1, so
@@ -201,7 +201,7 @@ fn composite_tile_body<const DISTORTION: bool>(
                 }
                 // In u32: a 64-bit integer's conversion to f32 is a long instruction sequence.
                 let first = i0 + (lanes.start - row) as u32;
-                let px: [f32; LANES] = std::array::from_fn(|l| (first + l as u32) as f32 + 0.5);
+                let px = row_centres(first);
                 let hits = intersect_lanes(&p.transform, &plane, camera, &px, &[py; LANES]);
                 let taps = taps_row_with::<false>(&hits.u, &hits.v, ts);
                 // The samples of the chunk's pixels first, so that their texel reads overlap

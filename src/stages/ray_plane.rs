@@ -217,6 +217,22 @@ pub fn intersect_vjp_with(
 /// Pixels per call of [`intersect_lanes`] (and of the other row-wise stage functions).
 pub const LANES: usize = 8;
 
+/// The centres `(first + l) as f32 + 0.5` of the [`LANES`] pixels `first..first + LANES` of a
+/// row or column, bit for bit. Below 2²³ − [`LANES`] they are computed as one broadcast and one
+/// vector add of the lane offsets (every value there is a multiple of ½ below 2²³, so each
+/// operation is exact and both forms give the exact centre); the integer conversion per lane
+/// is kept above it, where `f32` rounds. Tested against the per-lane form in
+/// `tests/suite/stage_lanes.rs`.
+#[inline(always)]
+pub fn row_centres(first: u32) -> [f32; LANES] {
+    if first < (1 << 23) - LANES as u32 {
+        let base = first as f32 + 0.5;
+        std::array::from_fn(|l| base + l as f32)
+    } else {
+        std::array::from_fn(|l| first.wrapping_add(l as u32) as f32 + 0.5)
+    }
+}
+
 /// The hits of [`LANES`] pixel centres with one billboard ([`intersect_lanes`]): lane `l` holds what [`intersect_with`] gives for pixel `l`, with the
 /// depth by the plane equation; `valid[l]` is false where it gives `None` (`u`, `v` and `depth`
 /// of such a lane are unspecified).

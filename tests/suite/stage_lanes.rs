@@ -9,7 +9,7 @@
 use bbsplat::camera::Camera;
 use bbsplat::stages::bilinear::{BilinearTaps, taps, taps_row};
 use bbsplat::stages::ray_plane::{
-    LANES, ViewPlane, intersect_lanes, intersect_vjp_lanes, intersect_vjp_with, intersect_with, pixel_ray,
+    LANES, ViewPlane, intersect_lanes, intersect_vjp_lanes, intersect_vjp_with, intersect_with, pixel_ray, row_centres,
 };
 use bbsplat::stages::splat_transform::{ROW_LANES, SplatTransform, SupportQuad, splat_frame, view_plane};
 use bbsplat::strategies::{billboard_in_front, camera, seeded_config};
@@ -404,4 +404,21 @@ fn sampling_only_taps_refuse_a_backward() {
     let (u, v) = ([0.1f32; LANES], [-0.2f32; LANES]);
     let texels = vec![[0.5f32; 4]; 16 * 16];
     let _ = sampling_taps_row(&u, &v, 16).vjp_rgba(0, &texels, [1.0; 4], |_, _| {});
+}
+
+/// `row_centres` is the per-lane `(first + l) as f32 + 0.5` bit for bit: near 0, on both sides
+/// of the switch to the per-lane form below 2²³, where `f32` rounds the centres, and at the
+/// top of the range.
+#[test]
+fn row_centres_equal_the_per_lane_centres() {
+    let switch = (1u32 << 23) - LANES as u32;
+    let firsts = (0..4096)
+        .chain(switch - 4096..switch + 4096)
+        .chain((1 << 24) - 64..(1 << 24) + 64)
+        .chain(u32::MAX - 4096 - LANES as u32..=u32::MAX - LANES as u32);
+    for first in firsts {
+        let expected: [f32; LANES] = std::array::from_fn(|l| (first + l as u32) as f32 + 0.5);
+        let got = row_centres(first);
+        assert_eq!(got.map(f32::to_bits), expected.map(f32::to_bits), "first = {first}");
+    }
 }
