@@ -205,13 +205,14 @@ pub mod raster {
     pub type Spans = ([u8; 2], [[u8; 2]; 16]);
 
     /// For every entry of every tile of the view, in tile order: the entry's spans as the
-    /// forward pass computes them (the per-billboard rows cut to the tile) and as computed for
-    /// the tile alone (the reference).
+    /// forward pass computes them (the per-billboard rows cut to the tile), as computed for
+    /// the tile alone (the reference), and the pixel count and column range the forward pass
+    /// keeps with its spans.
     pub fn entry_spans_both_ways(
         set: &ActivatedRef<'_>,
         camera: &Camera,
         settings: &RenderSettings,
-    ) -> Vec<(Spans, Spans)> {
+    ) -> Vec<(Spans, Spans, u16, [u8; 2])> {
         let mut prepared = Vec::new();
         preprocess_into(set, camera, settings, &mut prepared);
         let (mut bins, mut scratch) = (TileBins::default(), BinScratch::default());
@@ -228,7 +229,12 @@ pub mod raster {
             for (fast, &b) in spans.iter().zip(list) {
                 let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
                 let direct = entry_spans_direct(p, (i0, j0), half_side);
-                out.push(((fast.rows, fast.cols), (direct.rows, direct.cols)));
+                out.push((
+                    (fast.rows, fast.cols),
+                    (direct.rows, direct.cols),
+                    fast.pixels,
+                    fast.columns,
+                ));
             }
         }
         out

@@ -3,7 +3,7 @@
 use super::binning::{BinScratch, TileBins, bin_into};
 use super::preprocess::{Prepared, preprocess_into};
 use super::row_spans::{BillboardRows, is_wide};
-use super::tile_forward::{PixelOut, TileComposite, composite_tile, span_pixels};
+use super::tile_forward::{PixelOut, TileComposite, composite_tile};
 use super::tile_forward_pixels::{PixelWalk, composite_tile_by_pixel};
 use super::{ActivatedRef, RenderSettings, TILE_SIZE};
 use crate::camera::Camera;
@@ -269,6 +269,30 @@ impl TileCandidates {
 pub(crate) struct EntrySpans {
     pub(crate) rows: [u8; 2],
     pub(crate) cols: [[u8; 2]; TILE_SIZE as usize],
+    /// The number of pixels of the rows' spans (set by [`EntrySpans::summed`]).
+    pub(crate) pixels: u16,
+    /// The first and last column of any row's span (the first exceeds the last when every row
+    /// is empty; set by [`EntrySpans::summed`]).
+    pub(crate) columns: [u8; 2],
+}
+
+impl EntrySpans {
+    /// The spans with their pixel count and column range filled in from the rows.
+    #[inline]
+    fn summed(mut self) -> Self {
+        let (mut pixels, mut x0, mut x1) = (0u16, u8::MAX, 0u8);
+        for y in self.rows[0]..=self.rows[1] {
+            let [a, b] = self.cols[usize::from(y)];
+            if a <= b {
+                pixels += u16::from(b - a) + 1;
+                x0 = x0.min(a);
+                x1 = x1.max(b);
+            }
+        }
+        self.pixels = pixels;
+        self.columns = [x0, x1];
+        self
+    }
 }
 
 /// Boxes narrower than this many pixel columns are not culled row by row (nothing to gain).
@@ -309,7 +333,7 @@ pub(crate) fn local_spans(
         let overlaps =
             p.pixel_min[0] <= i0 + last && p.pixel_max[0] >= i0 && p.pixel_min[1] <= j0 + last && p.pixel_max[1] >= j0;
         if !overlaps {
-            return entry_spans_direct(p, (i0, j0), half_side);
+            return entry_spans_direct(p, (i0, j0), half_side).summed();
         }
         let box_rows = rows.of(b as usize);
         let mut spans = box_spans(p, (i0, j0));
@@ -325,7 +349,7 @@ pub(crate) fn local_spans(
                 [1, 0]
             };
         }
-        spans
+        spans.summed()
     }));
 }
 
@@ -338,9 +362,18 @@ fn box_spans(p: &Prepared, (i0, j0): (u32, u32)) -> EntrySpans {
     // A box entirely left of / above the tile cannot be binned here; keep it exact anyway.
     let (x0, y0) = (lo(p.pixel_min[0], i0), lo(p.pixel_min[1], j0));
     let (x1, y1) = (hi(p.pixel_max[0], i0), hi(p.pixel_max[1], j0));
+    // Every row of the box has the box's columns (a box that misses the tile, kept exact above,
+    // may have an empty row range or empty columns: no pixel).
+    let filled = x0 <= x1 && y0 <= y1;
     EntrySpans {
         rows: [y0, y1],
         cols: [[x0, x1]; TILE_SIZE as usize],
+        pixels: if filled {
+            (u16::from(x1 - x0) + 1) * (u16::from(y1 - y0) + 1)
+        } else {
+            0
+        },
+        columns: if filled { [x0, x1] } else { [1, 0] },
     }
 }
 
@@ -570,7 +603,8 @@ pub fn render_with(
                 let blended = (slots, transmittance);
                 // Tiles of small billboards go pixel by pixel (the same bits; see
                 // `tile_forward_pixels`).
-                let by_pixel = super::lanes::walk_by_pixel(spans.iter().map(span_pixels).sum(), spans.len());
+                let by_pixel =
+                    super::lanes::walk_by_pixel(spans.iter().map(|s| usize::from(s.pixels)).sum(), spans.len());
                 match (with_distortion, by_pixel) {
                     (true, true) => composite_tile_by_pixel::<true>(walk, tile, impact, pixels, blended),
                     (true, false) => composite_tile::<true>(composite, tile, impact, pixels, blended),

@@ -176,7 +176,7 @@ fn composite_tile_body<const DISTORTION: bool>(
         if let (Some(&ahead), Some(ahead_span)) = (list.get(k + 6), spans.get(k + 6))
             && let Some(pa) = prepared[ahead as usize].as_ref()
             && let Some(rect) =
-                span_rect(ahead_span).and_then(|r| texel_footprint(pa, r, (i0, j0), ts, span_pixels(ahead_span)))
+                span_rect(ahead_span).and_then(|r| texel_footprint(pa, r, (i0, j0), ts, usize::from(ahead_span.pixels)))
         {
             prefetch_texel_rect(set.texture_of(ahead as usize).as_ptr(), ts, rect);
         }
@@ -294,28 +294,10 @@ fn composite_tile_body<const DISTORTION: bool>(
     }
 }
 
-/// The number of pixels of an entry's span.
-pub(crate) fn span_pixels(span: &EntrySpans) -> usize {
-    (span.rows[0]..=span.rows[1])
-        .map(|y| {
-            let [a, b] = span.cols[y as usize];
-            (usize::from(b) + 1).saturating_sub(usize::from(a))
-        })
-        .sum()
-}
-
 /// The tile-local pixel rectangle `(x0, y0, x1, y1)` (inclusive) holding an entry's span, or
 /// `None` when the span is empty.
 fn span_rect(span: &EntrySpans) -> Option<(u8, u8, u8, u8)> {
-    let (y0, y1) = (span.rows[0], span.rows[1]);
-    let (mut x0, mut x1) = (u8::MAX, 0u8);
-    for y in y0..=y1 {
-        let [a, b] = span.cols[y as usize];
-        if a <= b {
-            x0 = x0.min(a);
-            x1 = x1.max(b);
-        }
-    }
+    let ([x0, x1], [y0, y1]) = (span.columns, span.rows);
     (x0 <= x1).then_some((x0, y0, x1, y1))
 }
 

@@ -1,7 +1,9 @@
 //! The forward pass's per-entry spans (which pixels of a tile an entry can reach) come from
 //! each billboard's rows computed once per view and cut to the tile; they must be the spans
 //! computed for the tile alone, entry by entry, exactly (the renderer's outputs depend on them
-//! only through which pixels are tried, but a span cut one column short would drop a hit).
+//! only through which pixels are tried, but a span cut one column short would drop a hit). The
+//! pixel count and column range kept with them (which choose the tile's walk and the texels to
+//! prefetch) must be those of the rows.
 
 use bbsplat::billboards::{
     ActivatedBillboards, RandomSceneConfig, TrainedLikeConfig, random_scene, random_scene_camera, trained_like_scene,
@@ -21,13 +23,26 @@ fn assert_same_spans(scene: &ActivatedBillboards, camera: &Camera) -> usize {
     let both = entry_spans_both_ways(&scene.borrowed(), camera, &RenderSettings::default());
     assert!(!both.is_empty(), "the view lists no entry");
     let mut narrowed = 0;
-    for (e, (fast, direct)) in both.iter().enumerate() {
+    for (e, (fast, direct, pixels, columns)) in both.iter().enumerate() {
         assert_eq!(
             fast, direct,
             "entry {e}: spans from the billboard's rows differ from the tile's own"
         );
         let [y0, y1] = direct.0;
         narrowed += usize::from((y0..=y1).any(|y| direct.1[y as usize] != direct.1[y0 as usize]));
+        // The totals kept with the spans, counted from the reference's rows.
+        let rows = (y0..=y1).map(|y| direct.1[y as usize]).filter(|[a, b]| a <= b);
+        let count: usize = rows.clone().map(|[a, b]| usize::from(b - a) + 1).sum();
+        assert_eq!(usize::from(*pixels), count, "entry {e}: pixel count");
+        let first = rows.clone().map(|[a, _]| a).min();
+        let last = rows.map(|[_, b]| b).max();
+        match (first, last) {
+            (Some(first), Some(last)) => assert_eq!(*columns, [first, last], "entry {e}: column range"),
+            _ => assert!(
+                columns[0] > columns[1],
+                "entry {e}: an empty span has an empty column range"
+            ),
+        }
     }
     narrowed
 }
