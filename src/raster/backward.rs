@@ -386,6 +386,7 @@ impl TexelSums {
     /// The touched cells grouped by slot, in texel order within a slot, resetting the flags for
     /// the next tile. Returns `(offsets, texels)`: the texels of slot `k` are
     /// `texels[offsets[k]..offsets[k + 1]]`.
+    #[inline(always)]
     pub(crate) fn finish(&mut self, slots: usize) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
         let texels = self.texels;
         let mut offsets = Vec::with_capacity(slots + 1);
