@@ -169,7 +169,7 @@ pub(crate) struct Candidate {
 }
 
 /// The candidates of a run of pixels of a tile (the backward pass's walk; the forward pass samples
-/// entry by entry, [`TileSamples`]), computed before they are used so that
+/// entry by entry, [`TileSamples`](super::tile_forward_pixels::TileSamples)), computed before they are used so that
 /// the texels they read can be prefetched: the texture reads are scattered over the whole texture
 /// arrays (one random cache line per tap row and channel), and issuing them up front lets the
 /// misses overlap instead of stalling the compositing loop one at a time. A run is cut once it
@@ -423,7 +423,7 @@ struct TileScratch {
 }
 
 /// A tile whose entries cover fewer pixels than this on average is composited pixel by pixel
-/// ([`composite_tile_by_pixel`]), others billboard by billboard ([`composite_tile`]): measured
+/// (`composite_tile_by_pixel`), others billboard by billboard (`composite_tile`): measured
 /// on the 256²/50k benchmark scene (1.4 pixels per entry) and the trained-like scenes (about 30).
 pub const SMALL_ENTRY_PIXELS: usize = 4;
 

@@ -11,7 +11,7 @@
 //!    back-to-front pass giving gradients without dividing by `1 − alpha`; per-tile partial sums
 //!    are reduced per billboard in tile order, so results do not depend on the thread count.
 //!
-//! [`reference`] holds a plain brute-force renderer (every pixel against every billboard) that
+//! [`reference`](mod@reference) holds a plain brute-force renderer (every pixel against every billboard) that
 //! the tiled renderer is tested against.
 //!
 //! Conventions: camera and pixel conventions of [`crate::camera`]; textures are *activated*

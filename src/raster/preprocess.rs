@@ -119,11 +119,11 @@ pub fn preprocess(set: &ActivatedRef<'_>, camera: &Camera, settings: &RenderSett
 /// component (all of them culled; counted among the culled ones only, so the check costs nothing
 /// for the billboards that are kept).
 ///
-/// Each task takes [`PREPROCESS_CHUNK`] billboards: first their geometry, the splat frames four
+/// Each task takes `PREPROCESS_CHUNK` (256) billboards: first their geometry, the splat frames four
 /// at a time ([`splat_frames_x4`], in vector lanes: 6-17 % less time for the whole preprocess
 /// on the benchmark scene, depending on the host's phase, `docs/perf-log.md`), then the SH colours
 /// of those that
-/// survived, [`SH_BATCH`] at a time ([`sh_colour_batch`], whose interleaved dependency chains
+/// survived, `SH_BATCH` (4) at a time ([`sh_colour_batch`], whose interleaved dependency chains
 /// take 21.8 ns a colour against 36.5 ns one at a time, `cargo bench --features bench --bench appearance --
 /// eval`). Every record equals [`prepare_one`]'s bit for bit (tested).
 pub fn preprocess_into(
