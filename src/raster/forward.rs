@@ -269,10 +269,11 @@ impl TileCandidates {
 pub(crate) struct EntrySpans {
     pub(crate) rows: [u8; 2],
     pub(crate) cols: [[u8; 2]; TILE_SIZE as usize],
-    /// The number of pixels of the rows' spans (set by [`EntrySpans::summed`]).
+    /// The number of pixels of the rows' spans (from the rows by [`EntrySpans::summed`], or in
+    /// closed form for a box).
     pub(crate) pixels: u16,
     /// The first and last column of any row's span (the first exceeds the last when every row
-    /// is empty; set by [`EntrySpans::summed`]).
+    /// is empty; as `pixels`).
     pub(crate) columns: [u8; 2],
 }
 
@@ -333,7 +334,7 @@ pub(crate) fn local_spans(
         let overlaps =
             p.pixel_min[0] <= i0 + last && p.pixel_max[0] >= i0 && p.pixel_min[1] <= j0 + last && p.pixel_max[1] >= j0;
         if !overlaps {
-            return entry_spans_direct(p, (i0, j0), half_side).summed();
+            return entry_spans_direct(p, (i0, j0), half_side);
         }
         let box_rows = rows.of(b as usize);
         let mut spans = box_spans(p, (i0, j0));
@@ -411,7 +412,7 @@ pub(crate) fn entry_spans_direct(p: &Prepared, (i0, j0): (u32, u32), half_side: 
             }
         }
     }
-    spans
+    spans.summed()
 }
 
 /// Reusable per-task scratch of the forward tile pass (every field is rebuilt per tile).
