@@ -10,7 +10,7 @@
 //! `raster_stats 256 50000 loop 20` only runs 20 forward+backward calls after one warm-up and
 //! prints their mean (a steady harness for `perf record` and `valgrind`), recycling the render's
 //! storage with `render_with` as the trainer does; `loopfresh` the same with fresh storage every
-//! call (`render`); `loopf` the forward alone.
+//! call (`render`); `loopf` the forward alone (storage recycled too).
 use bbsplat::billboards::{
     RandomSceneConfig, TrainedLikeConfig, planar_textures, random_scene, random_scene_camera, trained_like_scene,
 };
@@ -49,10 +49,11 @@ fn main() {
     }
     if args.get(3).map(String::as_str) == Some("loopf") {
         let calls: usize = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(20);
+        // The render's storage recycled from call to call, as training and evaluation do.
         let mut out = render(&set, &cam, &settings);
         let (t, c) = (Instant::now(), cpu_ms());
         for _ in 0..calls {
-            out = render(&set, &cam, &settings);
+            out = render_with(&set, &cam, &settings, out.into_buffers());
         }
         let ms = t.elapsed().as_secs_f64() * 1e3 / calls.max(1) as f64;
         let cpu = (cpu_ms() - c) / calls.max(1) as f64;
