@@ -175,8 +175,10 @@ fn render_orbit(args: &RenderArgs, frames: usize) -> Result<()> {
     gif.set_repeat(Repeat::Infinite)
         .with_context(|| format!("writing {}", gif_tmp.display()))?;
     let delay = image::Delay::from_numer_denom_ms(args.frame_ms, 1);
+    // The render's storage recycled from frame to frame (the same images, fewer fresh pages).
+    let mut buffers = bbsplat::raster::RenderBuffers::default();
     for (k, camera) in path.iter().enumerate() {
-        let out = bbsplat::raster::render(&activated.borrowed(), camera, &settings);
+        let out = bbsplat::raster::render_with(&activated.borrowed(), camera, &settings, std::mem::take(&mut buffers));
         write_png_atomic(
             &args.output.join(format!("orbit_{k:04}.png")),
             &out.rgb,
@@ -196,6 +198,7 @@ fn render_orbit(args: &RenderArgs, frames: usize) -> Result<()> {
         let frame = image::RgbaImage::from_raw(out.width, out.height, rgba).context("frame size")?;
         gif.encode_frame(image::Frame::from_parts(frame, 0, 0, delay))
             .with_context(|| format!("writing {}", gif_tmp.display()))?;
+        buffers = out.into_buffers();
     }
     drop(gif);
     std::fs::rename(&gif_tmp, &gif_path)

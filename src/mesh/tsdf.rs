@@ -17,7 +17,7 @@
 use super::MeshError;
 use super::params::{DepthKind, MeshParams};
 use crate::camera::Camera;
-use crate::raster::{ActivatedRef, RenderOutput, RenderSettings, render};
+use crate::raster::{ActivatedRef, RenderBuffers, RenderOutput, RenderSettings, render_with};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -196,11 +196,14 @@ pub fn fuse_views(
         sh_degree: 0,
         ..*settings
     };
+    // The render's storage recycled from view to view (the same maps, fewer fresh pages).
+    let mut buffers = RenderBuffers::default();
     for view in views {
-        let out = render(set, view.camera, &settings);
+        let out = render_with(set, view.camera, &settings, std::mem::take(&mut buffers));
         let coverage = if params.use_coverage { view.coverage } else { None };
         let map = DepthMap::from_render(&out, params.depth, params.min_alpha, coverage);
         volume.integrate(&map, view.camera, params.depth_trunc);
+        buffers = out.into_buffers();
     }
     Ok(volume)
 }
