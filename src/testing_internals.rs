@@ -172,7 +172,7 @@ pub mod model_file {
 pub mod raster {
     use crate::camera::Camera;
     use crate::raster::binning::{BinScratch, TileBins, bin_into};
-    use crate::raster::forward::{entry_spans_direct, local_spans, tile_pixels};
+    use crate::raster::forward::{box_meets_tile, entry_spans_direct, local_spans, tile_pixels};
     use crate::raster::preprocess::Prepared;
     use crate::raster::preprocess::preprocess_into;
     use crate::raster::row_spans::BillboardRows;
@@ -204,15 +204,32 @@ pub mod raster {
     /// last column (empty when the first exceeds the last).
     pub type Spans = ([u8; 2], [[u8; 2]; 16]);
 
-    /// For every entry of every tile of the view, in tile order: the entry's spans as the
-    /// forward pass computes them (the per-billboard rows cut to the tile), as computed for
-    /// the tile alone (the reference), and the pixel count and column range the forward pass
-    /// keeps with its spans.
+    /// One tile entry's spans computed both ways ([`entry_spans_both_ways`]).
+    #[derive(Clone, Copy, Debug)]
+    pub struct SpansBothWays {
+        /// As the forward pass computes them: the billboard's rows cut to the tile (or, for a
+        /// box that misses the tile, the per-entry computation).
+        pub fast: Spans,
+        /// As computed for the tile alone (the reference).
+        pub reference: Spans,
+        /// The pixel count the forward pass keeps with `fast`.
+        pub pixels: u16,
+        /// The column range the forward pass keeps with `fast`.
+        pub columns: [u8; 2],
+        /// Whether the billboard's pixel box meets the tile (always, for a binned entry).
+        pub box_meets_tile: bool,
+    }
+
+    /// For every entry of every tile of the view, in tile order, its spans both ways. With
+    /// `every_billboard` each tile's list is every prepared billboard instead of the binned
+    /// ones, so that boxes missing the tile (which the forward pass never lists, and handles
+    /// exactly anyway) are compared too.
     pub fn entry_spans_both_ways(
         set: &ActivatedRef<'_>,
         camera: &Camera,
         settings: &RenderSettings,
-    ) -> Vec<(Spans, Spans, u16, [u8; 2])> {
+        every_billboard: bool,
+    ) -> Vec<SpansBothWays> {
         let mut prepared = Vec::new();
         preprocess_into(set, camera, settings, &mut prepared);
         let (mut bins, mut scratch) = (TileBins::default(), BinScratch::default());
@@ -220,21 +237,29 @@ pub mod raster {
         let half_side = support_half_side(set.texture_size);
         let mut rows = BillboardRows::default();
         rows.build(&prepared, half_side);
+        let all: Vec<u32> = (0..prepared.len() as u32)
+            .filter(|&b| prepared[b as usize].is_some())
+            .collect();
         let mut spans = Vec::new();
         let mut out = Vec::new();
         for t in 0..bins.tile_count() {
-            let list = &bins.entries[bins.tile_range(t)];
+            let list = if every_billboard {
+                &all[..]
+            } else {
+                &bins.entries[bins.tile_range(t)]
+            };
             let (i0, j0, _, _) = tile_pixels(&bins, t, camera.width, camera.height);
             local_spans(&prepared, &rows, list, (i0, j0), half_side, &mut spans);
             for (fast, &b) in spans.iter().zip(list) {
-                let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
-                let direct = entry_spans_direct(p, (i0, j0), half_side);
-                out.push((
-                    (fast.rows, fast.cols),
-                    (direct.rows, direct.cols),
-                    fast.pixels,
-                    fast.columns,
-                ));
+                let p = prepared[b as usize].as_ref().expect("listed billboards are prepared");
+                let reference = entry_spans_direct(p, (i0, j0), half_side);
+                out.push(SpansBothWays {
+                    fast: (fast.rows, fast.cols),
+                    reference: (reference.rows, reference.cols),
+                    pixels: fast.pixels,
+                    columns: fast.columns,
+                    box_meets_tile: box_meets_tile(p, (i0, j0)),
+                });
             }
         }
         out

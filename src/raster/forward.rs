@@ -320,7 +320,6 @@ pub(crate) fn local_spans(
     half_side: f32,
     spans: &mut Vec<EntrySpans>,
 ) {
-    let last = TILE_SIZE - 1;
     spans.clear();
     spans.extend(list.iter().enumerate().map(|(k, &b)| {
         // The records are scattered over the prepared array: fetch a few entries ahead.
@@ -331,9 +330,7 @@ pub(crate) fn local_spans(
         if !is_wide(p) {
             return box_spans(p, (i0, j0));
         }
-        let overlaps =
-            p.pixel_min[0] <= i0 + last && p.pixel_max[0] >= i0 && p.pixel_min[1] <= j0 + last && p.pixel_max[1] >= j0;
-        if !overlaps {
+        if !box_meets_tile(p, (i0, j0)) {
             return entry_spans_direct(p, (i0, j0), half_side);
         }
         let box_rows = rows.of(b as usize);
@@ -352,6 +349,13 @@ pub(crate) fn local_spans(
         }
         spans.summed()
     }));
+}
+
+/// Whether a billboard's pixel box meets the tile at `(i0, j0)` (always, for a billboard the
+/// binning listed in that tile).
+pub(crate) fn box_meets_tile(p: &Prepared, (i0, j0): (u32, u32)) -> bool {
+    let last = TILE_SIZE - 1;
+    p.pixel_min[0] <= i0 + last && p.pixel_max[0] >= i0 && p.pixel_min[1] <= j0 + last && p.pixel_max[1] >= j0
 }
 
 /// The [`EntrySpans`] of a billboard's pixel box clamped to the tile at `(i0, j0)`: every row

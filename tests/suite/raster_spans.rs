@@ -17,34 +17,37 @@ use bbsplat::testing_internals::raster::entry_spans_both_ways;
 use glam::{Vec2, Vec3};
 use proptest::prelude::*;
 
-/// Compares the two ways on every tile entry of the view; returns how many entries had spans
-/// narrower than their box (so that a test can show the cut was exercised).
-fn assert_same_spans(scene: &ActivatedBillboards, camera: &Camera) -> usize {
-    let both = entry_spans_both_ways(&scene.borrowed(), camera, &RenderSettings::default());
+/// Compares the two ways on every tile entry of the view (with `every_billboard`, on every
+/// prepared billboard in every tile); returns how many entries had spans narrower than their
+/// box and how many boxes missed their tile (so that a test can show both paths were taken).
+fn assert_same_spans(scene: &ActivatedBillboards, camera: &Camera, every_billboard: bool) -> (usize, usize) {
+    let both = entry_spans_both_ways(&scene.borrowed(), camera, &RenderSettings::default(), every_billboard);
     assert!(!both.is_empty(), "the view lists no entry");
-    let mut narrowed = 0;
-    for (e, (fast, direct, pixels, columns)) in both.iter().enumerate() {
+    let (mut narrowed, mut missed) = (0, 0);
+    for (e, entry) in both.iter().enumerate() {
+        let (fast, reference) = (&entry.fast, &entry.reference);
         assert_eq!(
-            fast, direct,
+            fast, reference,
             "entry {e}: spans from the billboard's rows differ from the tile's own"
         );
-        let [y0, y1] = direct.0;
-        narrowed += usize::from((y0..=y1).any(|y| direct.1[y as usize] != direct.1[y0 as usize]));
+        let [y0, y1] = reference.0;
+        narrowed += usize::from((y0..=y1).any(|y| reference.1[y as usize] != reference.1[y0 as usize]));
+        missed += usize::from(!entry.box_meets_tile);
         // The totals kept with the spans, counted from the reference's rows.
-        let rows = (y0..=y1).map(|y| direct.1[y as usize]).filter(|[a, b]| a <= b);
+        let rows = (y0..=y1).map(|y| reference.1[y as usize]).filter(|[a, b]| a <= b);
         let count: usize = rows.clone().map(|[a, b]| usize::from(b - a) + 1).sum();
-        assert_eq!(usize::from(*pixels), count, "entry {e}: pixel count");
+        assert_eq!(usize::from(entry.pixels), count, "entry {e}: pixel count");
         let first = rows.clone().map(|[a, _]| a).min();
         let last = rows.map(|[_, b]| b).max();
         match (first, last) {
-            (Some(first), Some(last)) => assert_eq!(*columns, [first, last], "entry {e}: column range"),
+            (Some(first), Some(last)) => assert_eq!(entry.columns, [first, last], "entry {e}: column range"),
             _ => assert!(
-                columns[0] > columns[1],
+                entry.columns[0] > entry.columns[1],
                 "entry {e}: an empty span has an empty column range"
             ),
         }
     }
-    narrowed
+    (narrowed, missed)
 }
 
 #[test]
@@ -54,15 +57,20 @@ fn spans_from_billboard_rows_equal_the_per_tile_spans_on_trained_like_scenes() {
         TrainedLikeConfig::object(3000, 160, 128),
         TrainedLikeConfig::capture(3000, 160, 128),
     ] {
-        let narrowed = assert_same_spans(&trained_like_scene(&config), &camera);
+        let (narrowed, missed) = assert_same_spans(&trained_like_scene(&config), &camera, false);
         assert!(narrowed > 100, "only {narrowed} entries were narrowed by their quad");
+        assert_eq!(missed, 0, "a binned billboard's box meets its tile");
     }
 }
 
 #[test]
 fn spans_from_billboard_rows_equal_the_per_tile_spans_on_the_benchmark_scene() {
     let camera = random_scene_camera(128, 128);
-    assert_same_spans(&random_scene(&RandomSceneConfig::benchmark(8000, 128, 128)), &camera);
+    assert_same_spans(
+        &random_scene(&RandomSceneConfig::benchmark(8000, 128, 128)),
+        &camera,
+        false,
+    );
 }
 
 /// Billboards around and through the camera: crossing the near plane, edge-on, huge (boxes
@@ -97,8 +105,12 @@ fn spans_from_billboard_rows_equal_the_per_tile_spans_on_hard_geometry() {
             ]
         }));
     }
-    let narrowed = assert_same_spans(&scene, &camera);
+    let (narrowed, _) = assert_same_spans(&scene, &camera, false);
     assert!(narrowed > 100, "only {narrowed} entries were narrowed by their quad");
+    // Every billboard in every tile: the boxes that miss a tile (never listed there by the
+    // binning) take the per-entry path, and must give the reference's spans too.
+    let (_, missed) = assert_same_spans(&scene, &camera, true);
+    assert!(missed > 1000, "only {missed} boxes missed their tile");
 }
 
 /// A bound of `pixel_range`: finite, infinite, NaN or huge, with pixel centres on it.
