@@ -37,6 +37,7 @@ pub mod place;
 pub mod regularise;
 pub mod relocate;
 pub mod resolution;
+pub mod row_sums;
 pub mod run;
 pub mod run_record;
 pub mod texture_step;

@@ -11,6 +11,7 @@
 //! ([`crate::raster::RenderOutput::impact`], the post-2025 "fixed" definition). The paper-era
 //! threshold σ = 500 is our default (see `docs/training.md` for the choice).
 
+use super::row_sums::{RowSums, row_sums};
 use rayon::prelude::*;
 
 /// Weight of the texture regulariser in the reference (`1e-4`).
@@ -89,7 +90,12 @@ pub fn regularise(
         .zip(textures.par_chunks(t))
         .enumerate()
         .map(|(i, (d_tex, tex))| {
-            let term = texture.and_then(|(term, vis)| row_texture_term(term, vis, i, tex));
+            // The row's sums, read once for both terms (only the alpha sum without the texture
+            // term, or for a row the term skips).
+            let texture_row = texture.filter(|(term, _)| term_weight(*term, i).is_some());
+            let sums = (texture_row.is_some() || g_opacity.is_some())
+                .then(|| row_sums(tex, texture_row.map(|(term, _)| term.alpha0)));
+            let term = texture_row.and_then(|(term, vis)| row_texture_term(term, vis, i, tex.len(), sums?));
             if let Some((_, gc, ga)) = term {
                 for g in d_tex.iter_mut() {
                     for c in 0..3 {
@@ -105,7 +111,7 @@ pub fn regularise(
                     for d in d_tex.iter_mut() {
                         d[3] += g;
                     }
-                    tex.iter().map(|x| x[3] as f64).sum::<f64>()
+                    sums.map_or(0.0, |s| s.alpha)
                 }
                 None => 0.0,
             };
@@ -120,28 +126,28 @@ pub fn regularise(
     }
 }
 
-/// The texture regulariser on billboard `i` (texels `tex`) given `|vis|`: `(w_i · (mean colour +
-/// |m_i|), ∂/∂colour, ∂/∂alpha)`, or `None` when the billboard is not visible or at or above the
-/// threshold (weight 0).
-fn row_texture_term(term: TextureTerm<'_>, vis: f64, i: usize, tex: &[[f32; 4]]) -> Option<(f64, f32, f32)> {
-    let t = tex.len();
-    let (threshold, lambda) = (term.threshold as f64, term.weight as f64);
+/// The weight `w_i = σ − clamp(impact_i, 0, σ)` of billboard `i` in the texture regulariser, or
+/// `None` when the billboard is not visible or at or above the threshold (weight 0).
+fn term_weight(term: TextureTerm<'_>, i: usize) -> Option<f64> {
     let imp = term.impact[i] as f64;
     if imp <= 0.0 {
         return None;
     }
+    let threshold = term.threshold as f64;
     let w = threshold - imp.clamp(0.0, threshold);
-    if w == 0.0 {
-        return None;
-    }
-    // Channel by channel (r, g, b), each over the texels in order.
-    let mean_c = (0..3).flat_map(|c| tex.iter().map(move |x| x[c] as f64)).sum::<f64>() / (3 * t) as f64;
-    let m = tex
-        .iter()
-        .zip(term.alpha0)
-        .map(|(x, &x0)| x[3] as f64 - x0 as f64)
-        .sum::<f64>()
-        / t as f64;
+    (w != 0.0).then_some(w)
+}
+
+/// The texture regulariser on billboard `i` (`t` texels, whose [`RowSums`] with the reference
+/// alpha are `sums`) given `|vis|`: `(w_i · (mean colour + |m_i|), ∂/∂colour, ∂/∂alpha)`, or
+/// `None` when the billboard is not visible or at or above the threshold (weight 0).
+fn row_texture_term(term: TextureTerm<'_>, vis: f64, i: usize, t: usize, sums: RowSums) -> Option<(f64, f32, f32)> {
+    let lambda = term.weight as f64;
+    let w = term_weight(term, i)?;
+    // The colour sum runs channel by channel (r, g, b), each over the texels in order; the
+    // alpha offset over the texels in order (`RowSums`, the same bits in any order it uses).
+    let mean_c = sums.colour / (3 * t) as f64;
+    let m = sums.alpha_offset / t as f64;
     let gc = (lambda * w / (vis * (3 * t) as f64)) as f32;
     let sign = if m > 0.0 {
         1.0

@@ -77,6 +77,7 @@ mod train_grow;
 mod train_place;
 mod train_regularise;
 mod train_relocate;
+mod train_row_sums;
 mod train_run;
 mod train_texture_step;
 mod train_time_budget;
