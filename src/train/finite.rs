@@ -8,6 +8,7 @@
 //! rayon pool; the answer (which group, checked in a fixed order) does not depend on the thread
 //! count.
 
+use super::regularise::RowGradient;
 use crate::model::RawBillboards;
 use crate::raster::RenderGradients;
 use glam::{Vec2, Vec3};
@@ -110,6 +111,67 @@ fn finite_vec2(xs: &[Vec2]) -> bool {
 /// The texture gradients are checked as one array first; only when that fails are the alpha and
 /// colour lanes told apart.
 pub fn non_finite_gradient(g: &RenderGradients) -> Option<ParamGroup> {
+    non_finite_gradient_with(g, None)
+}
+
+/// [`non_finite_gradient`] of the gradients `g` with, per billboard, the regularisers'
+/// gradient `added[row]` added to its texels (as [`RowGradient::add`] adds it, the values the
+/// texture step will read): the answer `regularise` followed by [`non_finite_gradient`] gives,
+/// without writing the sums. `None` adds nothing.
+///
+/// # Panics
+/// When `added` does not hold one gradient per billboard.
+pub fn non_finite_gradient_with(g: &RenderGradients, added: Option<&[RowGradient]>) -> Option<ParamGroup> {
+    let Some(added) = added else {
+        return non_finite_gradient_plain(g);
+    };
+    let rows = g.positions.len();
+    assert_eq!(added.len(), rows, "one regulariser gradient per billboard");
+    if let Some(group) = non_finite_geometry_gradient(g) {
+        return Some(group);
+    }
+    let texels = g.textures.len() / rows.max(1);
+    // Per row: the largest exponent field of its colour and of its alpha gradients.
+    let (colour, alpha) = g
+        .textures
+        .par_chunks(texels.max(1))
+        .zip(added)
+        .map(|(row, a)| {
+            let addends: [[f32; 2]; 4] = std::array::from_fn(|ch| a.addends(ch));
+            row.iter().fold((0u32, 0u32), |(c, al), x| {
+                let e = |ch: usize| RowGradient::add_addends(addends[ch], x[ch]).to_bits() & EXPONENT;
+                (c.max(e(0)).max(e(1)).max(e(2)), al.max(e(3)))
+            })
+        })
+        .reduce(|| (0, 0), |x, y| (x.0.max(y.0), x.1.max(y.1)));
+    if alpha == EXPONENT {
+        return Some(ParamGroup::AlphaTextures);
+    }
+    if colour == EXPONENT {
+        return Some(ParamGroup::ColourTextures);
+    }
+    None
+}
+
+/// [`non_finite_gradient`] with nothing added.
+fn non_finite_gradient_plain(g: &RenderGradients) -> Option<ParamGroup> {
+    if let Some(group) = non_finite_geometry_gradient(g) {
+        return Some(group);
+    }
+    if !all_finite(g.textures.as_flattened()) {
+        let alpha_ok = g.textures.iter().all(|t| t[3].is_finite());
+        return Some(if alpha_ok {
+            ParamGroup::ColourTextures
+        } else {
+            ParamGroup::AlphaTextures
+        });
+    }
+    None
+}
+
+/// The first group of the gradients before the textures (positions, quaternions, log-scales,
+/// SH) holding a non-finite value.
+fn non_finite_geometry_gradient(g: &RenderGradients) -> Option<ParamGroup> {
     if !finite_vec3(&g.positions) {
         return Some(ParamGroup::Positions);
     }
@@ -121,14 +183,6 @@ pub fn non_finite_gradient(g: &RenderGradients) -> Option<ParamGroup> {
     }
     if !all_finite(&g.sh) {
         return Some(ParamGroup::Sh);
-    }
-    if !all_finite(g.textures.as_flattened()) {
-        let alpha_ok = g.textures.iter().all(|t| t[3].is_finite());
-        return Some(if alpha_ok {
-            ParamGroup::ColourTextures
-        } else {
-            ParamGroup::AlphaTextures
-        });
     }
     None
 }

@@ -60,7 +60,7 @@ pub use error::TrainError;
 pub use finite::{NonFinite, ParamGroup};
 use geometry::GeometryLoss;
 use glam::Vec3;
-use regularise::{RegulariserValues, TextureTerm, gaussian_opacity_grad, regularise};
+use regularise::{RegulariserValues, RowGradient, TextureTerm, gaussian_opacity_grad, regularise, regulariser_rows};
 use relocate::{apply_relocation, plan_relocation, split_alpha_logit};
 pub use run::{RunConfig, RunError, RunOutcome, RunWarning, StopReason, StopSignal, TrainEvent, run};
 use serde::{Deserialize, Serialize};
@@ -542,6 +542,10 @@ pub struct Trainer {
     render_buffers: RenderBuffers,
     /// The float values of the step's view when it is 8-bit (recycled from step to step).
     target: Vec<f32>,
+    /// Per billboard, the regularisers' gradient of the current step, which the texture step
+    /// adds as it reads the texture gradients (full textures; empty in Gaussian mode, where
+    /// `regularise` adds it in place).
+    regulariser_rows: Vec<RowGradient>,
     /// The run's arguments and dataset, saved in the checkpoint ([`run_record`]).
     record: run_record::RunRecord,
     /// The time budget's plan, when the run has one ([`time_budget`]).
@@ -610,6 +614,7 @@ impl Trainer {
             opacity_logits,
             render_buffers: RenderBuffers::default(),
             target: Vec::new(),
+            regulariser_rows: Vec::new(),
             record: run_record::RunRecord::default(),
             time_plan: None,
         };
@@ -808,13 +813,27 @@ impl Trainer {
         let RegulariserValues {
             texture: texture_reg,
             opacity: opacity_reg,
-        } = regularise(
-            &self.activated.textures,
-            self.model.texture_size * self.model.texture_size,
-            texture_term,
-            opacity_weight,
-            &mut self.grads.textures,
-        );
+        } = if self.config.texture_mode == TextureMode::Gaussian {
+            // The opacity logits' gradient reads the texture gradients with the regularisers'.
+            self.regulariser_rows.clear();
+            regularise(
+                &self.activated.textures,
+                self.model.texture_size * self.model.texture_size,
+                texture_term,
+                opacity_weight,
+                &mut self.grads.textures,
+            )
+        } else {
+            // Only read here: the texture step adds each row's regulariser gradient as it reads
+            // the row's gradients (the same bits as adding it in place, one pass fewer over them).
+            regulariser_rows(
+                &self.activated.textures,
+                self.model.texture_size * self.model.texture_size,
+                texture_term,
+                opacity_weight,
+                &mut self.regulariser_rows,
+            )
+        };
         // Growth this step: how many rows, and those placed on this view's error (drawn now,
         // while the render is at hand; appended after relocation, below).
         let due = relocation_due(self.step, self.config.iterations, self.config.relocate_every);
@@ -832,7 +851,8 @@ impl Trainer {
             loss.loss + texture_reg + opacity_reg
         };
         let bad = if total.is_finite() {
-            finite::non_finite_gradient(&self.grads).map(NonFinite::Gradient)
+            let added = (!self.regulariser_rows.is_empty()).then_some(self.regulariser_rows.as_slice());
+            finite::non_finite_gradient_with(&self.grads, added).map(NonFinite::Gradient)
         } else {
             Some(NonFinite::Loss)
         };
@@ -1024,6 +1044,7 @@ impl Trainer {
                 selected = s;
                 texture_step::RowSelection::Sparse(&selected)
             };
+            let added = (!self.regulariser_rows.is_empty()).then_some(self.regulariser_rows.as_slice());
             let [.., a_alpha, a_colour, _] = &mut self.adam;
             texture_step::step_texture_group(
                 a_alpha,
@@ -1033,6 +1054,7 @@ impl Trainer {
                 3..4,
                 Some(&self.model.alpha_mask),
                 selection,
+                added,
                 lr.alpha,
                 &hp,
                 textures_live,
@@ -1045,6 +1067,7 @@ impl Trainer {
                 0..3,
                 None,
                 selection,
+                added,
                 lr.colour,
                 &hp,
                 textures_live,

@@ -50,7 +50,8 @@ pub struct RegulariserValues {
 /// are those of [`texture_regulariser`] followed by those of [`opacity_regulariser`], in that
 /// order, so the gradients are the bits of the two calls one after the other; each value is
 /// summed row by row and the rows' sums added in billboard order (the same for any thread
-/// count). See the two functions for the formulas.
+/// count). See the two functions for the formulas. [`regulariser_rows`] followed by
+/// [`RowGradient::add_to`] on every row.
 ///
 /// # Panics
 /// When `d_textures` and `textures` differ in length, `textures` is not whole rows of
@@ -63,8 +64,93 @@ pub fn regularise(
     opacity_weight: Option<f32>,
     d_textures: &mut [[f32; 4]],
 ) -> RegulariserValues {
-    let t = texels_per_row;
     assert_eq!(d_textures.len(), textures.len(), "texture gradient buffer");
+    let mut rows = Vec::new();
+    let values = regulariser_rows(textures, texels_per_row, texture, opacity_weight, &mut rows);
+    if !rows.is_empty() {
+        d_textures
+            .par_chunks_mut(texels_per_row)
+            .zip(&rows)
+            .for_each(|(d_tex, row)| row.add_to(d_tex));
+    }
+    values
+}
+
+/// What the regularisers add to the gradient of every texel of one billboard: `colour` (the
+/// texture term's `∂/∂colour`, to each colour channel) and `alpha` (its `∂/∂alpha`, added only
+/// when non-zero) when the texture term weighs the billboard, then `opacity` (the opacity
+/// term's `∂/∂alpha`) when that term is on.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RowGradient {
+    /// The texture term's `(∂/∂colour, ∂/∂alpha)`.
+    pub texture: Option<(f32, f32)>,
+    /// The opacity term's `∂/∂alpha`.
+    pub opacity: Option<f32>,
+}
+
+impl RowGradient {
+    /// Channel `channel` of a texel's gradient `g` with the row's regulariser gradient added:
+    /// `(g + first) + second` with the two [`RowGradient::addends`] of the channel (the one copy
+    /// of these additions, for [`regularise`], the trainer's texture step and its finiteness
+    /// check).
+    #[inline(always)]
+    pub fn add(&self, channel: usize, g: f32) -> f32 {
+        Self::add_addends(self.addends(channel), g)
+    }
+
+    /// `(g + first) + second`: [`RowGradient::add`] with the channel's addends already read
+    /// (for loops over a row's texels).
+    #[inline(always)]
+    pub fn add_addends([first, second]: [f32; 2], g: f32) -> f32 {
+        (g + first) + second
+    }
+
+    /// The two numbers [`RowGradient::add`] adds to a gradient of channel `channel`, in order:
+    /// the texture term's (its colour gradient for channels 0-2, its alpha gradient for channel
+    /// 3 when non-zero), then the opacity term's (channel 3). A term that adds nothing there
+    /// gives `−0.0`, which leaves every value's bits as they are (`x + (−0.0)` is `x`, `−0.0`
+    /// included), so a loop over texels adds both without a branch.
+    #[inline(always)]
+    pub fn addends(&self, channel: usize) -> [f32; 2] {
+        let first = match self.texture {
+            Some((gc, _)) if channel < 3 => gc,
+            Some((_, ga)) if ga != 0.0 => ga,
+            _ => -0.0,
+        };
+        let second = match self.opacity {
+            Some(go) if channel == 3 => go,
+            _ => -0.0,
+        };
+        [first, second]
+    }
+
+    /// Adds the row's regulariser gradient to every texel of `d_tex`.
+    pub fn add_to(&self, d_tex: &mut [[f32; 4]]) {
+        if *self == Self::default() {
+            return;
+        }
+        for g in d_tex {
+            *g = std::array::from_fn(|c| self.add(c, g[c]));
+        }
+    }
+}
+
+/// The values of the regularisers of [`regularise`] and, in `rows` (resized to one per
+/// billboard, or cleared when both terms are off or the set is empty), what they add to each
+/// billboard's texel gradients, without touching a gradient: a pass that only reads `textures`.
+/// The values are the bits of [`regularise`]'s.
+///
+/// # Panics
+/// As [`regularise`].
+pub fn regulariser_rows(
+    textures: &[[f32; 4]],
+    texels_per_row: usize,
+    texture: Option<TextureTerm<'_>>,
+    opacity_weight: Option<f32>,
+    rows: &mut Vec<RowGradient>,
+) -> RegulariserValues {
+    let t = texels_per_row;
+    rows.clear();
     // Rows of no texels hold nothing: only an empty set has them.
     if t == 0 {
         assert!(textures.is_empty(), "whole rows of TS² texels");
@@ -84,42 +170,31 @@ pub fn regularise(
         return RegulariserValues::default();
     }
     let g_opacity = opacity.map(|w| (w as f64 / textures.len() as f64) as f32);
-    // Per row: the texture term's contribution and the row's alpha sum, each in f64.
-    let rows: Vec<(f64, f64)> = d_textures
-        .par_chunks_mut(t)
-        .zip(textures.par_chunks(t))
+    // Per row: its gradient, the texture term's contribution and the row's alpha sum (f64).
+    let per_row: Vec<(RowGradient, f64, f64)> = textures
+        .par_chunks(t)
         .enumerate()
-        .map(|(i, (d_tex, tex))| {
+        .map(|(i, tex)| {
             // The row's sums, read once for both terms (only the alpha sum without the texture
             // term, or for a row the term skips).
             let texture_row = texture.filter(|(term, _)| term_weight(*term, i).is_some());
             let sums = (texture_row.is_some() || g_opacity.is_some())
                 .then(|| row_sums(tex, texture_row.map(|(term, _)| term.alpha0)));
             let term = texture_row.and_then(|(term, vis)| row_texture_term(term, vis, i, tex.len(), sums?));
-            if let Some((_, gc, ga)) = term {
-                for g in d_tex.iter_mut() {
-                    for c in 0..3 {
-                        g[c] += gc;
-                    }
-                    if ga != 0.0 {
-                        g[3] += ga;
-                    }
-                }
-            }
             let alpha_sum = match g_opacity {
-                Some(g) => {
-                    for d in d_tex.iter_mut() {
-                        d[3] += g;
-                    }
-                    sums.map_or(0.0, |s| s.alpha)
-                }
+                Some(_) => sums.map_or(0.0, |s| s.alpha),
                 None => 0.0,
             };
-            (term.map_or(0.0, |(value, _, _)| value), alpha_sum)
+            let gradient = RowGradient {
+                texture: term.map(|(_, gc, ga)| (gc, ga)),
+                opacity: g_opacity,
+            };
+            (gradient, term.map_or(0.0, |(value, _, _)| value), alpha_sum)
         })
         .collect();
+    rows.extend(per_row.iter().map(|r| r.0));
     // Skipped billboards contribute an exact 0.0, which leaves the running sums unchanged.
-    let (terms, alpha) = rows.iter().fold((0.0, 0.0), |(a, b), &(x, y)| (a + x, b + y));
+    let (terms, alpha) = per_row.iter().fold((0.0, 0.0), |(a, b), &(_, x, y)| (a + x, b + y));
     RegulariserValues {
         texture: texture.map_or(0.0, |(term, vis)| term.weight as f64 * terms / vis),
         opacity: opacity.map_or(0.0, |w| w as f64 * alpha / textures.len() as f64),

@@ -13,6 +13,7 @@
 //! gained nothing (criterion `texture_step/dense/10000`: 23.7-26.5 ms against 23.5-24.9).
 
 use super::adam::{AdamGroup, AdamParams, StepFactors, update_row_with};
+use super::regularise::RowGradient;
 use crate::model::sigmoid;
 use rayon::prelude::*;
 use std::ops::Range;
@@ -41,12 +42,15 @@ const CHUNK_ROWS: usize = 64;
 ///   **activated** values, chained here through the sigmoid (`∂L/∂x = ∂L/∂y · y(1 − y)`, masked
 ///   texels 0).
 /// * `mask`: per texel, `false` for the texels that stay at alpha 0; `None` keeps every texel.
+/// * `added`: per row, the regularisers' gradient ([`RowGradient`]), added to each texel's
+///   gradient as it is read (the bits of [`super::regularise::regularise`] adding it in place
+///   first), so that the regulariser pass need not write the gradients; `None` adds nothing.
 /// * `update`: `false` (textures frozen or before the window when the moments should not move)
 ///   skips the step and only zeroes the gradients.
 ///
 /// # Panics
 /// When the slices do not hold `group.rows()` rows, `channels` is empty or not inside `0..4`,
-/// or `mask` does not hold `TS²` flags.
+/// `mask` does not hold `TS²` flags, or `added` does not hold one gradient per row.
 #[allow(clippy::too_many_arguments)]
 pub fn step_texture_group(
     group: &mut AdamGroup,
@@ -56,6 +60,7 @@ pub fn step_texture_group(
     channels: Range<usize>,
     mask: Option<&[bool]>,
     selection: RowSelection<'_>,
+    added: Option<&[RowGradient]>,
     lr: f32,
     hp: &AdamParams,
     update: bool,
@@ -69,6 +74,10 @@ pub fn step_texture_group(
     assert_eq!(activated.len(), rows * texels, "one activated row per billboard");
     assert_eq!(grads.len(), rows * texels, "one gradient row per billboard");
     assert!(mask.is_none_or(|m| m.len() == texels), "one mask flag per texel");
+    assert!(
+        added.is_none_or(|a| a.len() == rows),
+        "one regulariser gradient per row"
+    );
     let owned: [bool; 4] = std::array::from_fn(|c| channels.contains(&c));
     if !update {
         grads
@@ -103,6 +112,7 @@ pub fn step_texture_group(
                 texels,
                 mask,
                 selection,
+                added,
                 global_step,
                 lr,
                 hp,
@@ -135,6 +145,8 @@ struct RowStep<'a, 'h> {
     texels: usize,
     mask: Option<&'a [bool]>,
     selection: RowSelection<'a>,
+    /// Per row, the regularisers' gradient to add to the texels' gradients as they are read.
+    added: Option<&'a [RowGradient]>,
     global_step: u64,
     lr: f32,
     hp: &'h AdamParams,
@@ -189,11 +201,15 @@ fn step_rows(rows: ChunkRows<'_>, how: &RowStep<'_, '_>) {
             }
         };
         let (y, g) = (&mut activated[texel_span.clone()], &mut grads[texel_span]);
-        // Chain through the sigmoid, consuming (zeroing) the gradient as it is read.
+        // Chain through the sigmoid, consuming (zeroing) the gradient as it is read, with the
+        // regularisers' gradient added first (as `regularise` would have added it in place).
+        let added = how.added.map(|a| a[first_row + r]);
         for (ci, ch) in how.channels.clone().enumerate() {
+            // `RowGradient::add`'s two addends, `−0.0` (no change) without regularisers.
+            let addends = added.map_or([-0.0; 2], |a| a.addends(ch));
             for k in 0..texels {
                 let y = y[k][ch];
-                let g = std::mem::take(&mut g[k][ch]);
+                let g = RowGradient::add_addends(addends, std::mem::take(&mut g[k][ch]));
                 d_logit[ci * texels + k] = if keep(k) { g * y * (1.0 - y) } else { 0.0 };
             }
         }

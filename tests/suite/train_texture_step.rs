@@ -101,6 +101,7 @@ fn matches_the_serial_row_loop_bit_for_bit() {
                             channels.clone(),
                             Some(&mask),
                             sel,
+                            None,
                             0.01,
                             &hp,
                             true,
@@ -127,6 +128,112 @@ fn matches_the_serial_row_loop_bit_for_bit() {
                 assert_eq!(bits(&g2.v), bits(&group.v));
                 assert_eq!(g2.steps, group.steps);
             }
+        }
+    }
+}
+
+/// The texture step adding each row's regulariser gradient as it reads the row
+/// (`added = Some(rows)`, what the trainer does with full textures) gives the bits of
+/// `regularise` adding it in place first and the step adding nothing: logits, moments,
+/// activated values, and the gradients left at zero; for both groups, dense and sparse, with a
+/// mask, with both terms, with either alone, and with rows the texture term skips. The
+/// gradients include `−0.0` and rows whose alpha offset is exactly zero (the texture term then
+/// adds no alpha gradient). Measured: the step ignoring `added` fails this test.
+#[test]
+fn regulariser_gradients_added_as_read_match_adding_them_in_place() {
+    use bbsplat::train::regularise::{RowGradient, TextureTerm, regularise, regulariser_rows};
+    let (rows, texels) = (12usize, 16usize);
+    let mask: Vec<bool> = (0..texels).map(|k| k % 6 != 1).collect();
+    let mut state = 0x2545f4914f6cdd1du64;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state % 20001) as f32 / 10000.0 - 1.0
+    };
+    let alpha0: Vec<f32> = (0..texels).map(|k| 0.25 + 0.01 * k as f32).collect();
+    // Rows 0 and 1: alpha equal to the reference (offset exactly 0); the others random.
+    let activated0: Vec<[f32; 4]> = (0..rows * texels)
+        .map(|i| {
+            let c = [0.5 + 0.4 * next(), 0.5 + 0.4 * next(), 0.5 + 0.4 * next()];
+            let a = if i / texels < 2 {
+                alpha0[i % texels]
+            } else {
+                0.5 + 0.4 * next()
+            };
+            [c[0], c[1], c[2], a]
+        })
+        .collect();
+    let grads0: Vec<[f32; 4]> = (0..rows * texels)
+        .map(|i| std::array::from_fn(|c| if (i + c) % 7 == 0 { -0.0 } else { 1e-3 * next() }))
+        .collect();
+    // Impacts: invisible, at and above the threshold (skipped by the texture term), and below.
+    let impact: Vec<f32> = (0..rows)
+        .map(|r| [0.0, 30.0, 500.0, 900.0, 120.0, 7.0][r % 6])
+        .collect();
+    let term = TextureTerm {
+        alpha0: &alpha0,
+        impact: &impact,
+        threshold: 500.0,
+        weight: 0.5,
+    };
+    let selected: Vec<bool> = (0..rows).map(|r| r % 4 != 3).collect();
+    let hp = AdamParams::default();
+    let bits = |x: &[f32]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    for (with_texture, with_opacity) in [(true, true), (true, false), (false, true)] {
+        let (texture, opacity) = (with_texture.then_some(term), with_opacity.then_some(0.25));
+        let mut added: Vec<RowGradient> = Vec::new();
+        let values = regulariser_rows(&activated0, texels, texture, opacity, &mut added);
+        assert_eq!(added.len(), rows);
+        assert!(added.iter().any(|a| a.texture.is_some()) == with_texture);
+        for dense in [true, false] {
+            let run = |in_place: bool| {
+                let mut grads = grads0.clone();
+                let mut activated = activated0.clone();
+                if in_place {
+                    let v = regularise(&activated0, texels, texture, opacity, &mut grads);
+                    assert_eq!(v, values, "the values do not depend on where the gradient goes");
+                }
+                let selection = if dense {
+                    RowSelection::Dense
+                } else {
+                    RowSelection::Sparse(&selected)
+                };
+                let mut out = Vec::new();
+                for (channels, group_mask) in [(3..4, Some(mask.as_slice())), (0..3, None)] {
+                    let n = channels.len() * texels;
+                    let mut group = AdamGroup::new(rows, n);
+                    group.global_step = 1;
+                    let mut logits: Vec<f32> = (0..rows * n).map(|k| (k % 11) as f32 * 0.3 - 1.5).collect();
+                    step_texture_group(
+                        &mut group,
+                        &mut logits,
+                        &mut activated,
+                        &mut grads,
+                        channels,
+                        group_mask,
+                        selection,
+                        (!in_place).then_some(added.as_slice()),
+                        0.01,
+                        &hp,
+                        true,
+                    );
+                    out.extend(bits(&logits));
+                    out.extend(bits(&group.m));
+                    out.extend(bits(&group.v));
+                }
+                out.extend(bits(activated.as_flattened()));
+                assert!(
+                    grads.iter().flatten().all(|&g| g == 0.0 && g.to_bits() == 0),
+                    "consumed"
+                );
+                out
+            };
+            assert_eq!(
+                run(false),
+                run(true),
+                "texture {with_texture}, opacity {with_opacity}, dense {dense}"
+            );
         }
     }
 }
