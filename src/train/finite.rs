@@ -84,6 +84,18 @@ fn finite_serial(xs: &[f32]) -> bool {
     xs.iter().fold(0u32, |m, x| m.max(x.to_bits() & EXPONENT)) != EXPONENT
 }
 
+/// The largest exponent field (`bits & 0x7f80_0000`) of `xs` (0 when empty), for scans folded
+/// into other loops: a value is non-finite exactly when its field is [`non_finite_field`]'s.
+#[inline(always)]
+pub(crate) fn max_exponent_field(xs: &[f32]) -> u32 {
+    xs.iter().fold(0u32, |m, x| m.max(x.to_bits() & EXPONENT))
+}
+
+/// The exponent field of NaN and the infinities (all ones).
+pub(crate) const fn non_finite_field() -> u32 {
+    EXPONENT
+}
+
 /// True when every value of `xs` is finite (split across the rayon pool when large).
 pub fn all_finite(xs: &[f32]) -> bool {
     if xs.len() <= CHUNK {
@@ -138,10 +150,11 @@ pub fn non_finite_gradient_with(g: &RenderGradients, added: Option<&[RowGradient
         .zip(added)
         .map(|(row, a)| {
             let addends: [[f32; 2]; 4] = std::array::from_fn(|ch| a.addends(ch));
-            row.iter().fold((0u32, 0u32), |(c, al), x| {
-                let e = |ch: usize| RowGradient::add_addends(addends[ch], x[ch]).to_bits() & EXPONENT;
-                (c.max(e(0)).max(e(1)).max(e(2)), al.max(e(3)))
-            })
+            // Per channel (four lanes of one register), then the colour lanes together.
+            let fields = row.iter().fold([0u32; 4], |m, x| {
+                std::array::from_fn(|ch| m[ch].max(RowGradient::add_addends(addends[ch], x[ch]).to_bits() & EXPONENT))
+            });
+            (fields[0].max(fields[1]).max(fields[2]), fields[3])
         })
         .reduce(|| (0, 0), |x, y| (x.0.max(y.0), x.1.max(y.1)));
     if alpha == EXPONENT {
@@ -190,6 +203,17 @@ fn non_finite_geometry_gradient(g: &RenderGradients) -> Option<ParamGroup> {
 /// The first group (in the order of [`ParamGroup`]) of `model` and `opacity_logits` holding a
 /// non-finite value.
 pub fn non_finite_parameter(model: &RawBillboards, opacity_logits: &[f32]) -> Option<ParamGroup> {
+    non_finite_parameter_with(model, opacity_logits, false)
+}
+
+/// [`non_finite_parameter`], skipping the alpha and colour logits when `textures_known_finite`
+/// (the trainer's texture step has just checked every one of them as it wrote it): the same
+/// answer whenever that is true.
+pub fn non_finite_parameter_with(
+    model: &RawBillboards,
+    opacity_logits: &[f32],
+    textures_known_finite: bool,
+) -> Option<ParamGroup> {
     if !finite_vec3(&model.positions) {
         return Some(ParamGroup::Positions);
     }
@@ -202,10 +226,10 @@ pub fn non_finite_parameter(model: &RawBillboards, opacity_logits: &[f32]) -> Op
     if !all_finite(&model.sh) {
         return Some(ParamGroup::Sh);
     }
-    if !all_finite(&model.alpha_logits) {
+    if !textures_known_finite && !all_finite(&model.alpha_logits) {
         return Some(ParamGroup::AlphaTextures);
     }
-    if !all_finite(&model.colour_logits) {
+    if !textures_known_finite && !all_finite(&model.colour_logits) {
         return Some(ParamGroup::ColourTextures);
     }
     if !all_finite(opacity_logits) {

@@ -878,19 +878,16 @@ impl Trainer {
                 self.config.iterations,
             )));
         }
-        let updated = match self.config.adam {
+        let (updated, textures_checked) = match self.config.adam {
             AdamMode::Dense => {
                 for g in &mut self.adam {
                     g.global_step += 1;
                 }
                 let rows: Vec<u32> = (0..self.model.len() as u32).collect();
-                self.apply(&rows, &lr);
-                rows.len()
+                let checked = self.apply(&rows, &lr);
+                (rows.len(), checked)
             }
-            AdamMode::Sparse => {
-                self.apply(&touched, &lr);
-                touched.len()
-            }
+            AdamMode::Sparse => (touched.len(), self.apply(&touched, &lr)),
         };
         // Regulariser gradients may have landed on rows the sparse mode did not consume (the
         // texture step zeroes every row in full-texture mode).
@@ -908,7 +905,11 @@ impl Trainer {
             None => 0,
         };
         self.step += 1;
-        if let Some(group) = finite::non_finite_parameter(&self.model, &self.opacity_logits) {
+        // The texture logits were checked as the texture step wrote them, unless some were
+        // not written (sparse rows, frozen textures) or were written since (relocation, growth).
+        let textures_known_finite = textures_checked && relocated == 0 && grown == 0;
+        if let Some(group) = finite::non_finite_parameter_with(&self.model, &self.opacity_logits, textures_known_finite)
+        {
             return Err(TrainError::NonFinite {
                 step: self.step,
                 view: vi,
@@ -953,7 +954,9 @@ impl Trainer {
         }
     }
 
-    fn apply(&mut self, rows: &[u32], lr: &LearningRates) {
+    /// One optimiser step of the rows `rows`. Returns true when the texture step wrote every
+    /// texture logit (dense mode, full textures, not frozen) and found them all finite.
+    fn apply(&mut self, rows: &[u32], lr: &LearningRates) -> bool {
         let hp = AdamParams::default();
         let t = self.model.texture_size * self.model.texture_size;
         let dense = self.config.adam == AdamMode::Dense;
@@ -1046,7 +1049,7 @@ impl Trainer {
             };
             let added = (!self.regulariser_rows.is_empty()).then_some(self.regulariser_rows.as_slice());
             let [.., a_alpha, a_colour, _] = &mut self.adam;
-            texture_step::step_texture_group(
+            let alpha_finite = texture_step::step_texture_group(
                 a_alpha,
                 &mut self.model.alpha_logits,
                 &mut self.activated.textures,
@@ -1059,7 +1062,7 @@ impl Trainer {
                 &hp,
                 textures_live,
             );
-            texture_step::step_texture_group(
+            let colour_finite = texture_step::step_texture_group(
                 a_colour,
                 &mut self.model.colour_logits,
                 &mut self.activated.textures,
@@ -1072,7 +1075,9 @@ impl Trainer {
                 &hp,
                 textures_live,
             );
+            return dense && textures_live && alpha_finite && colour_finite;
         }
+        false
     }
 
     /// Relocates dead billboards now (spec §6; normally called by [`Trainer::step`] when due) and

@@ -13,6 +13,7 @@
 //! gained nothing (criterion `texture_step/dense/10000`: 23.7-26.5 ms against 23.5-24.9).
 
 use super::adam::{AdamGroup, AdamParams, StepFactors, update_row_with};
+use super::finite::{max_exponent_field, non_finite_field};
 use super::regularise::RowGradient;
 use crate::model::sigmoid;
 use rayon::prelude::*;
@@ -48,6 +49,9 @@ const CHUNK_ROWS: usize = 64;
 /// * `update`: `false` (textures frozen or before the window when the moments should not move)
 ///   skips the step and only zeroes the gradients.
 ///
+/// Returns true when every logit the step wrote (those of the selected rows; none without
+/// `update`) is finite: the parameter check of those logits, done while they are in cache.
+///
 /// # Panics
 /// When the slices do not hold `group.rows()` rows, `channels` is empty or not inside `0..4`,
 /// `mask` does not hold `TS²` flags, or `added` does not hold one gradient per row.
@@ -64,7 +68,7 @@ pub fn step_texture_group(
     lr: f32,
     hp: &AdamParams,
     update: bool,
-) {
+) -> bool {
     let n = group.row_len;
     let rows = group.rows();
     assert!(!channels.is_empty() && channels.end <= 4, "channels must lie in 0..4");
@@ -83,7 +87,7 @@ pub fn step_texture_group(
         grads
             .par_chunks_mut(CHUNK_ROWS * texels.max(1))
             .for_each(|g| clear_channels(g, owned));
-        return;
+        return true;
     }
     let global_step = group.global_step;
     let AdamGroup { m, v, steps, .. } = group;
@@ -97,7 +101,7 @@ pub fn step_texture_group(
         .zip(activated.par_chunks_mut(texel_chunk))
         .zip(grads.par_chunks_mut(texel_chunk))
         .enumerate()
-        .for_each(|(c, (((((m, v), steps), logits), activated), grads))| {
+        .map(|(c, (((((m, v), steps), logits), activated), grads))| {
             let rows = ChunkRows {
                 first_row: c * CHUNK_ROWS,
                 m,
@@ -120,12 +124,13 @@ pub fn step_texture_group(
             #[cfg(target_arch = "x86_64")]
             if wide {
                 // SAFETY: `wide_lanes` checked that the CPU has AVX2 and FMA.
-                unsafe { step_rows_avx2(rows, &how) };
-                return;
+                return unsafe { step_rows_avx2(rows, &how) };
             }
             let _ = wide;
-            step_rows(rows, &how);
-        });
+            step_rows(rows, &how)
+        })
+        .reduce(|| 0, u32::max)
+        != non_finite_field()
 }
 
 /// One rayon chunk of the texture step: `steps.len()` rows starting at billboard `first_row`.
@@ -159,14 +164,15 @@ struct RowStep<'a, 'h> {
 /// The CPU must support AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn step_rows_avx2(rows: ChunkRows<'_>, how: &RowStep<'_, '_>) {
+unsafe fn step_rows_avx2(rows: ChunkRows<'_>, how: &RowStep<'_, '_>) -> u32 {
     step_rows(rows, how)
 }
 
 /// The rows of one chunk, one after the other: chain through the sigmoid (consuming the
-/// gradient), Adam, re-activation.
+/// gradient), Adam, re-activation. Returns the largest exponent field of the logits it wrote
+/// (their finiteness check, while they are in cache).
 #[inline(always)]
-fn step_rows(rows: ChunkRows<'_>, how: &RowStep<'_, '_>) {
+fn step_rows(rows: ChunkRows<'_>, how: &RowStep<'_, '_>) -> u32 {
     let ChunkRows {
         first_row,
         m,
@@ -183,6 +189,7 @@ fn step_rows(rows: ChunkRows<'_>, how: &RowStep<'_, '_>) {
     let mut d_logit = vec![0.0f32; n];
     // Dense rows share the group's step count, so its Adam factors are computed once.
     let dense_factors = StepFactors::new(how.lr, how.hp, how.global_step);
+    let mut written = 0u32;
     for r in 0..steps.len() {
         let span = r * n..(r + 1) * n;
         let texel_span = r * texels..(r + 1) * texels;
@@ -215,6 +222,7 @@ fn step_rows(rows: ChunkRows<'_>, how: &RowStep<'_, '_>) {
         }
         let x = &mut logits[span.clone()];
         update_row_with(&mut m[span.clone()], &mut v[span], x, &d_logit, factors, how.hp);
+        written = written.max(max_exponent_field(x));
         // Sigmoids over the contiguous logits (vectorised), then scattered into the texels.
         for (s, &x) in d_logit.iter_mut().zip(x.iter()) {
             *s = sigmoid(x);
@@ -225,6 +233,7 @@ fn step_rows(rows: ChunkRows<'_>, how: &RowStep<'_, '_>) {
             }
         }
     }
+    written
 }
 
 /// Zeroes the channels flagged in `owned` of every texel. A fixed trip count with a per-channel

@@ -8,8 +8,8 @@ use bbsplat::report::TrainSummary;
 use bbsplat::scene::split::camera_extent;
 use bbsplat::train::run::{CHECKPOINT_FILE, MODEL_DIR, SUMMARY_FILE};
 use bbsplat::train::{
-    ClampGradient, NonFinite, ParamGroup, RunConfig, RunError, RunOutcome, StopReason, StopSignal, TrainConfig,
-    TrainError, TrainEvent, TrainView, Trainer, run,
+    AdamMode, ClampGradient, NonFinite, ParamGroup, RunConfig, RunError, RunOutcome, StopReason, StopSignal,
+    TrainConfig, TrainError, TrainEvent, TrainView, Trainer, run,
 };
 use glam::Vec3;
 use std::path::PathBuf;
@@ -428,6 +428,37 @@ fn a_nan_parameter_is_named_by_run_and_by_step() {
         "{err:?}"
     );
     assert_eq!(trainer.non_finite_parameter(), Some(ParamGroup::Sh));
+}
+
+/// A NaN written into an alpha or a colour logit is named after the step that applied it, in
+/// dense mode (where the texture step checks the logits as it writes them and the parameter
+/// check relies on it) and in row-sparse mode (where the whole arrays are scanned).
+#[test]
+fn a_nan_texture_logit_is_named_after_the_step() {
+    for adam in [AdamMode::Dense, AdamMode::Sparse] {
+        for (alpha, group) in [(true, ParamGroup::AlphaTextures), (false, ParamGroup::ColourTextures)] {
+            let Setup { mut trainer, train, .. } = setup(20, |c| TrainConfig { adam, ..c });
+            // Billboard 6's texel 5 (its blue channel for colour; planar rows).
+            let t = trainer.model.texture_size * trainer.model.texture_size;
+            if alpha {
+                trainer.model.alpha_logits[6 * t + 5] = f32::NAN;
+            } else {
+                trainer.model.colour_logits[6 * 3 * t + 2 * t + 5] = f32::NAN;
+            }
+            let err = trainer.step(&train).unwrap_err();
+            assert!(
+                matches!(
+                    err,
+                    TrainError::NonFinite {
+                        step: 1,
+                        value: NonFinite::Parameter(g),
+                        ..
+                    } if g == group
+                ),
+                "{adam:?} {group:?}: {err:?}"
+            );
+        }
+    }
 }
 
 /// The clamp gradient: with every alpha texel at 0.999 (above the 0.99 clamp) and the

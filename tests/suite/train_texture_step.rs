@@ -237,3 +237,57 @@ fn regulariser_gradients_added_as_read_match_adding_them_in_place() {
         }
     }
 }
+
+/// The step's report: false when a logit it wrote is not finite (a NaN logit stays NaN through
+/// Adam), true when the NaN lies in a row it did not step (sparse, unselected) or when it
+/// stepped nothing (`update = false`).
+#[test]
+fn the_step_reports_the_finiteness_of_the_logits_it_wrote() {
+    let (rows, texels) = (8usize, 9usize);
+    let hp = AdamParams::default();
+    let selected: Vec<bool> = (0..rows).map(|r| r != 5).collect();
+    for (selection, update, want) in [
+        (RowSelection::Dense, true, false),
+        (RowSelection::Sparse(&selected), true, true),
+        (RowSelection::Dense, false, true),
+    ] {
+        let mut group = AdamGroup::new(rows, texels);
+        group.global_step = 1;
+        let mut logits = vec![0.5f32; rows * texels];
+        logits[5 * texels + 4] = f32::NAN;
+        let mut activated = vec![[0.5f32; 4]; rows * texels];
+        let mut grads = vec![[1e-3f32; 4]; rows * texels];
+        let finite = step_texture_group(
+            &mut group,
+            &mut logits,
+            &mut activated,
+            &mut grads,
+            3..4,
+            None,
+            selection,
+            None,
+            0.01,
+            &hp,
+            update,
+        );
+        assert_eq!(finite, want, "{selection:?}, update {update}");
+        let mut selected_nan = selected.clone();
+        selected_nan[5] = true;
+        let mut logits = vec![0.5f32; rows * texels];
+        logits[5 * texels + 4] = f32::NAN;
+        let stepped = step_texture_group(
+            &mut group,
+            &mut logits,
+            &mut activated,
+            &mut grads,
+            3..4,
+            None,
+            RowSelection::Sparse(&selected_nan),
+            None,
+            0.01,
+            &hp,
+            true,
+        );
+        assert!(!stepped, "a selected NaN row is reported");
+    }
+}
