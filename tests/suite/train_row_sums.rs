@@ -42,9 +42,20 @@ fn row(rng: &mut Rng, texels: usize, tau: f32, low_exponent: i32) -> (Vec<[f32; 
 /// the texel-order sums; with and without the reference alpha; at texture sizes 2, 6, 16, 18
 /// (`3·T` just under 1024) and 19 (just over: a threshold twice as high). The values go down to
 /// the threshold and include long log-uniform tails, so the texel-order sums are far from
-/// trivial (rows of values spread over 20 binades).
+/// trivial (rows of values spread over 20 binades). In the AVX2 and the baseline build.
 #[test]
 fn the_fast_path_gives_the_texel_order_bits() {
+    let _guard = crate::raster_lanes::SWITCH.lock().unwrap_or_else(|e| e.into_inner());
+    for baseline in [false, true] {
+        bbsplat::raster::lanes::force_baseline(baseline);
+        fast_path_rows();
+    }
+    bbsplat::raster::lanes::force_baseline(false);
+}
+
+/// The rows of [`the_fast_path_gives_the_texel_order_bits`], in the build the lanes switch
+/// selects (AVX2 or baseline).
+fn fast_path_rows() {
     let mut rng = Rng::new(7);
     let mut fast = 0;
     for ts in [2usize, 6, 16, 18, 19] {
