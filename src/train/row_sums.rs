@@ -2,7 +2,7 @@
 //! bit for bit to its sum in texel order, but computed in any order when no order can change
 //! them.
 //!
-//! The regularisers ([`super::regularise`]) sum a row's values in f64 in a fixed order: the
+//! The regularisers ([`mod@super::regularise`]) sum a row's values in f64 in a fixed order: the
 //! colour channels (r over the texels, then g, then b), the alpha channel, and the alpha minus a
 //! reference alpha `alpha0`. In texel order each sum is one chain of dependent additions
 //! (1280 of them for a 16×16 row), so the regulariser pass waited on the adder's latency, not on
