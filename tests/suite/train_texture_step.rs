@@ -144,13 +144,8 @@ fn regulariser_gradients_added_as_read_match_adding_them_in_place() {
     use bbsplat::train::regularise::{RowGradient, TextureTerm, regularise, regulariser_rows};
     let (rows, texels) = (12usize, 16usize);
     let mask: Vec<bool> = (0..texels).map(|k| k % 6 != 1).collect();
-    let mut state = 0x2545f4914f6cdd1du64;
-    let mut next = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state % 20001) as f32 / 10000.0 - 1.0
-    };
+    let mut rng = bbsplat::rng::Rng::new(19);
+    let mut next = || 2.0 * rng.uniform() - 1.0;
     let alpha0: Vec<f32> = (0..texels).map(|k| 0.25 + 0.01 * k as f32).collect();
     // Rows 0 and 1: alpha equal to the reference (offset exactly 0); the others random.
     let activated0: Vec<[f32; 4]> = (0..rows * texels)
