@@ -76,10 +76,10 @@ pub fn regularise(
     values
 }
 
-/// What the regularisers add to the gradient of every texel of one billboard: `colour` (the
-/// texture term's `∂/∂colour`, to each colour channel) and `alpha` (its `∂/∂alpha`, added only
-/// when non-zero) when the texture term weighs the billboard, then `opacity` (the opacity
-/// term's `∂/∂alpha`) when that term is on.
+/// What the regularisers add to the gradient of every texel of one billboard: the texture
+/// term's `(∂/∂colour, ∂/∂alpha)` when it weighs the billboard (the colour gradient to each
+/// colour channel, the alpha gradient only when non-zero), then the opacity term's `∂/∂alpha`
+/// when that term is on.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct RowGradient {
     /// The texture term's `(∂/∂colour, ∂/∂alpha)`.
@@ -109,7 +109,8 @@ impl RowGradient {
     /// the texture term's (its colour gradient for channels 0-2, its alpha gradient for channel
     /// 3 when non-zero), then the opacity term's (channel 3). A term that adds nothing there
     /// gives `−0.0`, which leaves every value's bits as they are (`x + (−0.0)` is `x`, `−0.0`
-    /// included), so a loop over texels adds both without a branch.
+    /// included; only a signalling NaN comes out quiet, still a NaN), so a loop over texels
+    /// adds both without a branch.
     #[inline(always)]
     pub fn addends(&self, channel: usize) -> [f32; 2] {
         let first = match self.texture {
