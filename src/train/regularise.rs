@@ -178,10 +178,10 @@ pub fn regulariser_rows(
         .map(|(i, tex)| {
             // The row's sums, read once for both terms (only the alpha sum without the texture
             // term, or for a row the term skips).
-            let texture_row = texture.filter(|(term, _)| term_weight(*term, i).is_some());
+            let texture_row = texture.and_then(|(term, vis)| Some((term, vis, term_weight(term, i)?)));
             let sums = (texture_row.is_some() || g_opacity.is_some())
-                .then(|| row_sums(tex, texture_row.map(|(term, _)| term.alpha0)));
-            let term = texture_row.and_then(|(term, vis)| row_texture_term(term, vis, i, tex.len(), sums?));
+                .then(|| row_sums(tex, texture_row.map(|(term, _, _)| term.alpha0)));
+            let term = texture_row.and_then(|(term, vis, w)| Some(row_texture_term(term, vis, w, tex.len(), sums?)));
             let alpha_sum = match g_opacity {
                 Some(_) => sums.map_or(0.0, |s| s.alpha),
                 None => 0.0,
@@ -214,12 +214,11 @@ fn term_weight(term: TextureTerm<'_>, i: usize) -> Option<f64> {
     (w != 0.0).then_some(w)
 }
 
-/// The texture regulariser on billboard `i` (`t` texels, whose [`RowSums`] with the reference
-/// alpha are `sums`) given `|vis|`: `(w_i · (mean colour + |m_i|), ∂/∂colour, ∂/∂alpha)`, or
-/// `None` when the billboard is not visible or at or above the threshold (weight 0).
-fn row_texture_term(term: TextureTerm<'_>, vis: f64, i: usize, t: usize, sums: RowSums) -> Option<(f64, f32, f32)> {
+/// The texture regulariser on a billboard of weight `w` ([`term_weight`]; `t` texels, whose
+/// [`RowSums`] with the reference alpha are `sums`) given `|vis|`: `(w · (mean colour + |m|),
+/// ∂/∂colour, ∂/∂alpha)`.
+fn row_texture_term(term: TextureTerm<'_>, vis: f64, w: f64, t: usize, sums: RowSums) -> (f64, f32, f32) {
     let lambda = term.weight as f64;
-    let w = term_weight(term, i)?;
     // The colour sum runs channel by channel (r, g, b), each over the texels in order; the
     // alpha offset over the texels in order (`RowSums`, the same bits in any order it uses).
     let mean_c = sums.colour / (3 * t) as f64;
@@ -233,7 +232,7 @@ fn row_texture_term(term: TextureTerm<'_>, vis: f64, i: usize, t: usize, sums: R
         0.0
     };
     let ga = (lambda * w * sign / (vis * t as f64)) as f32;
-    Some(((mean_c + m.abs()) * w, gc, ga))
+    ((mean_c + m.abs()) * w, gc, ga)
 }
 
 /// Texture regulariser of paper Eq. 9.
