@@ -73,27 +73,22 @@ impl std::fmt::Display for NonFinite {
     }
 }
 
-/// Exponent bits of an `f32`.
-const EXPONENT: u32 = 0x7f80_0000;
+/// Exponent bits of an `f32`: all ones exactly for NaN and the infinities.
+pub(crate) const EXPONENT: u32 = 0x7f80_0000;
 
 /// Elements per parallel task of the large scans.
 pub(crate) const CHUNK: usize = 1 << 16;
 
 /// True when every value of `xs` is finite (serial).
 fn finite_serial(xs: &[f32]) -> bool {
-    xs.iter().fold(0u32, |m, x| m.max(x.to_bits() & EXPONENT)) != EXPONENT
+    max_exponent_field(xs) != EXPONENT
 }
 
-/// The largest exponent field (`bits & 0x7f80_0000`) of `xs` (0 when empty), for scans folded
-/// into other loops: a value is non-finite exactly when its field is [`non_finite_field`]'s.
+/// The largest exponent field (`bits & EXPONENT`) of `xs` (0 when empty), also for scans folded
+/// into other loops: some value is non-finite exactly when it is [`EXPONENT`].
 #[inline(always)]
 pub(crate) fn max_exponent_field(xs: &[f32]) -> u32 {
     xs.iter().fold(0u32, |m, x| m.max(x.to_bits() & EXPONENT))
-}
-
-/// The exponent field of NaN and the infinities (all ones).
-pub(crate) const fn non_finite_field() -> u32 {
-    EXPONENT
 }
 
 /// True when every value of `xs` is finite (split across the rayon pool when large).

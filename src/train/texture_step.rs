@@ -13,7 +13,7 @@
 //! gained nothing (criterion `texture_step/dense/10000`: 23.7-26.5 ms against 23.5-24.9).
 
 use super::adam::{AdamGroup, AdamParams, StepFactors, update_row_with};
-use super::finite::{max_exponent_field, non_finite_field};
+use super::finite::{EXPONENT, max_exponent_field};
 use super::regularise::RowGradient;
 use crate::model::sigmoid;
 use rayon::prelude::*;
@@ -130,7 +130,7 @@ pub fn step_texture_group(
             step_rows(rows, &how)
         })
         .reduce(|| 0, u32::max)
-        != non_finite_field()
+        != EXPONENT
 }
 
 /// One rayon chunk of the texture step: `steps.len()` rows starting at billboard `first_row`.
