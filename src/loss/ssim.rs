@@ -57,7 +57,10 @@
 //! map. The forward works one map row at a time (the vertical pass over the products formed on
 //! the fly, then the horizontal pass), in parallel over rows with rayon, and keeps only the
 //! three weighted partial maps for the backward (24 bytes per map value); the backward again
-//! works one image row at a time. Every output value is accumulated by one thread in a fixed
+//! works one image row at a time. Each pass keeps a chunk of outputs in registers while it
+//! walks the taps (no read-modify-write of a row per tap), and the partials of a row are
+//! computed in a loop of their own, apart from the in-order sum of the row's values, so that
+//! they run in vector lanes. Every output value is accumulated by one thread in a fixed
 //! tap order and the mean is summed in f64 per row and then over rows in order, so results are
 //! identical for any number of threads.
 //!
@@ -352,13 +355,7 @@ fn correlate_row(input: &[f64], out: &mut [f64], n_in: usize, stride: usize, off
         let len = (hi - lo) * stride;
         let start = (lo as isize + off - r) as usize * stride;
         let taps: [&[f64]; WINDOW_SIZE] = std::array::from_fn(|k| &input[start + k * stride..][..len]);
-        for (j, o) in out[lo * stride..hi * stride].iter_mut().enumerate() {
-            let mut acc = 0.0;
-            for (tap, &gk) in taps.iter().zip(g) {
-                acc += gk * tap[j];
-            }
-            *o = acc;
-        }
+        tap_sums(&taps, g, &mut out[lo * stride..hi * stride]);
     }
 }
 
@@ -383,24 +380,45 @@ impl Scratch {
     #[inline(always)]
     fn row_moments(&mut self, a: &[f32], b: &[f32], geo: &Geometry, oy: usize) -> [&[f64]; MOMENTS] {
         let lin = geo.in_row();
-        self.vertical.fill(0.0);
-        {
-            let [v0, v1, v2, v3, v4] = split5_mut(&mut self.vertical, lin);
-            for (k, &gk) in geo.g.iter().enumerate() {
-                let y = oy as isize + k as isize - RADIUS as isize + geo.off;
-                if y < 0 || y >= geo.h as isize {
-                    continue;
+        let (ks, y0) = window_rows(oy, geo.off, geo.h);
+        let rows_a = window_slices(a, y0, ks.len(), lin);
+        let rows_b = window_slices(b, y0, ks.len(), lin);
+        let taps = &geo.g[ks.clone()];
+        let [v0, v1, v2, v3, v4] = split5_mut(&mut self.vertical, lin);
+        let full = lin - lin % MOMENT_CHUNK;
+        for j in (0..full).step_by(MOMENT_CHUNK) {
+            let mut sums = [[0.0f64; MOMENT_CHUNK]; MOMENTS];
+            for (t, &gk) in taps.iter().enumerate() {
+                let ra: &[f32; MOMENT_CHUNK] = rows_a[t][j..j + MOMENT_CHUNK].try_into().expect("chunk");
+                let rb: &[f32; MOMENT_CHUNK] = rows_b[t][j..j + MOMENT_CHUNK].try_into().expect("chunk");
+                for l in 0..MOMENT_CHUNK {
+                    let (x, z) = (ra[l] as f64, rb[l] as f64);
+                    sums[0][l] += gk * x;
+                    sums[1][l] += gk * z;
+                    sums[2][l] += gk * (x * x);
+                    sums[3][l] += gk * (z * z);
+                    sums[4][l] += gk * (x * z);
                 }
-                let y = y as usize;
-                let (ra, rb) = (&a[y * lin..(y + 1) * lin], &b[y * lin..(y + 1) * lin]);
-                for j in 0..lin {
-                    let (x, z) = (ra[j] as f64, rb[j] as f64);
-                    v0[j] += gk * x;
-                    v1[j] += gk * z;
-                    v2[j] += gk * (x * x);
-                    v3[j] += gk * (z * z);
-                    v4[j] += gk * (x * z);
-                }
+            }
+            for (dst, sum) in [&mut *v0, &mut *v1, &mut *v2, &mut *v3, &mut *v4]
+                .into_iter()
+                .zip(&sums)
+            {
+                dst[j..j + MOMENT_CHUNK].copy_from_slice(sum);
+            }
+        }
+        for j in full..lin {
+            let mut sums = [0.0f64; MOMENTS];
+            for (t, &gk) in taps.iter().enumerate() {
+                let (x, z) = (rows_a[t][j] as f64, rows_b[t][j] as f64);
+                sums[0] += gk * x;
+                sums[1] += gk * z;
+                sums[2] += gk * (x * x);
+                sums[3] += gk * (z * z);
+                sums[4] += gk * (x * z);
+            }
+            for (dst, sum) in [&mut *v0, &mut *v1, &mut *v2, &mut *v3, &mut *v4].into_iter().zip(sums) {
+                dst[j] = sum;
             }
         }
         let lout = geo.out_row();
@@ -412,7 +430,8 @@ impl Scratch {
 }
 
 /// `out[m] = Σ_k g[k]·rows[oy + k − 5 + off][m]` for each of the `maps` interleaved maps of a
-/// buffer laid out `[row][map][len]` with `n_rows` rows; rows outside are zero.
+/// buffer laid out `[row][map][len]` with `n_rows` rows; rows outside are zero. Each output is
+/// summed in registers from 0 in increasing `k`, skipping the rows outside.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn vertical_pass(
@@ -425,17 +444,64 @@ fn vertical_pass(
     g: &[f64; WINDOW_SIZE],
     out: &mut [f64],
 ) {
-    out.fill(0.0);
-    for (k, &gk) in g.iter().enumerate() {
-        let y = oy as isize + k as isize - RADIUS as isize + off;
-        if y < 0 || y >= n_rows as isize {
-            continue;
+    let width = maps * len;
+    let (ks, y0) = window_rows(oy, off, n_rows);
+    let src = window_slices(rows, y0, ks.len(), width);
+    let taps = &g[ks];
+    tap_sums(&src[..taps.len()], taps, out);
+}
+
+/// `out[j] = Σ_t taps[t]·rows[t][j]`, each output summed from 0 in increasing `t`, sixteen
+/// outputs at a time in registers. Every row holds at least `out.len()` values.
+#[inline(always)]
+fn tap_sums(rows: &[&[f64]], taps: &[f64], out: &mut [f64]) {
+    let full = out.len() - out.len() % TAP_CHUNK;
+    let (chunks, tail) = out.split_at_mut(full);
+    for (j, dst) in (0..full).step_by(TAP_CHUNK).zip(chunks.chunks_exact_mut(TAP_CHUNK)) {
+        let mut sum = [0.0f64; TAP_CHUNK];
+        for (row, &gk) in rows.iter().zip(taps) {
+            let x: &[f64; TAP_CHUNK] = row[j..j + TAP_CHUNK].try_into().expect("chunk");
+            for l in 0..TAP_CHUNK {
+                sum[l] += gk * x[l];
+            }
         }
-        let src = &rows[y as usize * maps * len..(y as usize + 1) * maps * len];
-        for (o, &x) in out.iter_mut().zip(src) {
-            *o += gk * x;
-        }
+        dst.copy_from_slice(&sum);
     }
+    for (j, o) in (full..).zip(tail) {
+        let mut sum = 0.0f64;
+        for (row, &gk) in rows.iter().zip(taps) {
+            sum += gk * row[j];
+        }
+        *o = sum;
+    }
+}
+
+/// Values per register chunk of the moments' vertical pass (five sums each).
+const MOMENT_CHUNK: usize = 8;
+/// Values per register chunk of [`tap_sums`].
+const TAP_CHUNK: usize = 16;
+
+/// The taps `k` of the window around output row `oy` whose rows `oy + k − 5 + off` lie in
+/// `0..n_rows`, and the row of the first of them.
+#[inline(always)]
+fn window_rows(oy: usize, off: isize, n_rows: usize) -> (std::ops::Range<usize>, usize) {
+    let first = oy as isize - RADIUS as isize + off;
+    let lo = (-first).clamp(0, WINDOW_SIZE as isize) as usize;
+    let hi = (n_rows as isize - first).clamp(lo as isize, WINDOW_SIZE as isize) as usize;
+    (lo..hi, (first + lo as isize).max(0) as usize)
+}
+
+/// The `count` consecutive rows of `width` values of `buf` from row `y0`, in the first
+/// `count` slots; the other slots (window taps outside the image) are empty.
+#[inline(always)]
+fn window_slices<T>(buf: &[T], y0: usize, count: usize, width: usize) -> [&[T]; WINDOW_SIZE] {
+    std::array::from_fn(|t| {
+        if t < count {
+            &buf[(y0 + t) * width..][..width]
+        } else {
+            &[]
+        }
+    })
 }
 
 fn split5(buf: &[f64], len: usize) -> [&[f64]; MOMENTS] {
@@ -512,7 +578,7 @@ where
         .zip(row_sums.par_iter_mut())
         .enumerate()
         .for_each_init(
-            || Scratch::new(geo),
+            || (Scratch::new(geo), vec![0.0f64; lout]),
             |scratch, (oy, (drow, sum))| {
                 let row = MapRow { oy, drow, sum };
                 #[cfg(target_arch = "x86_64")]
@@ -561,7 +627,7 @@ struct MapRow<'r> {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn map_row_avx2<P>(
-    scratch: &mut Scratch,
+    scratch: &mut (Scratch, Vec<f64>),
     ab: (&[f32], &[f32]),
     geo: &Geometry,
     cot: Cotangent<'_>,
@@ -576,7 +642,7 @@ unsafe fn map_row_avx2<P>(
 /// The moments of one map row, its `S` values summed and its weighted partials.
 #[inline(always)]
 fn map_row<P>(
-    scratch: &mut Scratch,
+    scratch: &mut (Scratch, Vec<f64>),
     (a, b): (&[f32], &[f32]),
     geo: &Geometry,
     cot: Cotangent<'_>,
@@ -587,22 +653,60 @@ fn map_row<P>(
 {
     let MapRow { oy, drow, sum } = row;
     let lout = geo.out_row();
+    let (scratch, values) = scratch;
     let [ma, mb, saa, sbb, sab] = scratch.row_moments(a, b, geo, oy);
     let (d_mu, rest) = drow.split_at_mut(lout);
     let (d_saa, d_sab) = rest.split_at_mut(lout);
-    let mut acc = 0.0f64;
-    for j in 0..lout {
-        let [s, p_mu, p_saa, p_sab] = partials(ma[j], mb[j], saa[j], sbb[j], sab[j]);
-        let w = match cot {
-            Cotangent::Uniform(w) => w,
-            Cotangent::Map(m) => m[oy * lout + j] as f64,
-        };
-        acc += s;
-        d_mu[j] = w * p_mu;
-        d_saa[j] = w * p_saa;
-        d_sab[j] = w * p_sab;
+    // The partials in one loop without a carried sum (so that it runs in vector lanes), then
+    // the values summed in map order.
+    let moments = MomentRows { ma, mb, saa, sbb, sab };
+    let outputs = (d_mu, d_saa, d_sab, &mut values[..]);
+    match cot {
+        Cotangent::Uniform(w) => weighted_partials(moments, std::iter::repeat(w), partials, outputs),
+        Cotangent::Map(m) => {
+            let weights = m[oy * lout..(oy + 1) * lout].iter().map(|&w| w as f64);
+            weighted_partials(moments, weights, partials, outputs);
+        }
     }
-    *sum = acc;
+    *sum = values.iter().fold(0.0f64, |acc, &s| acc + s);
+}
+
+/// The five moment rows of one map row.
+#[derive(Clone, Copy)]
+struct MomentRows<'r> {
+    ma: &'r [f64],
+    mb: &'r [f64],
+    saa: &'r [f64],
+    sbb: &'r [f64],
+    sab: &'r [f64],
+}
+
+/// `S` of each map value of a row into `values`, and its three partials times the value's
+/// weight into `d_mu`, `d_saa`, `d_sab`.
+#[inline(always)]
+fn weighted_partials<P, W>(
+    m: MomentRows<'_>,
+    weights: W,
+    partials: &P,
+    (d_mu, d_saa, d_sab, values): (&mut [f64], &mut [f64], &mut [f64], &mut [f64]),
+) where
+    P: Fn(f64, f64, f64, f64, f64) -> [f64; 4],
+    W: Iterator<Item = f64>,
+{
+    let moments = m.ma.iter().zip(m.mb).zip(m.saa).zip(m.sbb).zip(m.sab);
+    let outputs = d_mu
+        .iter_mut()
+        .zip(d_saa.iter_mut())
+        .zip(d_sab.iter_mut())
+        .zip(values.iter_mut());
+    for (((((&ma, &mb), &saa), &sbb), &sab), ((((d_mu, d_saa), d_sab), value), w)) in moments.zip(outputs.zip(weights))
+    {
+        let [s, p_mu, p_saa, p_sab] = partials(ma, mb, saa, sbb, sab);
+        *value = s;
+        *d_mu = w * p_mu;
+        *d_saa = w * p_saa;
+        *d_sab = w * p_sab;
+    }
 }
 
 /// [`grad_row`] compiled for AVX2 and FMA (the same bits; see [`map_row_avx2`]).
