@@ -3,7 +3,8 @@
 //! `bbsplat::billboards::trained_like` (`step/trained/400/10000`: the object preset, whose
 //! per-pixel work matches a trained lego state at 400×400; `docs/benchmarks.md`), and the
 //! row-sparse Adam update on its own, and the texture step on its own (`texture_step/dense/10000`:
-//! both texture groups of 10 000 billboards at TS = 16, dense, as every step of a run does).
+//! both texture groups of 10 000 billboards at TS = 16, dense, as every step of a run does;
+//! `texture_step/pair/10000`: the same two groups chunk by chunk, as the trainer steps them).
 //!
 //! `cargo bench --features bench --bench train_step` (all), or e.g. `cargo bench --features bench --bench train_step -- 'step/96px'`.
 //!
@@ -18,7 +19,7 @@ use bbsplat::model::RawBillboards;
 use bbsplat::raster::{RenderSettings, render};
 use bbsplat::scene::split::camera_extent;
 use bbsplat::train::adam::{AdamGroup, AdamParams};
-use bbsplat::train::texture_step::{RowSelection, step_texture_group};
+use bbsplat::train::texture_step::{GroupStep, RowSelection, step_texture_group, step_texture_pair};
 use bbsplat::train::{TrainConfig, TrainView, Trainer};
 use criterion::{BenchmarkId, Criterion, Throughput, black_box, criterion_group, criterion_main};
 use glam::Vec3;
@@ -205,6 +206,35 @@ fn texture_step(c: &mut Criterion) {
                 &hp,
                 true,
             );
+        })
+    });
+    group.bench_function(BenchmarkId::new("pair", rows), |b| {
+        b.iter(|| {
+            grads.copy_from_slice(&grads0);
+            alpha.global_step += 1;
+            colour.global_step += 1;
+            step_texture_pair(
+                GroupStep {
+                    group: &mut alpha,
+                    logits: &mut alpha_logits,
+                    channels: 3..4,
+                    mask: Some(&mask),
+                    lr: 1e-3,
+                },
+                GroupStep {
+                    group: &mut colour,
+                    logits: &mut colour_logits,
+                    channels: 0..3,
+                    mask: None,
+                    lr: 1e-3,
+                },
+                &mut activated,
+                &mut grads,
+                RowSelection::Dense,
+                None,
+                &hp,
+                true,
+            )
         })
     });
     group.finish();

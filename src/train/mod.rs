@@ -1049,29 +1049,26 @@ impl Trainer {
             };
             let added = (!self.regulariser_rows.is_empty()).then_some(self.regulariser_rows.as_slice());
             let [.., a_alpha, a_colour, _] = &mut self.adam;
-            let alpha_finite = texture_step::step_texture_group(
-                a_alpha,
-                &mut self.model.alpha_logits,
+            // Both groups chunk by chunk, while each chunk's RGBA texels are in cache.
+            let [alpha_finite, colour_finite] = texture_step::step_texture_pair(
+                texture_step::GroupStep {
+                    group: a_alpha,
+                    logits: &mut self.model.alpha_logits,
+                    channels: 3..4,
+                    mask: Some(&self.model.alpha_mask),
+                    lr: lr.alpha,
+                },
+                texture_step::GroupStep {
+                    group: a_colour,
+                    logits: &mut self.model.colour_logits,
+                    channels: 0..3,
+                    mask: None,
+                    lr: lr.colour,
+                },
                 &mut self.activated.textures,
                 &mut self.grads.textures,
-                3..4,
-                Some(&self.model.alpha_mask),
                 selection,
                 added,
-                lr.alpha,
-                &hp,
-                textures_live,
-            );
-            let colour_finite = texture_step::step_texture_group(
-                a_colour,
-                &mut self.model.colour_logits,
-                &mut self.activated.textures,
-                &mut self.grads.textures,
-                0..3,
-                None,
-                selection,
-                added,
-                lr.colour,
                 &hp,
                 textures_live,
             );

@@ -271,3 +271,166 @@ fn the_step_reports_the_finiteness_of_the_logits_it_wrote() {
         assert_eq!(finite, want, "{selection:?}, update {update}");
     }
 }
+
+/// Both groups stepped chunk by chunk (`step_texture_pair`, what the trainer does) give the bits
+/// of the two `step_texture_group` calls one after the other: logits, moments, step counts,
+/// activated texels, the gradients left behind and each group's finiteness report. Dense and
+/// sparse, with and without regulariser gradients, with the update on and off, on 1 and 2
+/// threads, in the baseline and the AVX2 build. 150 rows: the last chunk is partial. One
+/// alpha logit's gradient is NaN in the second case, so that one report is false and the
+/// other true (a swapped or shared report fails).
+#[test]
+fn the_pair_step_equals_the_two_group_steps() {
+    use bbsplat::train::regularise::RowGradient;
+    use bbsplat::train::texture_step::{GroupStep, step_texture_pair};
+    let _guard = crate::raster_lanes::SWITCH.lock().unwrap_or_else(|e| e.into_inner());
+    let (rows, texels) = (150usize, 37usize);
+    let mask: Vec<bool> = (0..texels).map(|k| k % 5 != 2).collect();
+    let mut state = 0x2545f4914f6cdd1du64;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state % 20001) as f32 / 10000.0 - 1.0
+    };
+    let act0: Vec<[f32; 4]> = (0..rows * texels)
+        .map(|_| [0.0; 4].map(|_| 0.5 + 0.4 * next()))
+        .collect();
+    let grads0: Vec<[f32; 4]> = (0..rows * texels).map(|_| [0.0; 4].map(|_| next())).collect();
+    let alpha0: Vec<f32> = (0..rows * texels).map(|_| 3.0 * next()).collect();
+    let colour0: Vec<f32> = (0..rows * 3 * texels).map(|_| 3.0 * next()).collect();
+    let added: Vec<RowGradient> = (0..rows)
+        .map(|r| RowGradient {
+            texture: (r % 4 != 0).then(|| (1e-3 * next(), 1e-3 * next())),
+            opacity: Some(1e-4),
+        })
+        .collect();
+    let selected: Vec<bool> = (0..rows).map(|r| r % 3 != 1).collect();
+    let hp = AdamParams::default();
+    // Bits, with every NaN as one value: a NaN's sign and payload follow the operand order the
+    // compiler picked, which differs between the two loops.
+    let canonical = |v: f32| if v.is_nan() { u32::MAX } else { v.to_bits() };
+    let bits = |x: &[f32]| x.iter().map(|&v| canonical(v)).collect::<Vec<_>>();
+    let rgba_bits = |x: &[[f32; 4]]| x.iter().flat_map(|t| t.map(canonical)).collect::<Vec<_>>();
+    let mut reports_seen = Vec::new();
+    for nan in [false, true] {
+        for (dense, with_added, update) in [
+            (true, true, true),
+            (true, false, true),
+            (false, true, true),
+            (true, true, false),
+        ] {
+            let mut grads_in = grads0.clone();
+            if nan {
+                grads_in[5 * texels + 3][3] = f32::NAN;
+            }
+            let selection = if dense {
+                RowSelection::Dense
+            } else {
+                RowSelection::Sparse(&selected)
+            };
+            let added = with_added.then_some(added.as_slice());
+            let run = |pair: bool, threads: usize, baseline: bool| {
+                lanes::force_baseline(baseline);
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                let (mut a, mut c) = (AdamGroup::new(rows, texels), AdamGroup::new(rows, 3 * texels));
+                let (mut al, mut cl) = (alpha0.clone(), colour0.clone());
+                let (mut act, mut grads) = (act0.clone(), grads_in.clone());
+                let mut reports = Vec::new();
+                pool.install(|| {
+                    for _ in 0..2 {
+                        a.global_step += 1;
+                        c.global_step += 1;
+                        grads.copy_from_slice(&grads_in);
+                        let report = if pair {
+                            step_texture_pair(
+                                GroupStep {
+                                    group: &mut a,
+                                    logits: &mut al,
+                                    channels: 3..4,
+                                    mask: Some(&mask),
+                                    lr: 0.01,
+                                },
+                                GroupStep {
+                                    group: &mut c,
+                                    logits: &mut cl,
+                                    channels: 0..3,
+                                    mask: None,
+                                    lr: 0.02,
+                                },
+                                &mut act,
+                                &mut grads,
+                                selection,
+                                added,
+                                &hp,
+                                update,
+                            )
+                        } else {
+                            let ra = step_texture_group(
+                                &mut a,
+                                &mut al,
+                                &mut act,
+                                &mut grads,
+                                3..4,
+                                Some(&mask),
+                                selection,
+                                added,
+                                0.01,
+                                &hp,
+                                update,
+                            );
+                            let rc = step_texture_group(
+                                &mut c,
+                                &mut cl,
+                                &mut act,
+                                &mut grads,
+                                0..3,
+                                None,
+                                selection,
+                                added,
+                                0.02,
+                                &hp,
+                                update,
+                            );
+                            [ra, rc]
+                        };
+                        reports.push(report);
+                    }
+                });
+                lanes::force_baseline(false);
+                (
+                    bits(&al),
+                    bits(&cl),
+                    [bits(&a.m), bits(&a.v), bits(&c.m), bits(&c.v)],
+                    (a.steps.clone(), c.steps.clone()),
+                    rgba_bits(&act),
+                    rgba_bits(&grads),
+                    reports,
+                )
+            };
+            let want = run(false, 1, true);
+            for (threads, baseline) in [(1, true), (2, true), (1, false), (2, false)] {
+                let got = run(true, threads, baseline);
+                assert!(
+                    got == want,
+                    "nan {nan}, dense {dense}, added {with_added}, update {update}, {threads} threads, baseline {baseline}"
+                );
+            }
+            reports_seen.push(want.6);
+        }
+    }
+    // The NaN alpha gradient makes the alpha report false and leaves the colour report true.
+    assert!(
+        reports_seen
+            .iter()
+            .take(4)
+            .all(|r| r.iter().all(|r| *r == [true, true]))
+    );
+    assert!(
+        reports_seen
+            .iter()
+            .skip(4)
+            .take(3)
+            .all(|r| r.iter().all(|r| *r == [false, true]))
+    );
+}
