@@ -979,102 +979,93 @@ impl Trainer {
                 at(a_opacity, lr.opacity),
             ]
         };
-        for &b in rows {
-            let b = b as usize;
-            let m = &mut self.model;
-            let g = &self.grads;
-            let [a_pos, a_rot, a_scale, a_sh_dc, a_sh_rest, _, _, a_opacity] = &mut self.adam;
-            let step = |group: &mut AdamGroup, params: &mut [f32], grads: &[f32], lr: f32, factors: StepFactors| {
-                if dense {
-                    group.step_row_with(b, params, grads, factors, &hp);
-                } else {
-                    group.step_row(b, params, grads, lr, &hp);
-                }
-            };
-            step(
-                a_pos,
-                m.positions[b].as_mut(),
-                &g.positions[b].to_array(),
-                lr.position,
-                f_pos,
-            );
-            step(a_rot, &mut m.quaternions[b], &g.quaternions[b], lr.rotation, f_rot);
-            step(
-                a_scale,
-                m.log_scales[b].as_mut(),
-                &g.log_scales[b].to_array(),
-                lr.scale,
-                f_scale,
-            );
-            // SH: degree 0 (3 values) and degrees 1-3 (45 values) have their own rates.
-            let (sh, d_sh) = (
-                &mut m.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS],
-                &g.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS],
-            );
-            let (dc, rest) = sh.split_at_mut(3);
-            step(a_sh_dc, dc, &d_sh[..3], lr.sh_dc, f_sh_dc);
-            step(a_sh_rest, rest, &d_sh[3..], lr.sh_rest, f_sh_rest);
-            if gaussian {
+        let geometry_step = GeometryStep {
+            factors: [f_pos, f_rot, f_scale, f_sh_dc, f_sh_rest],
+            dense,
+            hp,
+        };
+        if gaussian {
+            for &b in rows {
+                let b = b as usize;
+                let [a_pos, a_rot, a_scale, a_sh_dc, a_sh_rest, _, _, a_opacity] = &mut self.adam;
+                let m = &mut self.model;
+                let g = &self.grads;
+                geometry_step.row(
+                    b,
+                    lr,
+                    [a_pos, a_rot, a_scale, a_sh_dc, a_sh_rest],
+                    GeometryMut::of(&mut m.positions, &mut m.quaternions, &mut m.log_scales, &mut m.sh),
+                    (&g.positions, &g.quaternions, &g.log_scales, &g.sh),
+                );
                 if textures_live {
                     let w = &mut self.opacity_logits[b..b + 1];
-                    let d = gaussian_opacity_grad(w[0], &g.textures[b * t..(b + 1) * t], &self.shape);
-                    step(a_opacity, w, &[d], lr.opacity, f_opacity);
+                    let d = gaussian_opacity_grad(w[0], &self.grads.textures[b * t..(b + 1) * t], &self.shape);
+                    if dense {
+                        a_opacity.step_row_with(b, w, &[d], f_opacity, &hp);
+                    } else {
+                        a_opacity.step_row(b, w, &[d], lr.opacity, &hp);
+                    }
                 }
                 self.refresh_row(b);
                 self.grads.clear_row(b);
-            } else {
-                let a = &mut self.activated;
-                a.positions[b] = m.positions[b];
-                a.quaternions[b] = m.quaternions[b];
-                a.log_scales[b] = m.log_scales[b];
-                a.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS].copy_from_slice(&m.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS]);
-                let gm = &mut self.grads;
-                gm.positions[b] = Vec3::ZERO;
-                gm.quaternions[b] = [0.0; 4];
-                gm.log_scales[b] = glam::Vec2::ZERO;
-                gm.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS].fill(0.0);
             }
+            return false;
         }
-        if !gaussian {
-            // Textures: parallel over rows, bit-identical to a serial loop; consumes (zeroes)
-            // every texture gradient row, including regulariser gradients on unselected rows.
-            let selected: Vec<bool>;
-            let selection = if dense {
-                texture_step::RowSelection::Dense
-            } else {
-                let mut s = vec![false; self.model.len()];
-                rows.iter().for_each(|&b| s[b as usize] = true);
-                selected = s;
-                texture_step::RowSelection::Sparse(&selected)
-            };
-            let added = (!self.regulariser_rows.is_empty()).then_some(self.regulariser_rows.as_slice());
-            let [.., a_alpha, a_colour, _] = &mut self.adam;
-            // Both groups chunk by chunk, while each chunk's RGBA texels are in cache.
-            let [alpha_finite, colour_finite] = texture_step::step_texture_pair(
+        // Full textures: the geometry rows (serial, about a millisecond) on one thread while the
+        // texture step runs on the others; the two touch disjoint arrays, so the bits are those
+        // of one after the other.
+        let selected: Vec<bool>;
+        let selection = if dense {
+            texture_step::RowSelection::Dense
+        } else {
+            let mut s = vec![false; self.model.len()];
+            rows.iter().for_each(|&b| s[b as usize] = true);
+            selected = s;
+            texture_step::RowSelection::Sparse(&selected)
+        };
+        let added = (!self.regulariser_rows.is_empty()).then_some(self.regulariser_rows.as_slice());
+        let [a_pos, a_rot, a_scale, a_sh_dc, a_sh_rest, a_alpha, a_colour, _] = &mut self.adam;
+        let (m, g, a) = (&mut self.model, &mut self.grads, &mut self.activated);
+        let mut params = GeometryMut::of(&mut m.positions, &mut m.quaternions, &mut m.log_scales, &mut m.sh);
+        let mut activated = GeometryMut::of(&mut a.positions, &mut a.quaternions, &mut a.log_scales, &mut a.sh);
+        let mut grads = GeometryMut::of(&mut g.positions, &mut g.quaternions, &mut g.log_scales, &mut g.sh);
+        let geometry = || {
+            for &b in rows {
+                let b = b as usize;
+                let adam = [&mut *a_pos, &mut *a_rot, &mut *a_scale, &mut *a_sh_dc, &mut *a_sh_rest];
+                let read = (&*grads.positions, &*grads.quaternions, &*grads.log_scales, &*grads.sh);
+                geometry_step.row(b, lr, adam, params.reborrow(), read);
+                params.copy_row_to(b, &mut activated);
+                grads.zero_row(b);
+            }
+        };
+        // Both texture groups chunk by chunk, while each chunk's RGBA texels are in cache.
+        let textures = || {
+            texture_step::step_texture_pair(
                 texture_step::GroupStep {
                     group: a_alpha,
-                    logits: &mut self.model.alpha_logits,
+                    logits: &mut m.alpha_logits,
                     channels: 3..4,
-                    mask: Some(&self.model.alpha_mask),
+                    mask: Some(&m.alpha_mask),
                     lr: lr.alpha,
                 },
                 texture_step::GroupStep {
                     group: a_colour,
-                    logits: &mut self.model.colour_logits,
+                    logits: &mut m.colour_logits,
                     channels: 0..3,
                     mask: None,
                     lr: lr.colour,
                 },
-                &mut self.activated.textures,
-                &mut self.grads.textures,
+                &mut a.textures,
+                &mut g.textures,
                 selection,
                 added,
                 &hp,
                 textures_live,
-            );
-            return dense && textures_live && alpha_finite && colour_finite;
-        }
-        false
+            )
+        };
+        let ((), [alpha_finite, colour_finite]) = rayon::join(geometry, textures);
+        dense && textures_live && alpha_finite && colour_finite
     }
 
     /// Relocates dead billboards now (spec §6; normally called by [`Trainer::step`] when due) and
@@ -1230,5 +1221,109 @@ impl Trainer {
             })
             .sum();
         total / views.len().max(1) as f64
+    }
+}
+
+/// The Adam factors and mode of the geometry and SH groups in one step (see [`Trainer::apply`]).
+#[derive(Clone, Copy)]
+struct GeometryStep {
+    /// Position, rotation, scale, SH degree 0 and SH rest: each group's factors at its dense step.
+    factors: [StepFactors; 5],
+    dense: bool,
+    hp: AdamParams,
+}
+
+/// Mutable views of the per-row geometry and SH arrays of a model, of its activated copy or of
+/// their gradients.
+struct GeometryMut<'a> {
+    positions: &'a mut [Vec3],
+    quaternions: &'a mut [[f32; 4]],
+    log_scales: &'a mut [glam::Vec2],
+    sh: &'a mut [f32],
+}
+
+/// The gradients [`GeometryStep::row`] reads: positions, quaternions, log-scales, SH.
+type GeometryGrads<'a> = (&'a [Vec3], &'a [[f32; 4]], &'a [glam::Vec2], &'a [f32]);
+
+impl<'a> GeometryMut<'a> {
+    fn of(
+        positions: &'a mut [Vec3],
+        quaternions: &'a mut [[f32; 4]],
+        log_scales: &'a mut [glam::Vec2],
+        sh: &'a mut [f32],
+    ) -> Self {
+        Self {
+            positions,
+            quaternions,
+            log_scales,
+            sh,
+        }
+    }
+
+    fn reborrow(&mut self) -> GeometryMut<'_> {
+        GeometryMut::of(self.positions, self.quaternions, self.log_scales, self.sh)
+    }
+
+    /// Copies row `b` into `to`.
+    fn copy_row_to(&self, b: usize, to: &mut GeometryMut<'_>) {
+        to.positions[b] = self.positions[b];
+        to.quaternions[b] = self.quaternions[b];
+        to.log_scales[b] = self.log_scales[b];
+        to.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS].copy_from_slice(&self.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS]);
+    }
+
+    /// Sets row `b` to zero.
+    fn zero_row(&mut self, b: usize) {
+        self.positions[b] = Vec3::ZERO;
+        self.quaternions[b] = [0.0; 4];
+        self.log_scales[b] = glam::Vec2::ZERO;
+        self.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS].fill(0.0);
+    }
+}
+
+impl GeometryStep {
+    /// One Adam step of row `b` of the position, rotation, scale, SH degree-0 and SH rest groups
+    /// (`adam`, in that order) on `params` with the gradients `grads`.
+    fn row(
+        &self,
+        b: usize,
+        lr: &LearningRates,
+        adam: [&mut AdamGroup; 5],
+        params: GeometryMut<'_>,
+        (d_pos, d_quat, d_scale, d_sh): GeometryGrads<'_>,
+    ) {
+        let hp = &self.hp;
+        let [f_pos, f_rot, f_scale, f_sh_dc, f_sh_rest] = self.factors;
+        let [a_pos, a_rot, a_scale, a_sh_dc, a_sh_rest] = adam;
+        let step = |group: &mut AdamGroup, params: &mut [f32], grads: &[f32], lr: f32, factors: StepFactors| {
+            if self.dense {
+                group.step_row_with(b, params, grads, factors, hp);
+            } else {
+                group.step_row(b, params, grads, lr, hp);
+            }
+        };
+        step(
+            a_pos,
+            params.positions[b].as_mut(),
+            &d_pos[b].to_array(),
+            lr.position,
+            f_pos,
+        );
+        step(a_rot, &mut params.quaternions[b], &d_quat[b], lr.rotation, f_rot);
+        step(
+            a_scale,
+            params.log_scales[b].as_mut(),
+            &d_scale[b].to_array(),
+            lr.scale,
+            f_scale,
+        );
+        // SH: degree 0 (3 values) and degrees 1-3 (45 values) have their own rates.
+        let (sh, d_sh) = (
+            &mut params.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS],
+            &d_sh[b * SH_FLOATS..(b + 1) * SH_FLOATS],
+        );
+        let (dc, rest) = sh.split_at_mut(3);
+        step(a_sh_dc, dc, &d_sh[..3], lr.sh_dc, f_sh_dc);
+        step(a_sh_rest, rest, &d_sh[3..], lr.sh_rest, f_sh_rest);
     }
 }
