@@ -234,6 +234,7 @@ fn texture_step(c: &mut Criterion) {
                 None,
                 &hp,
                 true,
+                None,
             )
         })
     });

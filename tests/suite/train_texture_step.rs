@@ -364,6 +364,7 @@ fn the_pair_step_equals_the_two_group_steps() {
                                 added,
                                 &hp,
                                 update,
+                                None,
                             )
                         } else {
                             let ra = step_texture_group(
@@ -433,4 +434,116 @@ fn the_pair_step_equals_the_two_group_steps() {
             .take(3)
             .all(|r| r.iter().all(|r| *r == [false, true]))
     );
+}
+
+/// The row sums `step_texture_pair` writes are those of the texels it leaves (`row_sums` with
+/// the reference alpha, bit for bit, every row, stepped or not, update on or off), and the
+/// regulariser given them (`regulariser_rows_with`) returns the values and row gradients it
+/// returns when it sums the rows itself. In builds with debug assertions (the test profile), a
+/// known sum that is not its row's is refused: one sum off by one ulp panics.
+#[test]
+fn the_pair_step_leaves_the_regulariser_sums_of_its_rows() {
+    use bbsplat::train::regularise::{KnownRowSums, TextureTerm, regulariser_rows, regulariser_rows_with};
+    use bbsplat::train::row_sums::{RowSums, row_sums};
+    use bbsplat::train::texture_step::{GroupStep, RowSumsOut, step_texture_pair};
+    let (rows, texels) = (150usize, 37usize);
+    let mask: Vec<bool> = (0..texels).map(|k| k % 5 != 2).collect();
+    let mut state = 0x5851f42d4c957f2du64;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state % 20001) as f32 / 10000.0 - 1.0
+    };
+    let alpha0: Vec<f32> = (0..texels).map(|_| 0.5 + 0.4 * next()).collect();
+    let act0: Vec<[f32; 4]> = (0..rows * texels)
+        .map(|_| [0.0; 4].map(|_| 0.5 + 0.4 * next()))
+        .collect();
+    let grads0: Vec<[f32; 4]> = (0..rows * texels).map(|_| [0.0; 4].map(|_| next())).collect();
+    let (alpha_logits0, colour_logits0): (Vec<f32>, Vec<f32>) = (
+        (0..rows * texels).map(|_| 3.0 * next()).collect(),
+        (0..rows * 3 * texels).map(|_| 3.0 * next()).collect(),
+    );
+    let impact: Vec<f32> = (0..rows).map(|r| [0.0, 30.0, 500.0, 900.0, 120.0][r % 5]).collect();
+    let selected: Vec<bool> = (0..rows).map(|r| r % 3 != 1).collect();
+    let hp = AdamParams::default();
+    for (dense, update) in [(true, true), (false, true), (true, false)] {
+        let (mut a, mut c) = (AdamGroup::new(rows, texels), AdamGroup::new(rows, 3 * texels));
+        let (mut al, mut cl) = (alpha_logits0.clone(), colour_logits0.clone());
+        let (mut act, mut grads) = (act0.clone(), grads0.clone());
+        let mut sums = vec![RowSums::default(); rows];
+        let selection = if dense {
+            RowSelection::Dense
+        } else {
+            RowSelection::Sparse(&selected)
+        };
+        for _ in 0..2 {
+            a.global_step += 1;
+            c.global_step += 1;
+            grads.copy_from_slice(&grads0);
+            step_texture_pair(
+                GroupStep {
+                    group: &mut a,
+                    logits: &mut al,
+                    channels: 3..4,
+                    mask: Some(&mask),
+                    lr: 0.01,
+                },
+                GroupStep {
+                    group: &mut c,
+                    logits: &mut cl,
+                    channels: 0..3,
+                    mask: None,
+                    lr: 0.02,
+                },
+                &mut act,
+                &mut grads,
+                selection,
+                None,
+                &hp,
+                update,
+                Some(RowSumsOut {
+                    alpha0: &alpha0,
+                    sums: &mut sums,
+                }),
+            );
+        }
+        assert_eq!(act == act0, !update, "the textures moved exactly when updated");
+        for (r, sum) in sums.iter().enumerate() {
+            let want = row_sums(&act[r * texels..(r + 1) * texels], Some(&alpha0));
+            assert_eq!(sum.to_bits(), want.to_bits(), "dense {dense}, update {update}, row {r}");
+        }
+        let term = TextureTerm {
+            alpha0: &alpha0,
+            impact: &impact,
+            threshold: 500.0,
+            weight: 0.5,
+        };
+        let known = KnownRowSums {
+            sums: &sums,
+            alpha0: &alpha0,
+        };
+        for (texture, opacity) in [(Some(term), Some(0.25)), (Some(term), None), (None, Some(0.25))] {
+            let (mut summed, mut given) = (Vec::new(), Vec::new());
+            let v1 = regulariser_rows(&act, texels, texture, opacity, &mut summed);
+            let v2 = regulariser_rows_with(&act, texels, texture, opacity, Some(known), &mut given);
+            assert_eq!(
+                (v1.texture.to_bits(), v1.opacity.to_bits()),
+                (v2.texture.to_bits(), v2.opacity.to_bits())
+            );
+            assert_eq!(summed, given);
+        }
+        if cfg!(debug_assertions) {
+            let mut stale = sums.clone();
+            stale[7].alpha = f64::from_bits(stale[7].alpha.to_bits() + 1);
+            let stale = KnownRowSums {
+                sums: &stale,
+                alpha0: &alpha0,
+            };
+            let refused = std::panic::catch_unwind(|| {
+                regulariser_rows_with(&act, texels, None, Some(0.25), Some(stale), &mut Vec::new())
+            });
+            assert!(refused.is_err(), "a stale known sum is refused in debug builds");
+        }
+    }
 }
