@@ -501,9 +501,7 @@ fn backward_tile(
     // The prepared records of the tile's blended entries are scattered over the whole array and
     // were last read by whichever thread ran this tile's forward: request them all up front so
     // that their cache misses overlap instead of stalling the candidate loop one by one.
-    let rank = state.tile_pixel_base[tile] as usize;
-    let tile_slots = state.blended_offsets[rank] as usize..state.blended_offsets[rank + n_q] as usize;
-    for &slot in &state.blended_slots[tile_slots] {
+    for &slot in &state.tiles[tile].slots {
         prefetch_record(&prepared[list[slot as usize] as usize]);
     }
     let mut first = 0;
@@ -739,12 +737,7 @@ pub fn render_backward(
             TEXEL_SUMS.with_borrow_mut(|sums| {
                 // The pixel walk serves the normal and distortion maps and the tiles of small
                 // billboards (few blended pixels per entry); the same bits either way.
-                let n_q = {
-                    let (i0, j0, i1, j1) = tile_pixels(bins, t, out.width, out.height);
-                    ((i1 - i0) * (j1 - j0)) as usize
-                };
-                let rank = state.tile_pixel_base[t] as usize;
-                let pairs = (state.blended_offsets[rank + n_q] - state.blended_offsets[rank]) as usize;
+                let pairs = state.tiles[t].slots.len();
                 if aux || super::lanes::walk_by_pixel(pairs, records.len()) {
                     backward_tile(set, out, image_grads, t, records, normals, &sole_rows, scratch, sums)
                 } else {

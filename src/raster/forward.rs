@@ -26,18 +26,10 @@ pub struct ForwardState {
     pub bins: TileBins,
     /// Per pixel: transmittance left after the last blended billboard.
     pub final_transmittance: Vec<f32>,
-    /// Tile-list slots of the blended entries of every pixel, front to back, tile by tile and
-    /// within a tile in tile-local row-major pixel order; see [`ForwardState::blended_of`].
-    pub blended_slots: Vec<u32>,
-    /// Per entry of [`ForwardState::blended_slots`]: the transmittance in front of it when it
-    /// was blended (`Tᵢ`), which lets the backward pass visit a tile's entries back to front
-    /// without replaying each pixel's compositing from the front.
-    pub blended_transmittance: Vec<f32>,
-    /// `blended_slots[blended_offsets[r]..blended_offsets[r + 1]]` are the blended slots of the
-    /// pixel with tile-major rank `r = tile_pixel_base[t] + q` (`q` tile-local, row-major).
-    pub blended_offsets: Vec<u32>,
-    /// Per tile: the tile-major rank of its first pixel (the pixel counts of the tiles before it).
-    pub tile_pixel_base: Vec<u32>,
+    /// Per tile (the index of [`TileBins::tile_range`]): the entries its pixels blended; see
+    /// [`ForwardState::blended_of`]. Kept where each tile's task wrote them, so that the
+    /// backward pass reads them without a copy into one image-wide list.
+    pub tiles: Vec<TileBlended>,
     /// The forward pass's temporaries, kept for [`RenderOutput::into_buffers`].
     pub(crate) spare: ForwardSpare,
 }
@@ -48,8 +40,31 @@ impl ForwardState {
     /// these, instead of re-testing every entry of the pixel's list.
     #[inline]
     pub fn blended_of(&self, t: usize, q: usize) -> &[u32] {
-        let r = self.tile_pixel_base[t] as usize + q;
-        &self.blended_slots[self.blended_offsets[r] as usize..self.blended_offsets[r + 1] as usize]
+        self.tiles[t].of(q)
+    }
+}
+
+/// The blended (entry, pixel) pairs of one tile, pixel by pixel in tile-local row-major order
+/// and front to back within a pixel.
+#[derive(Clone, Debug, Default)]
+pub struct TileBlended {
+    /// Tile-list slots (indices into the tile's [`TileBins::tile_range`] of
+    /// [`TileBins::entries`]) of the blended entries.
+    pub slots: Vec<u32>,
+    /// Per slot of [`TileBlended::slots`]: the transmittance in front of it when it was
+    /// blended (`Tᵢ`), which lets the backward pass visit a tile's entries back to front
+    /// without replaying each pixel's compositing from the front.
+    pub transmittance: Vec<f32>,
+    /// `slots[offsets[q]..offsets[q + 1]]` are the blended slots of tile-local pixel `q`
+    /// (`offsets[0] = 0`, one more value than the tile has pixels).
+    pub offsets: Vec<u32>,
+}
+
+impl TileBlended {
+    /// The blended slots of tile-local pixel `q`, front to back.
+    #[inline]
+    pub fn of(&self, q: usize) -> &[u32] {
+        &self.slots[self.offsets[q] as usize..self.offsets[q + 1] as usize]
     }
 }
 
@@ -481,10 +496,7 @@ pub struct RenderBuffers {
     visible: Vec<bool>,
     prepared: Vec<Option<Prepared>>,
     bins: TileBins,
-    blended_slots: Vec<u32>,
-    blended_transmittance: Vec<f32>,
-    blended_offsets: Vec<u32>,
-    tile_pixel_base: Vec<u32>,
+    tiles: Vec<TileBlended>,
     spare: ForwardSpare,
 }
 
@@ -494,11 +506,10 @@ pub struct RenderBuffers {
 pub(crate) struct ForwardSpare {
     bin_scratch: BinScratch,
     entry_impact: Vec<f32>,
-    /// Per tile: its pixels' outputs and the slots they blended.
-    tiles: Vec<(Vec<PixelOut>, Vec<u32>, Vec<f32>)>,
+    /// Per tile: its pixels' outputs.
+    tile_outputs: Vec<Vec<PixelOut>>,
     /// Per tile: its pixels' distortion (empty unless [`RenderSettings::distortion`]).
     tile_distortion: Vec<Vec<f32>>,
-    tile_blended_base: Vec<u32>,
     /// Per billboard: the columns of its box's rows that its support quad can reach.
     billboard_rows: BillboardRows,
 }
@@ -521,10 +532,7 @@ impl RenderOutput {
             visible: self.visible,
             prepared: state.prepared,
             bins: state.bins,
-            blended_slots: state.blended_slots,
-            blended_transmittance: state.blended_transmittance,
-            blended_offsets: state.blended_offsets,
-            tile_pixel_base: state.tile_pixel_base,
+            tiles: state.tiles,
             spare: state.spare,
         }
     }
@@ -570,10 +578,7 @@ pub fn render_with(
         mut visible,
         mut prepared,
         mut bins,
-        mut blended_slots,
-        mut blended_transmittance,
-        mut blended_offsets,
-        mut tile_pixel_base,
+        mut tiles,
         mut spare,
     } = buffers;
     let (w, h) = (camera.width, camera.height);
@@ -586,26 +591,27 @@ pub fn render_with(
     let billboard_rows = &spare.billboard_rows;
     refill(&mut spare.entry_impact, bins.entries.len(), 0.0);
     let impact_chunks = split_by_lengths(&mut spare.entry_impact, (0..n_tiles).map(|t| bins.tile_range(t).len()));
-    let tiles = &mut spare.tiles;
     tiles.resize_with(n_tiles, Default::default);
+    let tile_outputs = &mut spare.tile_outputs;
+    tile_outputs.resize_with(n_tiles, Default::default);
     // Per tile a distortion buffer, left empty unless the map is asked for.
     let with_distortion = settings.distortion;
     let tile_distortion = &mut spare.tile_distortion;
     tile_distortion.resize_with(n_tiles, Default::default);
     impact_chunks
         .into_par_iter()
-        .zip(tiles.par_iter_mut())
+        .zip(tiles.par_iter_mut().zip(tile_outputs.par_iter_mut()))
         .zip(tile_distortion.par_iter_mut())
         .enumerate()
         .for_each_init(
             TileScratch::default,
-            |scratch, (t, ((impact, (pixels, slots, transmittance)), tile_distortion))| {
+            |scratch, (t, ((impact, (blended_pairs, pixels)), tile_distortion))| {
                 let list = &bins.entries[bins.tile_range(t)];
                 let rect @ (i0, j0, _, _) = tile_pixels(&bins, t, w, h);
                 let TileScratch { spans, composite, walk } = scratch;
                 local_spans(&prepared, billboard_rows, list, (i0, j0), half_side, spans);
                 let tile = (camera, set, settings, &*prepared, list, rect, &spans[..]);
-                let blended = (slots, transmittance);
+                let blended = (&mut blended_pairs.slots, &mut blended_pairs.transmittance);
                 // Tiles of small billboards go pixel by pixel (the same bits; see
                 // `tile_forward_pixels`).
                 let by_pixel =
@@ -616,53 +622,30 @@ pub fn render_with(
                     (false, true) => composite_tile_by_pixel::<false>(walk, tile, impact, pixels, blended),
                     (false, false) => composite_tile::<false>(composite, tile, impact, pixels, blended),
                 }
+                // Each pixel's range of the tile's slots.
+                let offsets = &mut blended_pairs.offsets;
+                offsets.clear();
+                offsets.push(0);
+                let mut end = 0u32;
+                offsets.extend(pixels.iter().map(|px| {
+                    end += px.blended;
+                    end
+                }));
                 if with_distortion {
                     tile_distortion.clear();
                     tile_distortion.extend(pixels.iter().map(|px| px.distortion));
                 }
             },
         );
-    let tiles = &spare.tiles;
-    // Tile-major prefix sums, serial over tiles only: each tile's first pixel rank and first
-    // blended slot.
-    tile_pixel_base.clear();
-    let tile_blended_base = &mut spare.tile_blended_base;
-    tile_blended_base.clear();
-    let (mut pixel_count, mut blended_count) = (0u32, 0u32);
-    for (pixels, slots, _) in tiles {
-        tile_pixel_base.push(pixel_count);
-        tile_blended_base.push(blended_count);
-        pixel_count += pixels.len() as u32;
-        blended_count += slots.len() as u32;
-    }
-    // Blended slots and per-pixel offsets, tile by tile in parallel (disjoint ranges).
-    // Both are written in full below (the tiles cover the image): not reset first.
-    resize_for_overwrite(&mut blended_slots, blended_count as usize, 0);
-    resize_for_overwrite(&mut blended_transmittance, blended_count as usize, 0.0);
-    resize_for_overwrite(&mut blended_offsets, n_pix + 1, 0)[0] = 0;
-    let slot_chunks = split_by_lengths(&mut blended_slots, tiles.iter().map(|(_, s, _)| s.len()));
-    let transmittance_chunks = split_by_lengths(&mut blended_transmittance, tiles.iter().map(|(_, s, _)| s.len()));
-    let offset_chunks = split_by_lengths(&mut blended_offsets[1..], tiles.iter().map(|(p, _, _)| p.len()));
-    let (evaluated_pairs, nan_alpha_pairs): (u64, u64) = slot_chunks
-        .into_par_iter()
-        .zip(transmittance_chunks)
-        .zip(offset_chunks)
-        .zip(tiles)
-        .zip(&*tile_blended_base)
-        .map(
-            |((((slot_chunk, transmittance_chunk), offset_chunk), (pixels, slots, transmittance)), &base)| {
-                slot_chunk.copy_from_slice(slots);
-                transmittance_chunk.copy_from_slice(transmittance);
-                let mut end = base;
-                for (offset, px) in offset_chunk.iter_mut().zip(pixels) {
-                    end += px.blended;
-                    *offset = end;
-                }
-                pixels.iter().fold((0u64, 0u64), |(e, n), px| {
-                    (e + u64::from(px.evaluated), n + u64::from(px.nan_alpha))
-                })
-            },
-        )
+    let tile_outputs = &spare.tile_outputs;
+    let blended_count: u64 = tiles.iter().map(|tile| tile.slots.len() as u64).sum();
+    let (evaluated_pairs, nan_alpha_pairs): (u64, u64) = tile_outputs
+        .par_iter()
+        .map(|pixels| {
+            pixels.iter().fold((0u64, 0u64), |(e, n), px| {
+                (e + u64::from(px.evaluated), n + u64::from(px.nan_alpha))
+            })
+        })
         .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
     // Images, one band of tile rows per task; every pixel is written (the tiles cover the
     // image), so recycled storage is not reset first.
@@ -692,7 +675,7 @@ pub fn render_with(
                 let t = ty * bins.tiles_x as usize + tx;
                 let (i0, _, i1, _) = tile_pixels(&bins, t, w, h);
                 let tw = (i1 - i0) as usize;
-                for (row, pixels) in tiles[t].0.chunks(tw).enumerate() {
+                for (row, pixels) in tile_outputs[t].chunks(tw).enumerate() {
                     for (column, px) in pixels.iter().enumerate() {
                         // Pixel index within the band.
                         let p = row * w as usize + i0 as usize + column;
@@ -758,7 +741,7 @@ pub fn render_with(
         stats: RenderStats {
             tile_entries: bins.entries.len() as u64,
             evaluated_pairs,
-            blended_pairs: u64::from(blended_count),
+            blended_pairs: blended_count,
             non_finite_billboards,
             nan_alpha_pairs,
         },
@@ -768,10 +751,7 @@ pub fn render_with(
             prepared,
             bins,
             final_transmittance,
-            blended_slots,
-            blended_transmittance,
-            blended_offsets,
-            tile_pixel_base,
+            tiles,
             spare,
         },
     }

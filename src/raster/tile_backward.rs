@@ -6,7 +6,7 @@
 //! the colour behind, starting at the background) in a small per-tile array; visiting the
 //! entries in reverse list order visits every pixel's blended entries back to front, as the
 //! per-pixel recursion needs. The transmittance in front of each blended pair comes from the
-//! forward pass ([`super::ForwardState::blended_transmittance`]), so no pixel's compositing is
+//! forward pass ([`super::TileBlended::transmittance`]), so no pixel's compositing is
 //! replayed from the front. The alpha of each pair is sampled again and classified with the
 //! stored transmittance, which gives the forward's [`Blend`](crate::stages::composite::Blend)
 //! record bit for bit.
@@ -171,11 +171,8 @@ fn by_entry_body(
     }
     // The tile's blended pairs grouped by entry (a counting sort of the per-pixel lists; pixel
     // order within an entry).
-    let rank = state.tile_pixel_base[tile] as usize;
-    let offsets = &state.blended_offsets[rank..=rank + n_q];
-    let tile_pairs = offsets[0] as usize..offsets[n_q] as usize;
-    let slots = &state.blended_slots[tile_pairs.clone()];
-    let transmittance = &state.blended_transmittance[tile_pairs];
+    let blended = &state.tiles[tile];
+    let (offsets, slots, transmittance) = (&blended.offsets, &blended.slots, &blended.transmittance);
     starts.clear();
     starts.resize(list.len() + 1, 0);
     for &k in slots {
@@ -188,10 +185,9 @@ fn by_entry_body(
     cursor.extend_from_slice(&starts[..list.len()]);
     // Every position is written below (the counts sum to `slots.len()`): only new ones filled.
     crate::memory::resize_for_overwrite(pairs, slots.len(), Pair::default());
-    let base = offsets[0];
     for q in 0..n_q {
         let (x, y) = ((q % tw) as u8, (q / tw) as u8);
-        for r in (offsets[q] - base) as usize..(offsets[q + 1] - base) as usize {
+        for r in offsets[q] as usize..offsets[q + 1] as usize {
             let c = &mut cursor[slots[r] as usize];
             pairs[*c as usize] = Pair {
                 pixel: q as u16,

@@ -50,9 +50,9 @@ impl WorkloadStats {
         let pixels = u64::from(out.width) * u64::from(out.height);
         let per_pixel = |n: u64| if pixels == 0 { 0.0 } else { n as f64 / pixels as f64 };
         let mut blended_counts: Vec<u32> = state
-            .blended_offsets
-            .windows(2)
-            .map(|w| w[1] - w[0])
+            .tiles
+            .iter()
+            .flat_map(|tile| tile.offsets.windows(2).map(|w| w[1] - w[0]))
             .filter(|&n| n > 0)
             .collect();
         blended_counts.sort_unstable();

@@ -59,7 +59,7 @@ fn everything(scene: &ActivatedBillboards, cam: &Camera, settings: &RenderSettin
     bits.extend(grads.log_scales.iter().flat_map(|s| s.to_array().map(f32::to_bits)));
     bits.extend(grads.textures.iter().flat_map(|t| t.map(f32::to_bits)));
     bits.extend(grads.background.to_array().map(f32::to_bits));
-    bits.extend(out.state.blended_slots.iter().copied());
+    bits.extend(out.state.tiles.iter().flat_map(|tile| tile.slots.iter().copied()));
     bits.extend(touched);
     bits.extend([out.stats.evaluated_pairs as u32, out.stats.blended_pairs as u32]);
     bits
