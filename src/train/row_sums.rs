@@ -17,7 +17,10 @@
 //! all orders give the one exact sum. A zero result is `+0.0` in every order too: no value
 //! carries a sign bit, and `x + (−x)` is `+0.0`. [`exact_in_any_order`] checks that condition
 //! (NaN, infinities, negative values, `−0.0`, subnormals and values in `(0, τ)` fail it); the fast
-//! path then sums four texels at a time, and any other row takes the texel-order sums.
+//! path then sums the four channels of a texel at once (one f64 lane each, two texels in flight),
+//! and any other row takes the texel-order sums. The alpha offset is there `Σα − Σα₀`: both sums
+//! are exact, so their difference is the exact `Σ(α − α₀)` (a multiple of the same unit, no
+//! larger than `2^L`), which the texel order gives too.
 //!
 //! At `T = 256` the threshold is `τ = 2⁻²⁰ ≈ 9.5·10⁻⁷`: a sigmoid below it needs a logit below
 //! −13.9. Every row of a 30-minute lego model (20 000 rows) and of a beer_colmap model (10 886
@@ -70,7 +73,7 @@ pub fn row_sums_in_order(texels: &[[f32; 4]], alpha0: Option<&[f32]>) -> RowSums
     }
 }
 
-/// [`row_sums_in_order`], bit for bit: four texels at a time when [`exact_in_any_order`] holds,
+/// [`row_sums_in_order`], bit for bit: in vector lanes when [`exact_in_any_order`] holds,
 /// else in texel order.
 ///
 /// # Panics
@@ -101,39 +104,43 @@ fn row_sums_body(texels: &[[f32; 4]], alpha0: Option<&[f32]>) -> RowSums {
     if !exact_in_any_order(texels, alpha0) {
         return row_sums_in_order(texels, alpha0);
     }
-    const WAYS: usize = 4;
-    let mut alpha = [0.0f64; WAYS];
-    let (chunks, rest) = texels.as_chunks::<WAYS>();
-    for chunk in chunks {
-        for (acc, x) in alpha.iter_mut().zip(chunk) {
-            *acc += x[3] as f64;
+    // Every order gives the same exact sums: all four channels of a texel at once (one f64
+    // lane each), two accumulators for the adder's latency.
+    let mut lanes = [[0.0f64; 4]; 2];
+    let (pairs, last) = texels.as_chunks::<2>();
+    for [x0, x1] in pairs {
+        for c in 0..4 {
+            lanes[0][c] += x0[c] as f64;
+            lanes[1][c] += x1[c] as f64;
         }
     }
-    let alpha = rest.iter().fold(alpha.iter().sum::<f64>(), |s, x| s + x[3] as f64);
+    for x in last {
+        for c in 0..4 {
+            lanes[0][c] += x[c] as f64;
+        }
+    }
+    let channel = |c: usize| lanes[0][c] + lanes[1][c];
+    let alpha = channel(3);
     let Some(alpha0) = alpha0 else {
         return RowSums {
             alpha,
             ..RowSums::default()
         };
     };
-    let (mut colour, mut offset) = ([0.0f64; WAYS], [0.0f64; WAYS]);
-    let (a0_chunks, a0_rest) = alpha0.as_chunks::<WAYS>();
-    for (chunk, a0) in chunks.iter().zip(a0_chunks) {
-        for j in 0..WAYS {
-            let x = chunk[j];
-            colour[j] += x[0] as f64 + x[1] as f64 + x[2] as f64;
-            offset[j] += x[3] as f64 - a0[j] as f64;
+    // `Σ (α − α₀)` is `Σ α − Σ α₀`: both sums are exact, and so is their difference (a multiple of
+    // the same unit, no larger than the bound of the module docs).
+    let (chunks, rest) = alpha0.as_chunks::<8>();
+    let mut reference = [0.0f64; 8];
+    for chunk in chunks {
+        for (r, &x) in reference.iter_mut().zip(chunk) {
+            *r += x as f64;
         }
     }
-    let (mut colour, mut offset) = (colour.iter().sum::<f64>(), offset.iter().sum::<f64>());
-    for (x, &a0) in rest.iter().zip(a0_rest) {
-        colour += x[0] as f64 + x[1] as f64 + x[2] as f64;
-        offset += x[3] as f64 - a0 as f64;
-    }
+    let reference = rest.iter().fold(reference.iter().sum::<f64>(), |s, &x| s + x as f64);
     RowSums {
-        colour,
+        colour: channel(0) + channel(1) + channel(2),
         alpha,
-        alpha_offset: offset,
+        alpha_offset: alpha - reference,
     }
 }
 
@@ -159,16 +166,17 @@ pub fn exact_in_any_order(texels: &[[f32; 4]], alpha0: Option<&[f32]>) -> bool {
     let high = 1f32.to_bits();
     // On the bits: a positive `f32`'s bits grow with its value; a sign bit, an infinity or a
     // NaN puts them above 1.0's.
+    // `low ≤ b ≤ high` as one unsigned comparison (`b − low` wraps above `high − low` below).
+    let span = high - low;
     let ok = |x: f32| {
         let b = x.to_bits();
-        (b == 0) | ((b >= low) & (b <= high))
+        (b == 0) | (b.wrapping_sub(low) <= span)
     };
     match alpha0 {
         None => texels.iter().fold(true, |all, x| all & ok(x[3])),
         Some(a0) => {
-            texels
-                .iter()
-                .fold(true, |all, x| all & ok(x[0]) & ok(x[1]) & ok(x[2]) & ok(x[3]))
+            // Every channel of every texel, over the flat values (eight to a register).
+            texels.as_flattened().iter().fold(true, |all, &x| all & ok(x))
                 && a0.iter().fold(true, |all, &x| all & ok(x))
         }
     }
