@@ -185,7 +185,7 @@ pub fn step_texture_pair(
     let alpha0 = sums.as_ref().map(|out| {
         assert_eq!(out.sums.len(), first.group.rows(), "one row sum per row");
         assert_eq!(out.alpha0.len(), texels[0], "one reference alpha per texel");
-        out.alpha0
+        &*out.alpha0
     });
     let mut sum_chunks: Vec<Option<&mut [RowSums]>> = match sums {
         Some(out) => out.sums.chunks_mut(CHUNK_ROWS).map(Some).collect(),
