@@ -234,7 +234,6 @@ fn texture_step(c: &mut Criterion) {
                 None,
                 &hp,
                 true,
-                None,
             )
         })
     });

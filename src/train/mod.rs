@@ -60,9 +60,7 @@ pub use error::TrainError;
 pub use finite::{NonFinite, ParamGroup};
 use geometry::GeometryLoss;
 use glam::Vec3;
-use regularise::{
-    KnownRowSums, RegulariserValues, RowGradient, TextureTerm, gaussian_opacity_grad, regularise, regulariser_rows_with,
-};
+use regularise::{RegulariserValues, RowGradient, TextureTerm, gaussian_opacity_grad, regularise, regulariser_rows};
 use relocate::{apply_relocation, plan_relocation, split_alpha_logit};
 pub use run::{RunConfig, RunError, RunOutcome, RunWarning, StopReason, StopSignal, TrainEvent, run};
 use serde::{Deserialize, Serialize};
@@ -548,13 +546,6 @@ pub struct Trainer {
     /// adds as it reads the texture gradients (full textures; empty in Gaussian mode, where
     /// `regularise` adds it in place).
     regulariser_rows: Vec<RowGradient>,
-    /// Per row, the regulariser's sums of the activated textures as the last texture step left
-    /// them (computed while each row was in cache); valid only while `texture_sums_valid`.
-    texture_sums: Vec<row_sums::RowSums>,
-    /// Whether `texture_sums` are those of the activated textures: set by the texture step,
-    /// cleared by everything else that writes an activated texture (relocation, growth, row
-    /// refreshes).
-    texture_sums_valid: bool,
     /// The run's arguments and dataset, saved in the checkpoint ([`run_record`]).
     record: run_record::RunRecord,
     /// The time budget's plan, when the run has one ([`time_budget`]).
@@ -624,8 +615,6 @@ impl Trainer {
             render_buffers: RenderBuffers::default(),
             target: Vec::new(),
             regulariser_rows: Vec::new(),
-            texture_sums: Vec::new(),
-            texture_sums_valid: false,
             record: run_record::RunRecord::default(),
             time_plan: None,
         };
@@ -837,17 +826,11 @@ impl Trainer {
         } else {
             // Only read here: the texture step adds each row's regulariser gradient as it reads
             // the row's gradients (the same bits as adding it in place, one pass fewer over them).
-            // The sums the last texture step computed, while they are those of the textures.
-            let known = self.texture_sums_valid.then_some(KnownRowSums {
-                sums: &self.texture_sums,
-                alpha0: &self.alpha0,
-            });
-            regulariser_rows_with(
+            regulariser_rows(
                 &self.activated.textures,
                 self.model.texture_size * self.model.texture_size,
                 texture_term,
                 opacity_weight,
-                known,
                 &mut self.regulariser_rows,
             )
         };
@@ -951,7 +934,6 @@ impl Trainer {
     /// Refreshes the activated row `b` from the raw parameters (and, in Gaussian mode, writes
     /// `o·shape` into both the activated alpha and the model's alpha logits).
     fn refresh_row(&mut self, b: usize) {
-        self.texture_sums_valid = false;
         let t = self.model.texture_size * self.model.texture_size;
         if self.config.texture_mode == TextureMode::Gaussian {
             let o = sigmoid(self.opacity_logits[b]);
@@ -1044,14 +1026,6 @@ impl Trainer {
         let added = (!self.regulariser_rows.is_empty()).then_some(self.regulariser_rows.as_slice());
         let [a_pos, a_rot, a_scale, a_sh_dc, a_sh_rest, a_alpha, a_colour, _] = &mut self.adam;
         let (m, g, a) = (&mut self.model, &mut self.grads, &mut self.activated);
-        // The regulariser sums of every row, as the texture step leaves it (only when the step
-        // runs: frozen textures keep whatever sums were valid).
-        let rows_total = m.len();
-        self.texture_sums.resize(rows_total, row_sums::RowSums::default());
-        let sums = textures_live.then_some(texture_step::RowSumsOut {
-            alpha0: &self.alpha0,
-            sums: &mut self.texture_sums,
-        });
         let mut params = GeometryMut::of(&mut m.positions, &mut m.quaternions, &mut m.log_scales, &mut m.sh);
         let mut activated = GeometryMut::of(&mut a.positions, &mut a.quaternions, &mut a.log_scales, &mut a.sh);
         let mut grads = GeometryMut::of(&mut g.positions, &mut g.quaternions, &mut g.log_scales, &mut g.sh);
@@ -1088,11 +1062,9 @@ impl Trainer {
                 added,
                 &hp,
                 textures_live,
-                sums,
             )
         };
         let ((), [alpha_finite, colour_finite]) = rayon::join(geometry, textures);
-        self.texture_sums_valid |= textures_live;
         dense && textures_live && alpha_finite && colour_finite
     }
 
@@ -1104,7 +1076,6 @@ impl Trainer {
     /// of both the sources and the dead slots are zeroed (the reference zeroes only the sources;
     /// a dead slot's stale moments belong to the billboard that died there).
     pub fn relocate(&mut self) -> usize {
-        self.texture_sums_valid = false;
         let plan = plan_relocation(&self.activated.mean_alphas(), &mut self.rng);
         if plan.is_empty() {
             return 0;
@@ -1189,7 +1160,6 @@ impl Trainer {
     /// Appends `copies` copies of billboards drawn ∝ mean alpha ([`grow`]) and then the rows of
     /// `placed` (if any); returns how many rows were added.
     fn grow_rows(&mut self, copies: usize, placed: Option<RawBillboards>) -> usize {
-        self.texture_sums_valid = false;
         let n = self.model.len();
         let plan = grow::plan_growth(&self.activated.mean_alphas(), copies, &mut self.rng);
         let placed_rows = placed.as_ref().map_or(0, RawBillboards::len);

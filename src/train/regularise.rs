@@ -150,35 +150,6 @@ pub fn regulariser_rows(
     opacity_weight: Option<f32>,
     rows: &mut Vec<RowGradient>,
 ) -> RegulariserValues {
-    regulariser_rows_with(textures, texels_per_row, texture, opacity_weight, None, rows)
-}
-
-/// Each row's [`RowSums`] with the reference alpha `alpha0`, already known: what
-/// [`row_sums`]`(row, Some(alpha0))` gives for the textures as they are now (the trainer's
-/// texture step computes them as it writes the rows; [`super::texture_step::RowSumsOut`]).
-#[derive(Clone, Copy, Debug)]
-pub struct KnownRowSums<'a> {
-    /// One per row.
-    pub sums: &'a [RowSums],
-    /// The reference alpha they were summed with (one per texel).
-    pub alpha0: &'a [f32],
-}
-
-/// [`regulariser_rows`], reading each row's sums from `known` instead of summing the row when
-/// they are given (the same values: debug builds check every one against the row). The pass
-/// then reads no texel.
-///
-/// # Panics
-/// As [`regularise`]; and when `known` does not hold one sum per row, or its reference alpha
-/// is not the texture term's.
-pub fn regulariser_rows_with(
-    textures: &[[f32; 4]],
-    texels_per_row: usize,
-    texture: Option<TextureTerm<'_>>,
-    opacity_weight: Option<f32>,
-    known: Option<KnownRowSums<'_>>,
-    rows: &mut Vec<RowGradient>,
-) -> RegulariserValues {
     let t = texels_per_row;
     rows.clear();
     // Rows of no texels hold nothing: only an empty set has them.
@@ -200,13 +171,6 @@ pub fn regulariser_rows_with(
         return RegulariserValues::default();
     }
     let g_opacity = opacity.map(|w| (w as f64 / textures.len() as f64) as f32);
-    if let Some(known) = known {
-        assert_eq!(known.sums.len() * t, textures.len(), "one known row sum per row");
-        assert!(
-            texture.is_none_or(|(term, _)| term.alpha0 == known.alpha0),
-            "the known sums use the texture term's reference alpha"
-        );
-    }
     // Per row: its gradient, the texture term's contribution and the row's alpha sum (f64).
     let per_row: Vec<(RowGradient, f64, f64)> = textures
         .par_chunks(t)
@@ -215,20 +179,8 @@ pub fn regulariser_rows_with(
             // The row's sums, read once for both terms (only the alpha sum without the texture
             // term, or for a row the term skips).
             let texture_row = texture.and_then(|(term, vis)| Some((term, vis, term_weight(term, i)?)));
-            // Known sums hold the colour and offset sums too; only the alpha sum is read when
-            // the texture term skips the row, and it is the same with or without them.
-            let sums = (texture_row.is_some() || g_opacity.is_some()).then(|| match known {
-                Some(known) => {
-                    let sums = known.sums[i];
-                    debug_assert_eq!(
-                        sums.to_bits(),
-                        row_sums(tex, Some(known.alpha0)).to_bits(),
-                        "the known sums of row {i} are those of its texels"
-                    );
-                    sums
-                }
-                None => row_sums(tex, texture_row.map(|(term, _, _)| term.alpha0)),
-            });
+            let sums = (texture_row.is_some() || g_opacity.is_some())
+                .then(|| row_sums(tex, texture_row.map(|(term, _, _)| term.alpha0)));
             let term = texture_row.and_then(|(term, vis, w)| Some(row_texture_term(term, vis, w, tex.len(), sums?)));
             let alpha_sum = match g_opacity {
                 Some(_) => sums.map_or(0.0, |s| s.alpha),

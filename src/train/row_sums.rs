@@ -38,13 +38,6 @@ pub struct RowSums {
     pub alpha_offset: f64,
 }
 
-impl RowSums {
-    /// The bits of the three sums (colour, alpha, alpha offset), for exact comparisons.
-    pub fn to_bits(&self) -> [u64; 3] {
-        [self.colour.to_bits(), self.alpha.to_bits(), self.alpha_offset.to_bits()]
-    }
-}
-
 /// The sums of the row `texels` in texel order: the definition (the colour sum channel after
 /// channel, each over the texels in order; the others over the texels in order). With `alpha0
 /// = None` only [`RowSums::alpha`] is summed.

@@ -17,7 +17,6 @@
 use super::adam::{AdamGroup, AdamParams, StepFactors, update_row_with};
 use super::finite::{EXPONENT, max_exponent_field};
 use super::regularise::RowGradient;
-use super::row_sums::{RowSums, row_sums};
 use crate::model::sigmoid;
 use rayon::prelude::*;
 use std::ops::Range;
@@ -135,29 +134,15 @@ pub struct GroupStep<'a> {
     pub lr: f32,
 }
 
-/// Where [`step_texture_pair`] writes each row's regulariser sums ([`row_sums`] with the
-/// reference alpha `alpha0`) of the texels it leaves, summed while the row is in cache, so
-/// that the next step's regulariser need not read the textures
-/// ([`super::regularise::KnownRowSums`]).
-pub struct RowSumsOut<'a> {
-    /// The reference alpha, one per texel.
-    pub alpha0: &'a [f32],
-    /// One per row, all overwritten.
-    pub sums: &'a mut [RowSums],
-}
-
 /// [`step_texture_group`] of two groups that own different channels of the same texels, chunk
 /// by chunk: each rayon chunk of rows steps the first group and then the second, while the
 /// chunk's texels are in cache. Every row does the arithmetic of the two calls one after the
 /// other (the groups touch different channels, so the order between them changes nothing): the
-/// same bits. With `sums`, each row's [`RowSums`] of the texels as the step leaves them (every
-/// row, stepped or not) are written there, chunk by chunk after both groups. Returns each
-/// group's finiteness report.
+/// same bits. Returns each group's finiteness report.
 ///
 /// # Panics
-/// As [`step_texture_group`], for either group; when the groups' channels overlap or their row
-/// counts differ; and when `sums` does not hold one sum per row and one reference alpha per
-/// texel.
+/// As [`step_texture_group`], for either group; and when the groups' channels overlap or their
+/// row counts differ.
 #[allow(clippy::too_many_arguments)]
 pub fn step_texture_pair(
     first: GroupStep<'_>,
@@ -168,7 +153,6 @@ pub fn step_texture_pair(
     added: Option<&[RowGradient]>,
     hp: &AdamParams,
     update: bool,
-    sums: Option<RowSumsOut<'_>>,
 ) -> [bool; 2] {
     assert!(
         first.channels.end <= second.channels.start || second.channels.end <= first.channels.start,
@@ -181,34 +165,11 @@ pub fn step_texture_pair(
     );
     let texels =
         [&first, &second].map(|g| check_group(g.group, g.logits, activated, grads, &g.channels, g.mask, added));
-    let n_chunks = first.group.rows().div_ceil(CHUNK_ROWS);
-    let alpha0 = sums.as_ref().map(|out| {
-        assert_eq!(out.sums.len(), first.group.rows(), "one row sum per row");
-        assert_eq!(out.alpha0.len(), texels[0], "one reference alpha per texel");
-        &*out.alpha0
-    });
-    let mut sum_chunks: Vec<Option<&mut [RowSums]>> = match sums {
-        Some(out) => out.sums.chunks_mut(CHUNK_ROWS).map(Some).collect(),
-        None => (0..n_chunks).map(|_| None).collect(),
-    };
-    let sum_rows = |activated: &[[f32; 4]], out: Option<&mut [RowSums]>| {
-        if let (Some(out), Some(alpha0)) = (out, alpha0) {
-            for (sum, row) in out.iter_mut().zip(activated.chunks(texels[0].max(1))) {
-                *sum = row_sums(row, Some(alpha0));
-            }
-        }
-    };
     if !update {
         let owned: [bool; 4] = std::array::from_fn(|c| first.channels.contains(&c) || second.channels.contains(&c));
-        let texel_chunk = CHUNK_ROWS * texels[0].max(1);
         grads
-            .par_chunks_mut(texel_chunk)
-            .zip(activated.par_chunks(texel_chunk))
-            .zip(sum_chunks.par_iter_mut())
-            .for_each(|((g, activated), out)| {
-                clear_channels(g, owned);
-                sum_rows(activated, out.take());
-            });
+            .par_chunks_mut(CHUNK_ROWS * texels[0].max(1))
+            .for_each(|g| clear_channels(g, owned));
         return [true; 2];
     }
     let texel_chunk = CHUNK_ROWS * texels[0].max(1);
@@ -251,10 +212,9 @@ pub fn step_texture_pair(
         .zip(seconds)
         .zip(activated.par_chunks_mut(texel_chunk))
         .zip(grads.par_chunks_mut(texel_chunk))
-        .zip(sum_chunks.par_iter_mut())
         .enumerate()
         .map(
-            |(c, (((((((m1, v1), s1), l1), (((m2, v2), s2), l2)), activated), grads), out))| {
+            |(c, ((((((m1, v1), s1), l1), (((m2, v2), s2), l2)), activated), grads))| {
                 let first_row = c * CHUNK_ROWS;
                 let one = ChunkRows {
                     first_row,
@@ -272,12 +232,10 @@ pub fn step_texture_pair(
                     v: v2,
                     steps: s2,
                     logits: l2,
-                    activated: &mut *activated,
+                    activated,
                     grads,
                 };
-                let w2 = step_rows_dispatch(two, &how[1], wide);
-                sum_rows(activated, out.take());
-                (w1, w2)
+                (w1, step_rows_dispatch(two, &how[1], wide))
             },
         )
         .reduce(|| (0, 0), |a, b| (a.0.max(b.0), a.1.max(b.1)));
