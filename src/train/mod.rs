@@ -1000,11 +1000,7 @@ impl Trainer {
                 if textures_live {
                     let w = &mut self.opacity_logits[b..b + 1];
                     let d = gaussian_opacity_grad(w[0], &self.grads.textures[b * t..(b + 1) * t], &self.shape);
-                    if dense {
-                        a_opacity.step_row_with(b, w, &[d], f_opacity, &hp);
-                    } else {
-                        a_opacity.step_row(b, w, &[d], lr.opacity, &hp);
-                    }
+                    geometry_step.group_row(a_opacity, b, w, &[d], lr.opacity, f_opacity);
                 }
                 self.refresh_row(b);
                 self.grads.clear_row(b);
@@ -1282,6 +1278,24 @@ impl<'a> GeometryMut<'a> {
 }
 
 impl GeometryStep {
+    /// One Adam step of row `b` of `group`: with the group's `factors` of this step when dense,
+    /// else with its own count and `lr` (row-sparse).
+    fn group_row(
+        &self,
+        group: &mut AdamGroup,
+        b: usize,
+        params: &mut [f32],
+        grads: &[f32],
+        lr: f32,
+        factors: StepFactors,
+    ) {
+        if self.dense {
+            group.step_row_with(b, params, grads, factors, &self.hp);
+        } else {
+            group.step_row(b, params, grads, lr, &self.hp);
+        }
+    }
+
     /// One Adam step of row `b` of the position, rotation, scale, SH degree-0 and SH rest groups
     /// (`adam`, in that order) on `params` with the gradients `grads`.
     fn row(
@@ -1292,15 +1306,10 @@ impl GeometryStep {
         params: GeometryMut<'_>,
         (d_pos, d_quat, d_scale, d_sh): GeometryGrads<'_>,
     ) {
-        let hp = &self.hp;
         let [f_pos, f_rot, f_scale, f_sh_dc, f_sh_rest] = self.factors;
         let [a_pos, a_rot, a_scale, a_sh_dc, a_sh_rest] = adam;
         let step = |group: &mut AdamGroup, params: &mut [f32], grads: &[f32], lr: f32, factors: StepFactors| {
-            if self.dense {
-                group.step_row_with(b, params, grads, factors, hp);
-            } else {
-                group.step_row(b, params, grads, lr, hp);
-            }
+            self.group_row(group, b, params, grads, lr, factors);
         };
         step(
             a_pos,
