@@ -386,42 +386,13 @@ impl Scratch {
         let rows_a = window_slices(a, y0, ks.len(), lin);
         let rows_b = window_slices(b, y0, ks.len(), lin);
         let taps = &geo.g[ks.clone()];
-        let [v0, v1, v2, v3, v4] = split5_mut(&mut self.vertical, lin);
+        let mut vertical = split5_mut(&mut self.vertical, lin);
         let full = lin - lin % MOMENT_CHUNK;
         for j in (0..full).step_by(MOMENT_CHUNK) {
-            let mut sums = [[0.0f64; MOMENT_CHUNK]; MOMENTS];
-            for (t, &gk) in taps.iter().enumerate() {
-                let ra: &[f32; MOMENT_CHUNK] = rows_a[t][j..j + MOMENT_CHUNK].try_into().expect("chunk");
-                let rb: &[f32; MOMENT_CHUNK] = rows_b[t][j..j + MOMENT_CHUNK].try_into().expect("chunk");
-                for l in 0..MOMENT_CHUNK {
-                    let (x, z) = (ra[l] as f64, rb[l] as f64);
-                    sums[0][l] += gk * x;
-                    sums[1][l] += gk * z;
-                    sums[2][l] += gk * (x * x);
-                    sums[3][l] += gk * (z * z);
-                    sums[4][l] += gk * (x * z);
-                }
-            }
-            for (dst, sum) in [&mut *v0, &mut *v1, &mut *v2, &mut *v3, &mut *v4]
-                .into_iter()
-                .zip(&sums)
-            {
-                dst[j..j + MOMENT_CHUNK].copy_from_slice(sum);
-            }
+            moment_sums::<MOMENT_CHUNK>((&rows_a, &rows_b), taps, j, &mut vertical);
         }
         for j in full..lin {
-            let mut sums = [0.0f64; MOMENTS];
-            for (t, &gk) in taps.iter().enumerate() {
-                let (x, z) = (rows_a[t][j] as f64, rows_b[t][j] as f64);
-                sums[0] += gk * x;
-                sums[1] += gk * z;
-                sums[2] += gk * (x * x);
-                sums[3] += gk * (z * z);
-                sums[4] += gk * (x * z);
-            }
-            for (dst, sum) in [&mut *v0, &mut *v1, &mut *v2, &mut *v3, &mut *v4].into_iter().zip(sums) {
-                dst[j] = sum;
-            }
+            moment_sums::<1>((&rows_a, &rows_b), taps, j, &mut vertical);
         }
         let lout = geo.out_row();
         for (src, dst) in self.vertical.chunks(lin).zip(self.moments.chunks_mut(lout)) {
@@ -460,21 +431,52 @@ fn tap_sums(rows: &[&[f64]], taps: &[f64], out: &mut [f64]) {
     let full = out.len() - out.len() % TAP_CHUNK;
     let (chunks, tail) = out.split_at_mut(full);
     for (j, dst) in (0..full).step_by(TAP_CHUNK).zip(chunks.chunks_exact_mut(TAP_CHUNK)) {
-        let mut sum = [0.0f64; TAP_CHUNK];
-        for (row, &gk) in rows.iter().zip(taps) {
-            let x: &[f64; TAP_CHUNK] = row[j..j + TAP_CHUNK].try_into().expect("chunk");
-            for l in 0..TAP_CHUNK {
-                sum[l] += gk * x[l];
-            }
-        }
-        dst.copy_from_slice(&sum);
+        tap_chunk::<TAP_CHUNK>(rows, taps, j, dst);
     }
-    for (j, o) in (full..).zip(tail) {
-        let mut sum = 0.0f64;
-        for (row, &gk) in rows.iter().zip(taps) {
-            sum += gk * row[j];
+    for (j, dst) in (full..).zip(tail.chunks_exact_mut(1)) {
+        tap_chunk::<1>(rows, taps, j, dst);
+    }
+}
+
+/// `dst[l] = Σ_t taps[t]·rows[t][j + l]` for the `N` outputs from `j`, summed in registers (the
+/// one copy of [`tap_sums`]' arithmetic, for its chunks and its tail).
+#[inline(always)]
+fn tap_chunk<const N: usize>(rows: &[&[f64]], taps: &[f64], j: usize, dst: &mut [f64]) {
+    let mut sum = [0.0f64; N];
+    for (row, &gk) in rows.iter().zip(taps) {
+        let x: &[f64; N] = row[j..j + N].try_into().expect("chunk");
+        for l in 0..N {
+            sum[l] += gk * x[l];
         }
-        *o = sum;
+    }
+    dst.copy_from_slice(&sum);
+}
+
+/// The five vertical moment sums (`a`, `b`, `a²`, `b²`, `a·b`, products in f64) of the `N`
+/// columns from `j`, each summed in registers from 0 in tap order, written into the five rows
+/// of `out` (the one copy of this arithmetic, for the chunks and the tail of a row).
+#[inline(always)]
+fn moment_sums<const N: usize>(
+    (rows_a, rows_b): (&[&[f32]; WINDOW_SIZE], &[&[f32]; WINDOW_SIZE]),
+    taps: &[f64],
+    j: usize,
+    out: &mut [&mut [f64]; MOMENTS],
+) {
+    let mut sums = [[0.0f64; N]; MOMENTS];
+    for (t, &gk) in taps.iter().enumerate() {
+        let ra: &[f32; N] = rows_a[t][j..j + N].try_into().expect("chunk");
+        let rb: &[f32; N] = rows_b[t][j..j + N].try_into().expect("chunk");
+        for l in 0..N {
+            let (x, z) = (ra[l] as f64, rb[l] as f64);
+            sums[0][l] += gk * x;
+            sums[1][l] += gk * z;
+            sums[2][l] += gk * (x * x);
+            sums[3][l] += gk * (z * z);
+            sums[4][l] += gk * (x * z);
+        }
+    }
+    for (dst, sum) in out.iter_mut().zip(&sums) {
+        dst[j..j + N].copy_from_slice(sum);
     }
 }
 
