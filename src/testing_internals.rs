@@ -97,6 +97,37 @@ pub mod ssim {
         let (_, grad) = crate::loss::ssim::value_and_grad(a, b, &geo, Cotangent::Uniform(1.0), partials);
         Ok((geo.map_len(), grad))
     }
+
+    /// `[S, ∂S/∂μa, ∂S/∂Saa, ∂S/∂Sab]` for one map value in f32 (the same generic code as
+    /// [`ssim_partials`]).
+    pub fn ssim_partials_f32(ma: f32, mb: f32, saa: f32, sbb: f32, sab: f32) -> [f32; 4] {
+        crate::loss::ssim::ssim_partials(ma, mb, saa, sbb, sab)
+    }
+
+    /// `(Σ S over the map, ∂(Σ S)/∂a)` computed in f32 (as
+    /// [`crate::loss::ssim::ssim_with_grad_f32`]) with `partials` in place of the f32
+    /// [`ssim_partials_f32`] (to inject faults).
+    pub fn sum_and_sum_grad_f32<P>(
+        a: &[f32],
+        b: &[f32],
+        w: usize,
+        h: usize,
+        c: usize,
+        padding: Padding,
+        partials: P,
+    ) -> Result<(f64, Vec<f32>), LossError>
+    where
+        P: Fn(f32, f32, f32, f32, f32) -> [f32; 4] + Sync,
+    {
+        let geo = Geometry::new(w, h, c, padding)?;
+        Ok(crate::loss::ssim::value_and_grad(
+            a,
+            b,
+            &geo,
+            Cotangent::Uniform(1.0),
+            partials,
+        ))
+    }
 }
 
 /// Spherical-harmonics kernels (`stages::sh`): the dispatched ones (SSE on x86-64) and their

@@ -11,7 +11,9 @@
 //!   ground truth and is treated as constant.
 //! - Scalar results (means) and upstream scalar derivatives are **f64**; means are accumulated
 //!   in a fixed order, so they are deterministic whatever the number of threads. Gradients
-//!   with respect to images are f32. SSIM works internally in f64 (see [`ssim`]).
+//!   with respect to images are f32. SSIM works internally in f64 (see [`ssim`]), or in
+//!   f32 where asked ([`ssim::ssim_with_grad_f32`]; the training loss's default,
+//!   [`TrainingLoss::precision`]).
 //! - Every function checks the buffer lengths against the stated shape and returns a
 //!   [`LossError`] rather than panicking.
 //!
@@ -35,7 +37,7 @@ pub mod psnr;
 pub mod ssim;
 
 use rayon::prelude::*;
-use ssim::Padding;
+use ssim::{Padding, Precision};
 use thiserror::Error;
 
 /// Errors of the loss functions: shapes that do not match the buffers.
@@ -114,14 +116,18 @@ pub struct TrainingLoss {
     pub lambda_dssim: f64,
     /// SSIM padding (reference: [`Padding::Same`]).
     pub padding: Padding,
+    /// The arithmetic of the SSIM term: [`Precision::F32`] (as the reference's PyTorch code,
+    /// and twice the vector lanes) or [`Precision::F64`] (the proven reference).
+    pub precision: Precision,
 }
 
 impl Default for TrainingLoss {
-    /// The reference setting: `λ = 0.2`, "same" zero padding.
+    /// The reference setting: `λ = 0.2`, "same" zero padding, SSIM in f32.
     fn default() -> Self {
         Self {
             lambda_dssim: 0.2,
             padding: Padding::Same,
+            precision: Precision::F32,
         }
     }
 }
@@ -157,8 +163,11 @@ impl TrainingLoss {
     ) -> Result<TrainingLossOutput, LossError> {
         let lambda = self.lambda_dssim;
         // d/d(render) of −λ·SSIM, then add the L1 part in place.
-        let (ssim, mut d_render) =
-            ssim::ssim_with_grad(render, target, width, height, channels, self.padding, -lambda)?;
+        let ssim_with_grad = match self.precision {
+            Precision::F64 => ssim::ssim_with_grad,
+            Precision::F32 => ssim::ssim_with_grad_f32,
+        };
+        let (ssim, mut d_render) = ssim_with_grad(render, target, width, height, channels, self.padding, -lambda)?;
         let l1 = l1::l1(render, target)?;
         l1::l1_vjp_accumulate(render, target, 1.0 - lambda, &mut d_render);
         let loss = (1.0 - lambda) * l1 + lambda * (1.0 - ssim);

@@ -48,8 +48,14 @@
 //! f32 the error of the difference is ~1e-7 against `σ² + C2 ≈ 1e-3`, which makes the map
 //! wrong by up to ~1e-4 relative (enough to hide or fake gradient errors in a finite-difference
 //! check), while in f64 it is ~1e-13 (measured: map within 3e-8 of a direct f64 reference,
-//! i.e. the f32 rounding of the output). f64 vector lanes are half as wide as f32 ones, so
-//! the passes may cost up to twice as much as f32 passes would (not measured separately).
+//! i.e. the f32 rounding of the output).
+//!
+//! The training loss runs the same passes in f32 ([`ssim_with_grad_f32`], twice the vector
+//! lanes: the training loss at 400×400×3 takes about half its f64 time), as the reference's
+//! PyTorch code does. Every pass and formula is one generic copy over the precision, so the
+//! f32 path is the code the finite-difference tests prove, run in f32 arithmetic; its distance
+//! from the f64 path is measured and bounded in the tests (gradient relative L2 about 5e-5 on
+//! render-like images, 3e-4 on a flat grey image).
 //!
 //! # Cost and determinism
 //!
@@ -80,6 +86,98 @@
 
 use super::LossError;
 use rayon::prelude::*;
+use std::ops::{Add, Div, Mul, Neg, Sub};
+
+/// The arithmetic the SSIM passes run in: f64 (the reference, [`ssim_with_grad`] and the other
+/// public functions) or f32 ([`ssim_with_grad_f32`], twice the vector lanes). One generic copy
+/// of every pass and formula serves both, so the f32 path is the proven code run in another
+/// precision.
+pub(crate) trait Real:
+    Copy
+    + Send
+    + Sync
+    + 'static
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+{
+    const ZERO: Self;
+    const ONE: Self;
+    const TWO: Self;
+    /// [`C1`] and [`C2`] in this precision.
+    const C1: Self;
+    const C2: Self;
+    fn of_f32(x: f32) -> Self;
+    fn of_f64(x: f64) -> Self;
+    fn to_f32(self) -> f32;
+    fn to_f64(self) -> f64;
+    /// Hands over this thread's kept partial-map storage (see [`value_and_grad`]).
+    fn take_partial_maps() -> Vec<Self>;
+    /// Keeps `maps` for this thread's next call.
+    fn keep_partial_maps(maps: Vec<Self>);
+}
+
+impl Real for f64 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    const TWO: Self = 2.0;
+    const C1: Self = C1;
+    const C2: Self = C2;
+    #[inline(always)]
+    fn of_f32(x: f32) -> Self {
+        x as f64
+    }
+    #[inline(always)]
+    fn of_f64(x: f64) -> Self {
+        x
+    }
+    #[inline(always)]
+    fn to_f32(self) -> f32 {
+        self as f32
+    }
+    #[inline(always)]
+    fn to_f64(self) -> f64 {
+        self
+    }
+    fn take_partial_maps() -> Vec<Self> {
+        PARTIAL_MAPS_F64.take()
+    }
+    fn keep_partial_maps(maps: Vec<Self>) {
+        PARTIAL_MAPS_F64.set(maps);
+    }
+}
+
+impl Real for f32 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    const TWO: Self = 2.0;
+    const C1: Self = C1 as f32;
+    const C2: Self = C2 as f32;
+    #[inline(always)]
+    fn of_f32(x: f32) -> Self {
+        x
+    }
+    #[inline(always)]
+    fn of_f64(x: f64) -> Self {
+        x as f32
+    }
+    #[inline(always)]
+    fn to_f32(self) -> f32 {
+        self
+    }
+    #[inline(always)]
+    fn to_f64(self) -> f64 {
+        self as f64
+    }
+    fn take_partial_maps() -> Vec<Self> {
+        PARTIAL_MAPS_F32.take()
+    }
+    fn keep_partial_maps(maps: Vec<Self>) {
+        PARTIAL_MAPS_F32.set(maps);
+    }
+}
 
 /// Side of the square window.
 pub const WINDOW_SIZE: usize = 11;
@@ -91,6 +189,17 @@ pub const SIGMA: f64 = 1.5;
 pub const C1: f64 = 0.01 * 0.01;
 /// Contrast stabiliser `(0.03·L)²` for data range `L = 1`.
 pub const C2: f64 = 0.03 * 0.03;
+
+/// The arithmetic of the SSIM passes (see [`ssim_with_grad_f32`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Precision {
+    /// f64: the reference, whose gradient the finite-difference tests prove.
+    F64,
+    /// f32: the same code in f32 arithmetic, twice the vector lanes; within a measured bound
+    /// of [`Precision::F64`].
+    #[default]
+    F32,
+}
 
 /// How windows at the image border are handled (see the [module documentation](self)).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -142,7 +251,7 @@ pub fn ssim(
     let row_sums: Vec<f64> = (0..geo.oh)
         .into_par_iter()
         .map_init(
-            || Scratch::new(&geo),
+            || Scratch::<f64>::new(&geo),
             |scratch, oy| {
                 let [ma, mb, saa, sbb, sab] = scratch.row_moments(a, b, &geo, oy);
                 (0..geo.out_row())
@@ -172,7 +281,7 @@ pub fn ssim_map(
     geo.check(a, b)?;
     let mut map = vec![0.0f32; geo.map_len()];
     map.par_chunks_mut(geo.out_row()).enumerate().for_each_init(
-        || Scratch::new(&geo),
+        || Scratch::<f64>::new(&geo),
         |scratch, (oy, row)| {
             let [ma, mb, saa, sbb, sab] = scratch.row_moments(a, b, &geo, oy);
             for (j, s) in row.iter_mut().enumerate() {
@@ -218,7 +327,38 @@ pub fn ssim_with_grad(
     let geo = Geometry::new(width, height, channels, padding)?;
     geo.check(a, b)?;
     let weight = d_ssim / geo.map_len() as f64;
-    let (sum, grad) = value_and_grad(a, b, &geo, Cotangent::Uniform(weight), ssim_partials);
+    let (sum, grad) = value_and_grad(a, b, &geo, Cotangent::Uniform(weight), ssim_partials::<f64>);
+    Ok((sum / geo.map_len() as f64, grad))
+}
+
+/// [`ssim_with_grad`] computed in f32 instead of f64: the same passes and formulas (one generic
+/// copy), in twice as many vector lanes, as the reference's PyTorch code computes them. The
+/// training loss uses it ([`super::Precision::F32`], the default). Each map value is still
+/// summed into the mean in f64, and the results are the same for any thread count and on
+/// either instruction set.
+///
+/// The variance `G*(a²) − μa²` loses f32 digits where the image is flat (see the [module
+/// documentation](self)), so the values are not those of [`ssim_with_grad`]: on 400×400 renders
+/// and targets the SSIM differs by about 1e-6 and the gradient's relative L2 distance is a few
+/// 1e-5 (bounds measured and asserted in `tests/suite/loss_ssim.rs`, figures in
+/// `docs/numerics-init-loss.md`).
+///
+/// # Errors
+///
+/// As [`ssim`].
+pub fn ssim_with_grad_f32(
+    a: &[f32],
+    b: &[f32],
+    width: usize,
+    height: usize,
+    channels: usize,
+    padding: Padding,
+    d_ssim: f64,
+) -> Result<(f64, Vec<f32>), LossError> {
+    let geo = Geometry::new(width, height, channels, padding)?;
+    geo.check(a, b)?;
+    let weight = d_ssim / geo.map_len() as f64;
+    let (sum, grad) = value_and_grad(a, b, &geo, Cotangent::Uniform(weight), ssim_partials::<f32>);
     Ok((sum / geo.map_len() as f64, grad))
 }
 
@@ -246,7 +386,7 @@ pub fn ssim_map_vjp(
             got: d_map.len(),
         });
     }
-    Ok(value_and_grad(a, b, &geo, Cotangent::Map(d_map), ssim_partials).1)
+    Ok(value_and_grad(a, b, &geo, Cotangent::Map(d_map), ssim_partials::<f64>).1)
 }
 
 /// Number of moment maps: μa, μb, G*(a²), G*(b²), G*(a·b).
@@ -328,6 +468,11 @@ impl Geometry {
     pub(crate) fn map_len(&self) -> usize {
         self.ow * self.oh * self.c
     }
+
+    /// The window [`gaussian_window`] rounded to precision `R`.
+    fn window<R: Real>(&self) -> [R; WINDOW_SIZE] {
+        self.g.map(R::of_f64)
+    }
 }
 
 /// `out[i] = Σ_k g[k]·input[i + k − 5 + off]` over pixels (each `stride` values), zero outside
@@ -335,7 +480,7 @@ impl Geometry {
 /// outside, so an output whose window is inside the image gets the same bits whatever the
 /// padding. Always inlined, so that it runs in its caller's instruction-set variant.
 #[inline(always)]
-fn correlate_row(input: &[f64], out: &mut [f64], n_in: usize, stride: usize, off: isize, g: &[f64; WINDOW_SIZE]) {
+fn correlate_row<R: Real>(input: &[R], out: &mut [R], n_in: usize, stride: usize, off: isize, g: &[R; WINDOW_SIZE]) {
     let n_out = out.len() / stride;
     let r = RADIUS as isize;
     // Output pixels lo..hi have all 11 taps inside 0..n_in.
@@ -343,11 +488,11 @@ fn correlate_row(input: &[f64], out: &mut [f64], n_in: usize, stride: usize, off
     let hi = (n_in as isize - r - off).clamp(lo as isize, n_out as isize) as usize;
     for i in (0..lo).chain(hi..n_out) {
         for ch in 0..stride {
-            let mut acc = 0.0;
+            let mut acc = R::ZERO;
             for (k, &gk) in g.iter().enumerate() {
                 let x = i as isize + k as isize - r + off;
                 if x >= 0 && x < n_in as isize {
-                    acc += gk * input[x as usize * stride + ch];
+                    acc = acc + gk * input[x as usize * stride + ch];
                 }
             }
             out[i * stride + ch] = acc;
@@ -356,47 +501,50 @@ fn correlate_row(input: &[f64], out: &mut [f64], n_in: usize, stride: usize, off
     if hi > lo {
         let len = (hi - lo) * stride;
         let start = (lo as isize + off - r) as usize * stride;
-        let taps: [&[f64]; WINDOW_SIZE] = std::array::from_fn(|k| &input[start + k * stride..][..len]);
+        let taps: [&[R]; WINDOW_SIZE] = std::array::from_fn(|k| &input[start + k * stride..][..len]);
         tap_sums(&taps, g, &mut out[lo * stride..hi * stride]);
     }
 }
 
 /// Per-thread buffers for one map row of moments.
-struct Scratch {
+struct Scratch<R> {
     /// The vertical pass of a, b, a², b², a·b: five image-width rows.
-    vertical: Vec<f64>,
+    vertical: Vec<R>,
     /// The five moment rows of the map: μa, μb, Saa, Sbb, Sab.
-    moments: Vec<f64>,
+    moments: Vec<R>,
+    /// The window in this precision.
+    g: [R; WINDOW_SIZE],
 }
 
-impl Scratch {
+impl<R: Real> Scratch<R> {
     fn new(geo: &Geometry) -> Self {
         Self {
-            vertical: vec![0.0; MOMENTS * geo.in_row()],
-            moments: vec![0.0; MOMENTS * geo.out_row()],
+            vertical: vec![R::ZERO; MOMENTS * geo.in_row()],
+            moments: vec![R::ZERO; MOMENTS * geo.out_row()],
+            g: geo.window(),
         }
     }
 
     /// The five moments of map row `oy`: the vertical pass over the products (formed on the
-    /// fly, in f64, where the products of f32 values are exact), then the horizontal pass.
+    /// fly; in f64 the products of f32 values are exact), then the horizontal pass.
     #[inline(always)]
-    fn row_moments(&mut self, a: &[f32], b: &[f32], geo: &Geometry, oy: usize) -> [&[f64]; MOMENTS] {
+    fn row_moments(&mut self, a: &[f32], b: &[f32], geo: &Geometry, oy: usize) -> [&[R]; MOMENTS] {
         let lin = geo.in_row();
         let (ks, y0) = window_rows(oy, geo.off, geo.h);
         let rows_a = window_slices(a, y0, ks.len(), lin);
         let rows_b = window_slices(b, y0, ks.len(), lin);
-        let taps = &geo.g[ks.clone()];
+        let taps = &self.g[ks.clone()];
         let mut vertical = split5_mut(&mut self.vertical, lin);
         let full = lin - lin % MOMENT_CHUNK;
         for j in (0..full).step_by(MOMENT_CHUNK) {
-            moment_sums::<MOMENT_CHUNK>((&rows_a, &rows_b), taps, j, &mut vertical);
+            moment_sums::<R, MOMENT_CHUNK>((&rows_a, &rows_b), taps, j, &mut vertical);
         }
         for j in full..lin {
-            moment_sums::<1>((&rows_a, &rows_b), taps, j, &mut vertical);
+            moment_sums::<R, 1>((&rows_a, &rows_b), taps, j, &mut vertical);
         }
         let lout = geo.out_row();
         for (src, dst) in self.vertical.chunks(lin).zip(self.moments.chunks_mut(lout)) {
-            correlate_row(src, dst, geo.w, geo.c, geo.off, &geo.g);
+            correlate_row(src, dst, geo.w, geo.c, geo.off, &self.g);
         }
         split5(&self.moments, lout)
     }
@@ -407,15 +555,15 @@ impl Scratch {
 /// summed in registers from 0 in increasing `k`, skipping the rows outside.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn vertical_pass(
-    rows: &[f64],
+fn vertical_pass<R: Real>(
+    rows: &[R],
     maps: usize,
     len: usize,
     n_rows: usize,
     oy: usize,
     off: isize,
-    g: &[f64; WINDOW_SIZE],
-    out: &mut [f64],
+    g: &[R; WINDOW_SIZE],
+    out: &mut [R],
 ) {
     let width = maps * len;
     let (ks, y0) = window_rows(oy, off, n_rows);
@@ -427,52 +575,52 @@ fn vertical_pass(
 /// `out[j] = Σ_t taps[t]·rows[t][j]`, each output summed from 0 in increasing `t`, sixteen
 /// outputs at a time in registers. Every row holds at least `out.len()` values.
 #[inline(always)]
-fn tap_sums(rows: &[&[f64]], taps: &[f64], out: &mut [f64]) {
+fn tap_sums<R: Real>(rows: &[&[R]], taps: &[R], out: &mut [R]) {
     let full = out.len() - out.len() % TAP_CHUNK;
     let (chunks, tail) = out.split_at_mut(full);
     for (j, dst) in (0..full).step_by(TAP_CHUNK).zip(chunks.chunks_exact_mut(TAP_CHUNK)) {
-        tap_chunk::<TAP_CHUNK>(rows, taps, j, dst);
+        tap_chunk::<R, TAP_CHUNK>(rows, taps, j, dst);
     }
     for (j, dst) in (full..).zip(tail.chunks_exact_mut(1)) {
-        tap_chunk::<1>(rows, taps, j, dst);
+        tap_chunk::<R, 1>(rows, taps, j, dst);
     }
 }
 
 /// `dst[l] = Σ_t taps[t]·rows[t][j + l]` for the `N` outputs from `j`, summed in registers (the
 /// one copy of [`tap_sums`]' arithmetic, for its chunks and its tail).
 #[inline(always)]
-fn tap_chunk<const N: usize>(rows: &[&[f64]], taps: &[f64], j: usize, dst: &mut [f64]) {
-    let mut sum = [0.0f64; N];
+fn tap_chunk<R: Real, const N: usize>(rows: &[&[R]], taps: &[R], j: usize, dst: &mut [R]) {
+    let mut sum = [R::ZERO; N];
     for (row, &gk) in rows.iter().zip(taps) {
-        let x: &[f64; N] = row[j..j + N].try_into().expect("chunk");
+        let x: &[R; N] = row[j..j + N].try_into().expect("chunk");
         for l in 0..N {
-            sum[l] += gk * x[l];
+            sum[l] = sum[l] + gk * x[l];
         }
     }
     dst.copy_from_slice(&sum);
 }
 
-/// The five vertical moment sums (`a`, `b`, `a²`, `b²`, `a·b`, products in f64) of the `N`
+/// The five vertical moment sums (`a`, `b`, `a²`, `b²`, `a·b`, products in `R`) of the `N`
 /// columns from `j`, each summed in registers from 0 in tap order, written into the five rows
 /// of `out` (the one copy of this arithmetic, for the chunks and the tail of a row).
 #[inline(always)]
-fn moment_sums<const N: usize>(
+fn moment_sums<R: Real, const N: usize>(
     (rows_a, rows_b): (&[&[f32]; WINDOW_SIZE], &[&[f32]; WINDOW_SIZE]),
-    taps: &[f64],
+    taps: &[R],
     j: usize,
-    out: &mut [&mut [f64]; MOMENTS],
+    out: &mut [&mut [R]; MOMENTS],
 ) {
-    let mut sums = [[0.0f64; N]; MOMENTS];
+    let mut sums = [[R::ZERO; N]; MOMENTS];
     for (t, &gk) in taps.iter().enumerate() {
         let ra: &[f32; N] = rows_a[t][j..j + N].try_into().expect("chunk");
         let rb: &[f32; N] = rows_b[t][j..j + N].try_into().expect("chunk");
         for l in 0..N {
-            let (x, z) = (ra[l] as f64, rb[l] as f64);
-            sums[0][l] += gk * x;
-            sums[1][l] += gk * z;
-            sums[2][l] += gk * (x * x);
-            sums[3][l] += gk * (z * z);
-            sums[4][l] += gk * (x * z);
+            let (x, z) = (R::of_f32(ra[l]), R::of_f32(rb[l]));
+            sums[0][l] = sums[0][l] + gk * x;
+            sums[1][l] = sums[1][l] + gk * z;
+            sums[2][l] = sums[2][l] + gk * (x * x);
+            sums[3][l] = sums[3][l] + gk * (z * z);
+            sums[4][l] = sums[4][l] + gk * (x * z);
         }
     }
     for (dst, sum) in out.iter_mut().zip(&sums) {
@@ -508,45 +656,45 @@ fn window_slices<T>(buf: &[T], y0: usize, count: usize, width: usize) -> [&[T]; 
     })
 }
 
-fn split5(buf: &[f64], len: usize) -> [&[f64]; MOMENTS] {
+fn split5<R>(buf: &[R], len: usize) -> [&[R]; MOMENTS] {
     std::array::from_fn(|m| &buf[m * len..(m + 1) * len])
 }
 
-fn split5_mut(buf: &mut [f64], len: usize) -> [&mut [f64]; MOMENTS] {
+fn split5_mut<R>(buf: &mut [R], len: usize) -> [&mut [R]; MOMENTS] {
     let mut it = buf.chunks_mut(len);
     std::array::from_fn(|_| it.next().expect("five rows"))
 }
 
 /// One SSIM map value from the five moments.
 #[inline]
-fn ssim_value(ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64) -> f64 {
+fn ssim_value<R: Real>(ma: R, mb: R, saa: R, sbb: R, sab: R) -> R {
     let (a1, a2, b1, b2) = terms(ma, mb, saa, sbb, sab);
     (a1 * a2) / (b1 * b2)
 }
 
 /// `(A1, A2, B1, B2)` of the SSIM formula.
 #[inline]
-pub(crate) fn terms(ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64) -> (f64, f64, f64, f64) {
+pub(crate) fn terms<R: Real>(ma: R, mb: R, saa: R, sbb: R, sab: R) -> (R, R, R, R) {
     let (maa, mbb, mab) = (ma * ma, mb * mb, ma * mb);
-    let a1 = 2.0 * mab + C1;
-    let a2 = 2.0 * (sab - mab) + C2;
-    let b1 = maa + mbb + C1;
-    let b2 = (saa - maa) + (sbb - mbb) + C2;
+    let a1 = R::TWO * mab + R::C1;
+    let a2 = R::TWO * (sab - mab) + R::C2;
+    let b1 = maa + mbb + R::C1;
+    let b2 = (saa - maa) + (sbb - mbb) + R::C2;
     (a1, a2, b1, b2)
 }
 
 /// `[S, ∂S/∂μa, ∂S/∂Saa, ∂S/∂Sab]` for one map value.
 #[inline]
-pub(crate) fn ssim_partials(ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64) -> [f64; 4] {
+pub(crate) fn ssim_partials<R: Real>(ma: R, mb: R, saa: R, sbb: R, sab: R) -> [R; 4] {
     let (a1, a2, b1, b2) = terms(ma, mb, saa, sbb, sab);
     let d = b1 * b2;
     // S exactly as `ssim_value` computes it, so forward-only and forward+backward agree.
     let s = (a1 * a2) / d;
     // One more division: 1/B1 = B2/D and 1/B2 = B1/D.
-    let inv_d = 1.0 / d;
-    let d_mu = 2.0 * (mb * (a2 - a1) - ma * s * (b2 - b1)) * inv_d;
+    let inv_d = R::ONE / d;
+    let d_mu = R::TWO * (mb * (a2 - a1) - ma * s * (b2 - b1)) * inv_d;
     let d_saa = -s * b1 * inv_d;
-    let d_sab = 2.0 * a1 * inv_d;
+    let d_sab = R::TWO * a1 * inv_d;
     [s, d_mu, d_saa, d_sab]
 }
 
@@ -561,7 +709,7 @@ pub(crate) enum Cotangent<'a> {
 ///
 /// `partials` computes `[S, ∂S/∂μa, ∂S/∂Saa, ∂S/∂Sab]` from the moments (a parameter so that
 /// tests can inject faults).
-pub(crate) fn value_and_grad<P>(
+pub(crate) fn value_and_grad<R, P>(
     a: &[f32],
     b: &[f32],
     geo: &Geometry,
@@ -569,7 +717,8 @@ pub(crate) fn value_and_grad<P>(
     partials: P,
 ) -> (f64, Vec<f32>)
 where
-    P: Fn(f64, f64, f64, f64, f64) -> [f64; 4] + Sync,
+    R: Real,
+    P: Fn(R, R, R, R, R) -> [R; 4] + Sync,
 {
     let lout = geo.out_row();
     let lin = geo.in_row();
@@ -577,15 +726,15 @@ where
     // Per map row: the sum of S, and the three weighted partial maps.
     // Every value is written below before it is read: storage recycled from this thread's last
     // call, neither zeroed nor freshly allocated.
-    let mut dbuf = PARTIAL_MAPS.take();
-    crate::memory::resize_for_overwrite(&mut dbuf, geo.oh * PARTIALS * lout, 0.0);
+    let mut dbuf = R::take_partial_maps();
+    crate::memory::resize_for_overwrite(&mut dbuf, geo.oh * PARTIALS * lout, R::ZERO);
     let mut row_sums = vec![0.0f64; geo.oh];
     let wide = crate::raster::lanes::wide_lanes();
     dbuf.par_chunks_mut(PARTIALS * lout)
         .zip(row_sums.par_iter_mut())
         .enumerate()
         .for_each_init(
-            || (Scratch::new(geo), vec![0.0f64; lout]),
+            || (Scratch::new(geo), vec![R::ZERO; lout]),
             |scratch, (oy, (drow, sum))| {
                 let row = MapRow { oy, drow, sum };
                 #[cfg(target_arch = "x86_64")]
@@ -603,7 +752,13 @@ where
     // the adjoint of the horizontal pass, then the chain rule through a, a², a·b.
     let mut grad = vec![0.0f32; geo.h * lin];
     grad.par_chunks_mut(lin).enumerate().for_each_init(
-        || (vec![0.0f64; PARTIALS * lout], vec![0.0f64; PARTIALS * lin]),
+        || {
+            (
+                vec![R::ZERO; PARTIALS * lout],
+                vec![R::ZERO; PARTIALS * lin],
+                geo.window(),
+            )
+        },
         |buffers, (y, out)| {
             #[cfg(target_arch = "x86_64")]
             if wide {
@@ -614,21 +769,23 @@ where
             grad_row(buffers, (a, b), geo, &dbuf, y, out);
         },
     );
-    PARTIAL_MAPS.set(dbuf);
+    R::keep_partial_maps(dbuf);
     (row_sums.iter().sum(), grad)
 }
 
 thread_local! {
-    /// The weighted partial maps of [`value_and_grad`]'s last call on this thread (24 bytes per
-    /// map value: 11.5 MB at 400×400×3), kept for its next call.
-    static PARTIAL_MAPS: std::cell::Cell<Vec<f64>> = const { std::cell::Cell::new(Vec::new()) };
+    /// The weighted partial maps of [`value_and_grad`]'s last call on this thread in f64 (24
+    /// bytes per map value: 11.5 MB at 400×400×3), kept for its next call.
+    static PARTIAL_MAPS_F64: std::cell::Cell<Vec<f64>> = const { std::cell::Cell::new(Vec::new()) };
+    /// The same in f32 (12 bytes per map value).
+    static PARTIAL_MAPS_F32: std::cell::Cell<Vec<f32>> = const { std::cell::Cell::new(Vec::new()) };
 }
 
 /// One map row of [`value_and_grad`]'s forward: map row `oy`, its three weighted partial rows
 /// `drow` and its sum of `S`.
-struct MapRow<'r> {
+struct MapRow<'r, R> {
     oy: usize,
-    drow: &'r mut [f64],
+    drow: &'r mut [R],
     sum: &'r mut f64,
 }
 
@@ -640,30 +797,32 @@ struct MapRow<'r> {
 /// The CPU must support AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn map_row_avx2<P>(
-    scratch: &mut (Scratch, Vec<f64>),
+unsafe fn map_row_avx2<R, P>(
+    scratch: &mut (Scratch<R>, Vec<R>),
     ab: (&[f32], &[f32]),
     geo: &Geometry,
     cot: Cotangent<'_>,
     partials: &P,
-    row: MapRow<'_>,
+    row: MapRow<'_, R>,
 ) where
-    P: Fn(f64, f64, f64, f64, f64) -> [f64; 4],
+    R: Real,
+    P: Fn(R, R, R, R, R) -> [R; 4],
 {
     map_row(scratch, ab, geo, cot, partials, row);
 }
 
 /// The moments of one map row, its `S` values summed and its weighted partials.
 #[inline(always)]
-fn map_row<P>(
-    scratch: &mut (Scratch, Vec<f64>),
+fn map_row<R, P>(
+    scratch: &mut (Scratch<R>, Vec<R>),
     (a, b): (&[f32], &[f32]),
     geo: &Geometry,
     cot: Cotangent<'_>,
     partials: &P,
-    row: MapRow<'_>,
+    row: MapRow<'_, R>,
 ) where
-    P: Fn(f64, f64, f64, f64, f64) -> [f64; 4],
+    R: Real,
+    P: Fn(R, R, R, R, R) -> [R; 4],
 {
     let MapRow { oy, drow, sum } = row;
     let lout = geo.out_row();
@@ -676,36 +835,37 @@ fn map_row<P>(
     let moments = MomentRows { ma, mb, saa, sbb, sab };
     let outputs = (d_mu, d_saa, d_sab, &mut values[..]);
     match cot {
-        Cotangent::Uniform(w) => weighted_partials(moments, std::iter::repeat(w), partials, outputs),
+        Cotangent::Uniform(w) => weighted_partials(moments, std::iter::repeat(R::of_f64(w)), partials, outputs),
         Cotangent::Map(m) => {
-            let weights = m[oy * lout..(oy + 1) * lout].iter().map(|&w| w as f64);
+            let weights = m[oy * lout..(oy + 1) * lout].iter().map(|&w| R::of_f32(w));
             weighted_partials(moments, weights, partials, outputs);
         }
     }
-    *sum = values.iter().fold(0.0f64, |acc, &s| acc + s);
+    *sum = values.iter().fold(0.0f64, |acc, &s| acc + s.to_f64());
 }
 
 /// The five moment rows of one map row.
 #[derive(Clone, Copy)]
-struct MomentRows<'r> {
-    ma: &'r [f64],
-    mb: &'r [f64],
-    saa: &'r [f64],
-    sbb: &'r [f64],
-    sab: &'r [f64],
+struct MomentRows<'r, R> {
+    ma: &'r [R],
+    mb: &'r [R],
+    saa: &'r [R],
+    sbb: &'r [R],
+    sab: &'r [R],
 }
 
 /// `S` of each map value of a row into `values`, and its three partials times the value's
 /// weight into `d_mu`, `d_saa`, `d_sab`.
 #[inline(always)]
-fn weighted_partials<P, W>(
-    m: MomentRows<'_>,
+fn weighted_partials<R, P, W>(
+    m: MomentRows<'_, R>,
     weights: W,
     partials: &P,
-    (d_mu, d_saa, d_sab, values): (&mut [f64], &mut [f64], &mut [f64], &mut [f64]),
+    (d_mu, d_saa, d_sab, values): (&mut [R], &mut [R], &mut [R], &mut [R]),
 ) where
-    P: Fn(f64, f64, f64, f64, f64) -> [f64; 4],
-    W: Iterator<Item = f64>,
+    R: Real,
+    P: Fn(R, R, R, R, R) -> [R; 4],
+    W: Iterator<Item = R>,
 {
     let moments = m.ma.iter().zip(m.mb).zip(m.saa).zip(m.sbb).zip(m.sab);
     let outputs = d_mu
@@ -729,11 +889,11 @@ fn weighted_partials<P, W>(
 /// The CPU must support AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn grad_row_avx2(
-    buffers: &mut (Vec<f64>, Vec<f64>),
+unsafe fn grad_row_avx2<R: Real>(
+    buffers: &mut (Vec<R>, Vec<R>, [R; WINDOW_SIZE]),
     ab: (&[f32], &[f32]),
     geo: &Geometry,
-    dbuf: &[f64],
+    dbuf: &[R],
     y: usize,
     out: &mut [f32],
 ) {
@@ -743,23 +903,23 @@ unsafe fn grad_row_avx2(
 /// The gradient of image row `y`: the adjoint of the vertical pass (map rows to image rows,
 /// shift −off), the adjoint of the horizontal pass, then the chain rule through a, a², a·b.
 #[inline(always)]
-fn grad_row(
-    (vertical, horizontal): &mut (Vec<f64>, Vec<f64>),
+fn grad_row<R: Real>(
+    (vertical, horizontal, g): &mut (Vec<R>, Vec<R>, [R; WINDOW_SIZE]),
     (a, b): (&[f32], &[f32]),
     geo: &Geometry,
-    dbuf: &[f64],
+    dbuf: &[R],
     y: usize,
     out: &mut [f32],
 ) {
     let (lout, lin) = (geo.out_row(), geo.in_row());
-    vertical_pass(dbuf, PARTIALS, lout, geo.oh, y, -geo.off, &geo.g, vertical);
+    vertical_pass(dbuf, PARTIALS, lout, geo.oh, y, -geo.off, g, vertical);
     for (src, dst) in vertical.chunks(lout).zip(horizontal.chunks_mut(lin)) {
-        correlate_row(src, dst, geo.ow, geo.c, -geo.off, &geo.g);
+        correlate_row(src, dst, geo.ow, geo.c, -geo.off, g);
     }
     let (t_mu, rest) = horizontal.split_at(lin);
     let (t_saa, t_sab) = rest.split_at(lin);
     let (ra, rb) = (&a[y * lin..(y + 1) * lin], &b[y * lin..(y + 1) * lin]);
     for j in 0..lin {
-        out[j] = (t_mu[j] + 2.0 * ra[j] as f64 * t_saa[j] + rb[j] as f64 * t_sab[j]) as f32;
+        out[j] = (t_mu[j] + R::TWO * R::of_f32(ra[j]) * t_saa[j] + R::of_f32(rb[j]) * t_sab[j]).to_f32();
     }
 }

@@ -8,7 +8,8 @@ use bbsplat::gradcheck::{
 use bbsplat::loss::l1::{l1, l1_vjp};
 use bbsplat::loss::psnr::{psnr, psnr_u8, quantize_u8};
 use bbsplat::loss::ssim::{
-    C1, C2, Padding, WINDOW_SIZE, gaussian_window, map_size, ssim, ssim_map, ssim_map_vjp, ssim_vjp, ssim_with_grad,
+    C1, C2, Padding, Precision, WINDOW_SIZE, gaussian_window, map_size, ssim, ssim_map, ssim_map_vjp, ssim_vjp,
+    ssim_with_grad, ssim_with_grad_f32,
 };
 use bbsplat::loss::{LossError, TrainingLoss, training_loss};
 use bbsplat::rng::Rng;
@@ -720,6 +721,7 @@ fn training_loss_gradient_matches_finite_differences() {
             TrainingLoss {
                 lambda_dssim: 0.5,
                 padding: Padding::Same,
+                precision: Precision::F64,
             },
         ] {
             // The loss is the sum over values (n·mean) so that gradients are O(1); it stays in
@@ -753,6 +755,7 @@ fn training_loss_lambda_extremes() {
     let pure_l1 = TrainingLoss {
         lambda_dssim: 0.0,
         padding: Padding::Same,
+        precision: Precision::F64,
     }
     .evaluate(&render, &gt, w, h, 3)
     .unwrap();
@@ -761,6 +764,7 @@ fn training_loss_lambda_extremes() {
     let pure_ssim = TrainingLoss {
         lambda_dssim: 1.0,
         padding: Padding::Valid,
+        precision: Precision::F64,
     }
     .evaluate(&render, &gt, w, h, 3)
     .unwrap();
@@ -855,7 +859,8 @@ fn window_is_normalised_and_symmetric() {
 }
 
 /// The SSIM forward and backward rows run an AVX2 build where the CPU has it: the same bits as
-/// the baseline build, on one thread and on two, for both paddings and both cotangents.
+/// the baseline build, on one thread and on two, for both paddings, both cotangents and both
+/// precisions.
 #[test]
 fn ssim_builds_and_thread_counts_give_the_same_bits() {
     use bbsplat::raster::lanes;
@@ -873,9 +878,158 @@ fn ssim_builds_and_thread_counts_give_the_same_bits() {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             let (value, grad) = pool.install(|| ssim_with_grad(&a, &b, w, h, c, padding, 0.8).unwrap());
             let vjp = pool.install(|| ssim_map_vjp(&a, &b, w, h, c, padding, &d_map).unwrap());
+            let (value32, grad32) = pool.install(|| ssim_with_grad_f32(&a, &b, w, h, c, padding, 0.8).unwrap());
             lanes::force_baseline(false);
-            results.push((value.to_bits(), bits(&grad), bits(&vjp)));
+            results.push((
+                value.to_bits(),
+                bits(&grad),
+                bits(&vjp),
+                value32.to_bits(),
+                bits(&grad32),
+            ));
         }
         assert!(results.iter().all(|r| *r == results[0]), "{padding:?}");
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The f32 path (`ssim_with_grad_f32`, the training loss's default) against the f64 reference.
+// ---------------------------------------------------------------------------------------------
+
+/// A render-like pair: a white background (flat, where the f32 variance cancels worst) with a
+/// textured disc and a few flat rectangles; `b` is `a` with small seeded changes (a target
+/// close to the render, as late in training).
+fn render_like_pair(w: usize, h: usize, seed: u64) -> (Vec<f32>, Vec<f32>) {
+    let mut rng = Rng::new(seed);
+    let mut a = vec![1.0f32; w * h * 3];
+    let (cx, cy, r) = (w as f32 * 0.5, h as f32 * 0.5, w.min(h) as f32 * 0.35);
+    for y in 0..h {
+        for x in 0..w {
+            let (dx, dy) = (x as f32 + 0.5 - cx, y as f32 + 0.5 - cy);
+            let p = 3 * (y * w + x);
+            if dx * dx + dy * dy < r * r {
+                for ch in 0..3 {
+                    a[p + ch] = 0.4 + 0.3 * ((x as f32 * 0.3 + ch as f32).sin() * (y as f32 * 0.2).cos());
+                }
+            } else if (x / 16 + y / 16) % 7 == 0 {
+                a[p..p + 3].copy_from_slice(&[0.8, 0.6, 0.2]);
+            }
+        }
+    }
+    let b = a
+        .iter()
+        .map(|&v| {
+            if v == 1.0 && rng.uniform() < 0.9 {
+                v
+            } else {
+                (v + rng.range(-0.03, 0.03)).clamp(0.0, 1.0)
+            }
+        })
+        .collect();
+    (a, b)
+}
+
+/// `(|SSIM₃₂ − SSIM₆₄|, ‖g₃₂ − g₆₄‖ / ‖g₆₄‖, max|g₃₂ − g₆₄| / max|g₆₄|)` of
+/// `ssim_with_grad_f32` against `ssim_with_grad`.
+fn f32_against_f64(a: &[f32], b: &[f32], (w, h, c): (usize, usize, usize), padding: Padding) -> [f64; 3] {
+    let (s64, g64) = ssim_with_grad(a, b, w, h, c, padding, 1.0).unwrap();
+    let (s32, g32) = ssim_with_grad_f32(a, b, w, h, c, padding, 1.0).unwrap();
+    gradient_distance(s64, &g64, s32, &g32)
+}
+
+fn gradient_distance(s64: f64, g64: &[f32], s32: f64, g32: &[f32]) -> [f64; 3] {
+    let (mut diff2, mut norm2, mut max_diff, mut max_g) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    for (&x, &y) in g64.iter().zip(g32) {
+        let (x, y) = (x as f64, y as f64);
+        diff2 += (x - y) * (x - y);
+        norm2 += x * x;
+        max_diff = max_diff.max((x - y).abs());
+        max_g = max_g.max(x.abs());
+    }
+    [(s32 - s64).abs(), (diff2 / norm2).sqrt(), max_diff / max_g]
+}
+
+/// Bounds of `ssim_with_grad_f32` against `ssim_with_grad`: `[|SSIM₃₂ − SSIM₆₄|, relative L2
+/// of the gradient, max |Δg| / max |g|]`, 10× the worst measured (2026-11-26; every case's
+/// figures in docs/numerics-init-loss.md). Textured images (no window without structure):
+/// measured worst 1.9e-8, 2.3e-6, 6.2e-6.
+const F32_TEXTURED: [f64; 3] = [1.9e-7, 2.3e-5, 6.2e-5];
+/// Images with flat or smooth low-contrast regions, where `G*(a²) − μa²` cancels in f32
+/// (render-like pairs on a white background, smooth low-contrast images, one grey level):
+/// measured worst 1.4e-5, 2.7e-4, 4.4e-4.
+const F32_FLAT: [f64; 3] = [1.4e-4, 2.7e-3, 4.4e-3];
+
+/// A named image pair with its `(w, h, c)` and its bounds.
+type F32Case = (String, Vec<f32>, Vec<f32>, (usize, usize, usize), [f64; 3]);
+
+#[test]
+fn f32_ssim_stays_within_measured_bounds_of_the_f64_reference() {
+    let mut cases: Vec<F32Case> = Vec::new();
+    for (k, kind) in [Kind::Independent, Kind::NearCopy, Kind::Smooth]
+        .into_iter()
+        .enumerate()
+    {
+        let (a, b) = image_pair(64, 48, 3, kind, 40 + k as u64);
+        let bound = if matches!(kind, Kind::Smooth) {
+            F32_FLAT
+        } else {
+            F32_TEXTURED
+        };
+        cases.push((format!("{kind:?}"), a, b, (64, 48, 3), bound));
+    }
+    for (seed, (w, h)) in [(1u64, (96usize, 80usize)), (2, (400, 400))] {
+        let (a, b) = render_like_pair(w, h, seed);
+        cases.push((format!("render-like {w}×{h}"), a, b, (w, h, 3), F32_FLAT));
+    }
+    // Flat: both images one grey level, faint noise in one (the variance's worst case).
+    let mut rng = Rng::new(9);
+    let flat_b = vec![0.9f32; 50 * 40 * 3];
+    let flat_a: Vec<f32> = flat_b.iter().map(|v| v + rng.range(-1e-3, 1e-3)).collect();
+    cases.push(("flat".into(), flat_a, flat_b, (50, 40, 3), F32_FLAT));
+    for (name, a, b, dims, bound) in &cases {
+        for padding in [Padding::Same, Padding::Valid] {
+            let d = f32_against_f64(a, b, *dims, padding);
+            println!(
+                "{name} {padding:?}: value {:.2e}, relative L2 {:.2e}, max {:.2e}",
+                d[0], d[1], d[2]
+            );
+            assert!(
+                d.iter().zip(bound).all(|(x, b)| x <= b),
+                "{name} {padding:?}: {d:?} against {bound:?}"
+            );
+        }
+    }
+}
+
+/// The bounds above catch a wrong f32 gradient: a 0.1 % scale error of one partial, or the
+/// covariance term dropped, fails even the looser bound of the flat images.
+#[test]
+fn the_f32_bound_catches_a_wrong_f32_gradient() {
+    use bbsplat::testing_internals::ssim::{ssim_partials_f32, sum_and_sum_grad_f32};
+    let (textured, flat) = (F32_TEXTURED[1], F32_FLAT[1]);
+    let (w, h, c) = (64, 48, 3);
+    let (a, b) = image_pair(w, h, c, Kind::NearCopy, 41);
+    let (s64, g64) = ssim_with_grad(&a, &b, w, h, c, Padding::Same, 1.0).unwrap();
+    let m = (w * h * c) as f64;
+    let g64: Vec<f32> = g64.iter().map(|&g| (g as f64 * m) as f32).collect();
+    let distance = |partials: &(dyn Fn(f32, f32, f32, f32, f32) -> [f32; 4] + Sync)| {
+        let (sum, g32) = sum_and_sum_grad_f32(&a, &b, w, h, c, Padding::Same, partials).unwrap();
+        gradient_distance(s64 * m, &g64, sum, &g32)[1]
+    };
+    let correct = distance(&ssim_partials_f32);
+    assert!(correct <= textured, "{correct:e}");
+    let scaled = distance(&|ma, mb, saa, sbb, sab| {
+        let [s, d_mu, d_saa, d_sab] = ssim_partials_f32(ma, mb, saa, sbb, sab);
+        [s, d_mu, d_saa, 1.001 * d_sab]
+    });
+    let no_covariance = distance(&|ma, mb, saa, sbb, sab| {
+        let [s, d_mu, d_saa, d_sab] = ssim_partials_f32(ma, mb, saa, sbb, sab);
+        let a1 = 2.0 * ma * mb + C1 as f32;
+        let b1 = ma * ma + mb * mb + C1 as f32;
+        let b2 = (saa - ma * ma) + (sbb - mb * mb) + C2 as f32;
+        [s, d_mu + 2.0 * mb * a1 / (b1 * b2), d_saa, d_sab]
+    });
+    println!("correct {correct:.2e}, d_sab × 1.001 {scaled:.2e}, covariance dropped {no_covariance:.2e}");
+    assert!(scaled > flat, "{scaled:e}");
+    assert!(no_covariance > flat, "{no_covariance:e}");
 }
