@@ -67,7 +67,7 @@ pub mod hull {
 /// SSIM internals (`loss::ssim`).
 pub mod ssim {
     use crate::loss::LossError;
-    use crate::loss::ssim::{Cotangent, Geometry, Padding};
+    use crate::loss::ssim::{Cotangent, Geometry, Padding, Real};
 
     /// `(A1, A2, B1, B2)` of the SSIM formula.
     pub fn terms(ma: f64, mb: f64, saa: f64, sbb: f64, sab: f64) -> (f64, f64, f64, f64) {
@@ -93,9 +93,8 @@ pub mod ssim {
     where
         P: Fn(f64, f64, f64, f64, f64) -> [f64; 4] + Sync,
     {
-        let geo = Geometry::new(w, h, c, padding)?;
-        let (_, grad) = crate::loss::ssim::value_and_grad(a, b, &geo, Cotangent::Uniform(1.0), partials);
-        Ok((geo.map_len(), grad))
+        let (map_len, _, grad) = sums(a, b, (w, h, c), padding, partials)?;
+        Ok((map_len, grad))
     }
 
     /// `[S, ∂S/∂μa, ∂S/∂Saa, ∂S/∂Sab]` for one map value in f32 (the same generic code as
@@ -119,14 +118,24 @@ pub mod ssim {
     where
         P: Fn(f32, f32, f32, f32, f32) -> [f32; 4] + Sync,
     {
+        let (_, sum, grad) = sums(a, b, (w, h, c), padding, partials)?;
+        Ok((sum, grad))
+    }
+
+    /// The map length, `Σ S` and `∂(Σ S)/∂a` in precision `R` with `partials`.
+    fn sums<R: Real, P>(
+        a: &[f32],
+        b: &[f32],
+        (w, h, c): (usize, usize, usize),
+        padding: Padding,
+        partials: P,
+    ) -> Result<(usize, f64, Vec<f32>), LossError>
+    where
+        P: Fn(R, R, R, R, R) -> [R; 4] + Sync,
+    {
         let geo = Geometry::new(w, h, c, padding)?;
-        Ok(crate::loss::ssim::value_and_grad(
-            a,
-            b,
-            &geo,
-            Cotangent::Uniform(1.0),
-            partials,
-        ))
+        let (sum, grad) = crate::loss::ssim::value_and_grad(a, b, &geo, Cotangent::Uniform(1.0), partials);
+        Ok((geo.map_len(), sum, grad))
     }
 }
 
