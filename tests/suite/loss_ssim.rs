@@ -716,13 +716,18 @@ fn training_loss_gradient_matches_finite_differences() {
             .iter()
             .map(|v| v + if rng.uniform() < 0.5 { -1.0 } else { 1.0 } * rng.range(0.03, 0.2))
             .collect();
-        for config in [
-            TrainingLoss::default(),
-            TrainingLoss {
-                lambda_dssim: 0.5,
-                padding: Padding::Same,
-                precision: Precision::F64,
-            },
+        // Relative L2 bounds 10× the worst measured over the six seeds (2026-11-26): 1.69e-4
+        // for the default, whose SSIM values are f32 (they carry the FD noise), 3.8e-7 in f64.
+        for (config, max_rel_l2) in [
+            (TrainingLoss::default(), 1.7e-3),
+            (
+                TrainingLoss {
+                    lambda_dssim: 0.5,
+                    padding: Padding::Same,
+                    precision: Precision::F64,
+                },
+                3.8e-6,
+            ),
         ] {
             // The loss is the sum over values (n·mean) so that gradients are O(1); it stays in
             // f64 (check_vjp would round it to f32, ~2e-6 at 27, i.e. 1e-3 after the FD).
@@ -737,7 +742,11 @@ fn training_loss_gradient_matches_finite_differences() {
                 .iter()
                 .map(|&g| g as f64 * n)
                 .collect();
-            let r = compare(&analytic, &numeric, &GradTolerance::default());
+            let tolerance = GradTolerance {
+                max_rel_l2,
+                ..GradTolerance::default()
+            };
+            let r = compare(&analytic, &numeric, &tolerance);
             println!("training loss, seed {seed}, λ = {}: {r}", config.lambda_dssim);
             assert!(r.passed(), "seed {seed} {config:?}: {r}");
         }
