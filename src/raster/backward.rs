@@ -17,7 +17,8 @@
 
 use super::binning::TileBins;
 use super::forward::{
-    RenderOutput, TileCandidates, prefetch, prefetch_record, prefetch_ref, prefetch_taps, split_by_lengths, tile_pixels,
+    PairOrder, RenderOutput, TileBlended, TileCandidates, prefetch, prefetch_record, prefetch_ref, prefetch_taps,
+    split_by_lengths, tile_pixels,
 };
 use super::preprocess::Prepared;
 use super::tile_backward::{EntryScratch, backward_tile_by_entry};
@@ -306,6 +307,48 @@ struct Scratch {
     sole: Vec<bool>,
     /// The scratch of the entry-by-entry tile pass.
     by_entry: EntryScratch,
+    /// A tile's blended slots regrouped pixel by pixel, when its forward grouped them by entry.
+    pixel_slots: PixelSlots,
+}
+
+/// The blended slots of each pixel of a tile, front to back: those of tile-local pixel `q` are
+/// `slots[offsets[q]..offsets[q + 1]]`.
+#[derive(Default)]
+struct PixelSlots {
+    offsets: Vec<u32>,
+    slots: Vec<u32>,
+    cursor: Vec<u32>,
+}
+
+impl PixelSlots {
+    /// `blended`'s pairs, of a tile of `pixels` pixels, as per-pixel slot lists: its own when
+    /// it is grouped by pixel, else a counting sort of its entry-grouped pairs into `self`
+    /// (entries in list order, so each pixel's slots come out front to back).
+    fn of<'a>(&'a mut self, blended: &'a TileBlended, pixels: usize) -> (&'a [u32], &'a [u32]) {
+        if blended.order == PairOrder::ByPixel {
+            return (&blended.offsets, &blended.slots);
+        }
+        let Self { offsets, slots, cursor } = self;
+        offsets.clear();
+        offsets.resize(pixels + 1, 0);
+        for pair in &blended.entry_pairs {
+            offsets[usize::from(pair.pixel) + 1] += 1;
+        }
+        for q in 0..pixels {
+            offsets[q + 1] += offsets[q];
+        }
+        cursor.clear();
+        cursor.extend_from_slice(&offsets[..pixels]);
+        crate::memory::resize_for_overwrite(slots, blended.entry_pairs.len(), 0);
+        for (k, group) in blended.offsets.windows(2).enumerate() {
+            for pair in &blended.entry_pairs[group[0] as usize..group[1] as usize] {
+                let at = &mut cursor[usize::from(pair.pixel)];
+                slots[*at as usize] = k as u32;
+                *at += 1;
+            }
+        }
+        (offsets, slots)
+    }
 }
 
 /// What an untouched cell of [`TexelSums`] holds: `−0.0` in every channel, so that adding the
@@ -497,11 +540,12 @@ fn backward_tile(
     let rect = (i0, j0, i1, j1);
     let tw = (i1 - i0) as usize;
     let n_q = tw * (j1 - j0) as usize;
-    let blended_of = |q: usize| state.blended_of(tile, q);
+    let (pixel_offsets, pixel_slots) = scratch.pixel_slots.of(&state.tiles[tile], n_q);
+    let blended_of = |q: usize| &pixel_slots[pixel_offsets[q] as usize..pixel_offsets[q + 1] as usize];
     // The prepared records of the tile's blended entries are scattered over the whole array and
     // were last read by whichever thread ran this tile's forward: request them all up front so
     // that their cache misses overlap instead of stalling the candidate loop one by one.
-    for &slot in &state.tiles[tile].slots {
+    for &slot in pixel_slots {
         prefetch_record(&prepared[list[slot as usize] as usize]);
     }
     let mut first = 0;
@@ -735,10 +779,9 @@ pub fn render_backward(
         .enumerate()
         .map_init(Scratch::default, |scratch, (t, (records, normals))| {
             TEXEL_SUMS.with_borrow_mut(|sums| {
-                // The pixel walk serves the normal and distortion maps and the tiles of small
-                // billboards (few blended pixels per entry); the same bits either way.
-                let pairs = state.tiles[t].slots.len();
-                if aux || super::lanes::walk_by_pixel(pairs, records.len()) {
+                // Each tile is walked as its forward walked it (the grouping of its pairs), and
+                // pixel by pixel for the normal and distortion maps; the same bits either way.
+                if aux || state.tiles[t].order == PairOrder::ByPixel {
                     backward_tile(set, out, image_grads, t, records, normals, &sole_rows, scratch, sums)
                 } else {
                     backward_tile_by_entry(

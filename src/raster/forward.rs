@@ -26,45 +26,118 @@ pub struct ForwardState {
     pub bins: TileBins,
     /// Per pixel: transmittance left after the last blended billboard.
     pub final_transmittance: Vec<f32>,
-    /// Per tile (the index of [`TileBins::tile_range`]): the entries its pixels blended; see
-    /// [`ForwardState::blended_of`]. Kept where each tile's task wrote them, so that the
-    /// backward pass reads them without a copy into one image-wide list.
+    /// Per tile (the index of [`TileBins::tile_range`]): the entries its pixels blended
+    /// ([`TileBlended`]). Kept where each tile's task wrote them, so that the backward pass
+    /// reads them without a copy into one image-wide list.
     pub tiles: Vec<TileBlended>,
     /// The forward pass's temporaries, kept for [`RenderOutput::into_buffers`].
     pub(crate) spare: ForwardSpare,
 }
 
-impl ForwardState {
-    /// The tile-list slots of the entries blended at tile-local pixel `q` of tile `t`, front to
-    /// back (slots index `bins.entries[bins.tile_range(t)]`). The backward pass rebuilds exactly
-    /// these, instead of re-testing every entry of the pixel's list.
-    #[inline]
-    pub fn blended_of(&self, t: usize, q: usize) -> &[u32] {
-        self.tiles[t].of(q)
-    }
+/// How the blended pairs of a tile are grouped in its [`TileBlended`]: in the order the
+/// forward's walk of that tile found them. The backward walks the tile the same way (pixel by
+/// pixel when it also has normal or distortion gradients), so neither pass regroups them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PairOrder {
+    /// Pixel by pixel (tile-local row-major), front to back within a pixel: the tile was
+    /// walked pixel by pixel.
+    #[default]
+    ByPixel,
+    /// Entry by entry (tile-list order, front to back), pixel order within an entry: the tile
+    /// was walked billboard by billboard.
+    ByEntry,
 }
 
-/// The blended (entry, pixel) pairs of one tile, pixel by pixel in tile-local row-major order
-/// and front to back within a pixel.
+/// One blended pair of a tile walked entry by entry: the tile-local pixel (its index, column
+/// and row, so that the backward divides nothing) and the transmittance in front of the entry
+/// there.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(crate) struct EntryPair {
+    pub(crate) pixel: u16,
+    pub(crate) x: u8,
+    pub(crate) y: u8,
+    pub(crate) transmittance: f32,
+}
+
+/// The blended (entry, pixel) pairs of one tile, grouped as [`TileBlended::order`] says, with
+/// the transmittance in front of each entry where it was blended (`Tᵢ`), which lets the
+/// backward pass visit a tile's entries back to front without replaying each pixel's
+/// compositing from the front. [`TileBlended::pairs_by_pixel`] lists them in one canonical
+/// order whatever the grouping.
 #[derive(Clone, Debug, Default)]
 pub struct TileBlended {
-    /// Tile-list slots (indices into the tile's [`TileBins::tile_range`] of
-    /// [`TileBins::entries`]) of the blended entries.
-    pub slots: Vec<u32>,
-    /// Per slot of [`TileBlended::slots`]: the transmittance in front of it when it was
-    /// blended (`Tᵢ`), which lets the backward pass visit a tile's entries back to front
-    /// without replaying each pixel's compositing from the front.
-    pub transmittance: Vec<f32>,
-    /// `slots[offsets[q]..offsets[q + 1]]` are the blended slots of tile-local pixel `q`
-    /// (`offsets[0] = 0`, one more value than the tile has pixels).
-    pub offsets: Vec<u32>,
+    pub(crate) order: PairOrder,
+    /// [`PairOrder::ByPixel`]: per pair, its tile-list slot (an index into the tile's
+    /// [`TileBins::tile_range`] of [`TileBins::entries`]). Empty otherwise.
+    pub(crate) slots: Vec<u32>,
+    /// [`PairOrder::ByPixel`]: per pair, the transmittance in front of it. Empty otherwise.
+    pub(crate) transmittance: Vec<f32>,
+    /// [`PairOrder::ByEntry`]: the pairs. Empty otherwise.
+    pub(crate) entry_pairs: Vec<EntryPair>,
+    /// The pairs of group `g` (tile-local pixel `g` by pixel, slot `g` by entry) are
+    /// `offsets[g]..offsets[g + 1]`; `offsets[0] = 0`.
+    pub(crate) offsets: Vec<u32>,
 }
 
 impl TileBlended {
-    /// The blended slots of tile-local pixel `q`, front to back.
-    #[inline]
-    pub fn of(&self, q: usize) -> &[u32] {
-        &self.slots[self.offsets[q] as usize..self.offsets[q + 1] as usize]
+    /// How the pairs are grouped.
+    pub fn order(&self) -> PairOrder {
+        self.order
+    }
+
+    /// Number of blended pairs.
+    pub fn len(&self) -> usize {
+        match self.order {
+            PairOrder::ByPixel => self.slots.len(),
+            PairOrder::ByEntry => self.entry_pairs.len(),
+        }
+    }
+
+    /// True when no pixel of the tile blended anything.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Every pair as `(tile-local pixel, slot, transmittance in front)`, pixel by pixel and
+    /// front to back within a pixel, whatever [`TileBlended::order`] is.
+    pub fn pairs_by_pixel(&self) -> Vec<(u32, u32, f32)> {
+        match self.order {
+            PairOrder::ByPixel => (0..self.offsets.len().saturating_sub(1))
+                .flat_map(|q| {
+                    let r = self.offsets[q] as usize..self.offsets[q + 1] as usize;
+                    self.slots[r.clone()]
+                        .iter()
+                        .zip(&self.transmittance[r])
+                        .map(move |(&slot, &t)| (q as u32, slot, t))
+                })
+                .collect(),
+            PairOrder::ByEntry => {
+                let mut pairs: Vec<(u32, u32, f32)> = (0..self.offsets.len().saturating_sub(1))
+                    .flat_map(|k| {
+                        self.entry_pairs[self.offsets[k] as usize..self.offsets[k + 1] as usize]
+                            .iter()
+                            .map(move |pair| (u32::from(pair.pixel), k as u32, pair.transmittance))
+                    })
+                    .collect();
+                // Stable: slots stay in list (front-to-back) order within a pixel.
+                pairs.sort_by_key(|&(q, _, _)| q);
+                pairs
+            }
+        }
+    }
+
+    /// The number of blended pairs of each of the tile's `pixels` pixels.
+    pub(crate) fn per_pixel_counts(&self, pixels: usize) -> Vec<u32> {
+        match self.order {
+            PairOrder::ByPixel => self.offsets.windows(2).map(|w| w[1] - w[0]).collect(),
+            PairOrder::ByEntry => {
+                let mut counts = vec![0u32; pixels];
+                for pair in &self.entry_pairs {
+                    counts[usize::from(pair.pixel)] += 1;
+                }
+                counts
+            }
+        }
     }
 }
 
@@ -611,7 +684,7 @@ pub fn render_with(
                 let TileScratch { spans, composite, walk } = scratch;
                 local_spans(&prepared, billboard_rows, list, (i0, j0), half_side, spans);
                 let tile = (camera, set, settings, &*prepared, list, rect, &spans[..]);
-                let blended = (&mut blended_pairs.slots, &mut blended_pairs.transmittance);
+                let blended = &mut *blended_pairs;
                 // Tiles of small billboards go pixel by pixel (the same bits; see
                 // `tile_forward_pixels`).
                 let by_pixel =
@@ -622,15 +695,6 @@ pub fn render_with(
                     (false, true) => composite_tile_by_pixel::<false>(walk, tile, impact, pixels, blended),
                     (false, false) => composite_tile::<false>(composite, tile, impact, pixels, blended),
                 }
-                // Each pixel's range of the tile's slots.
-                let offsets = &mut blended_pairs.offsets;
-                offsets.clear();
-                offsets.push(0);
-                let mut end = 0u32;
-                offsets.extend(pixels.iter().map(|px| {
-                    end += px.blended;
-                    end
-                }));
                 if with_distortion {
                     tile_distortion.clear();
                     tile_distortion.extend(pixels.iter().map(|px| px.distortion));
@@ -638,7 +702,7 @@ pub fn render_with(
             },
         );
     let tile_outputs = &spare.tile_outputs;
-    let blended_count: u64 = tiles.iter().map(|tile| tile.slots.len() as u64).sum();
+    let blended_count: u64 = tiles.iter().map(|tile| tile.len() as u64).sum();
     let (evaluated_pairs, nan_alpha_pairs): (u64, u64) = tile_outputs
         .par_iter()
         .map(|pixels| {

@@ -5,8 +5,11 @@
 //! `tile_forward.rs` / `tile_backward.rs`) unless its entries cover fewer than
 //! [`crate::raster::forward::SMALL_ENTRY_PIXELS`] pixels on average, when it is walked pixel by
 //! pixel (`tile_forward_pixels.rs`, and the backward's pixel walk, which also serves the normal
-//! and distortion maps). Both walks give the same bits; [`force_tile_walk`] picks one for
-//! every tile.
+//! and distortion maps). The forward's walk leaves the tile's blended pairs grouped its way
+//! ([`crate::raster::forward::PairOrder`]) and the backward walks the tile the same way, so
+//! neither regroups them (except the backward with normal or distortion gradients, which
+//! regroups an entry-walked tile by pixel). Both walks give the same bits; [`force_tile_walk`]
+//! picks one for every tile.
 //!
 //! **Instruction set.**
 //! The tile loops are written once, lane by lane over [`crate::stages::ray_plane::LANES`]

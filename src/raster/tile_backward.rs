@@ -17,7 +17,7 @@
 //! the gradients are the same bits (checksums of `raster_stats`; the raster tests).
 
 use super::backward::{EMPTY_RECORD, EntryRecord, SoleEntryRows, TexelSums, TileGrads, add_transform};
-use super::forward::{RenderOutput, prefetch_record, tile_pixels};
+use super::forward::{EntryPair, PairOrder, RenderOutput, prefetch_record, tile_pixels};
 use super::preprocess::Prepared;
 use super::tile_forward::{prefetch_texel_rect, texel_footprint};
 use super::{ActivatedRef, backward::ImageGradients};
@@ -36,26 +36,10 @@ struct PixelBack {
     d_out: [f32; CHANNELS],
 }
 
-/// One blended (pixel, entry) pair of the tile: the tile-local pixel (its index and its column
-/// and row, so that the pair loop divides nothing) and the transmittance in front of the entry
-/// there.
-#[derive(Clone, Copy, Debug, Default)]
-struct Pair {
-    pixel: u16,
-    x: u8,
-    y: u8,
-    transmittance: f32,
-}
-
 /// Reusable per-task scratch of [`backward_tile_by_entry`] (rebuilt per tile).
 #[derive(Default)]
 pub(super) struct EntryScratch {
     pixels: Vec<PixelBack>,
-    /// The tile's blended pairs grouped by entry, in pixel order within an entry: the pairs of
-    /// slot `k` are `pairs[starts[k]..starts[k + 1]]`.
-    pairs: Vec<Pair>,
-    starts: Vec<u32>,
-    cursor: Vec<u32>,
     /// Per slot: the tile adds the entry's texture gradients to its billboard's row itself.
     sole: Vec<bool>,
 }
@@ -135,13 +119,7 @@ fn by_entry_body(
         ..EMPTY_RECORD
     });
     sums.start(list.len(), ts * ts);
-    let EntryScratch {
-        pixels,
-        pairs,
-        starts,
-        cursor,
-        sole,
-    } = scratch;
+    let EntryScratch { pixels, sole } = scratch;
     sole.clear();
     sole.extend(
         list.iter()
@@ -169,42 +147,12 @@ fn by_entry_body(
             ],
         });
     }
-    // The tile's blended pairs grouped by entry (a counting sort of the per-pixel lists; pixel
-    // order within an entry).
+    // The tile's blended pairs, grouped by entry by its forward (pixel order within an entry):
+    // those of slot `k` are `pairs[starts[k]..starts[k + 1]]`.
     let blended = &state.tiles[tile];
-    let (offsets, slots, transmittance) = (&blended.offsets, &blended.slots, &blended.transmittance);
-    starts.clear();
-    starts.resize(list.len() + 1, 0);
-    for &k in slots {
-        starts[k as usize + 1] += 1;
-    }
-    for k in 0..list.len() {
-        starts[k + 1] += starts[k];
-    }
-    cursor.clear();
-    cursor.extend_from_slice(&starts[..list.len()]);
-    // Every position is written below (the counts sum to `slots.len()`): only new ones filled.
-    crate::memory::resize_for_overwrite(pairs, slots.len(), Pair::default());
-    for q in 0..n_q {
-        let (x, y) = ((q % tw) as u8, (q / tw) as u8);
-        for r in offsets[q] as usize..offsets[q + 1] as usize {
-            let c = &mut cursor[slots[r] as usize];
-            pairs[*c as usize] = Pair {
-                pixel: q as u16,
-                x,
-                y,
-                transmittance: transmittance[r],
-            };
-            *c += 1;
-        }
-    }
-    // Each slot's cursor ran exactly to the next slot's start: every position was written.
-    debug_assert!(
-        cursor.iter().zip(&starts[1..]).all(|(c, s)| c == s),
-        "the regroup filled every pair"
-    );
-    let starts: &[u32] = starts;
-    let pairs: &[Pair] = pairs;
+    debug_assert_eq!(blended.order, PairOrder::ByEntry, "the tile was walked by entry");
+    debug_assert_eq!(blended.offsets.len(), list.len() + 1, "one group per entry");
+    let (starts, pairs): (&[u32], &[EntryPair]) = (&blended.offsets, &blended.entry_pairs);
     // The tile-local rectangle of the pixels of an entry's pairs.
     let pair_rect = |k: usize| {
         let of = &pairs[starts[k] as usize..starts[k + 1] as usize];

@@ -13,7 +13,7 @@
 //! Per (entry, pixel) pair, work stops as soon as the pixel has stopped compositing
 //! (transmittance threshold), which the pixel-by-pixel walk also did.
 
-use super::forward::{EntrySpans, prefetch_ptr, prefetch_record};
+use super::forward::{EntryPair, EntrySpans, PairOrder, TileBlended, prefetch_ptr, prefetch_record};
 use super::preprocess::Prepared;
 use super::{ActivatedRef, RenderSettings};
 use crate::camera::Camera;
@@ -39,7 +39,6 @@ pub(crate) struct PixelOut {
     /// Entries whose span holds the pixel, up to and including the one where compositing
     /// stopped (all of them when it did not stop).
     pub(crate) evaluated: u32,
-    pub(crate) blended: u32,
     pub(crate) nan_alpha: u32,
     /// The depth-distortion value (0 unless the tile was composited with the distortion).
     pub(crate) distortion: f32,
@@ -52,7 +51,6 @@ struct PixelState {
     spread: DistortionState,
     median: f32,
     evaluated: u32,
-    blended: u32,
     nan_alpha: u32,
 }
 
@@ -70,7 +68,6 @@ impl PixelState {
         },
         median: 0.0,
         evaluated: 0,
-        blended: 0,
         nan_alpha: 0,
     };
 }
@@ -87,39 +84,23 @@ pub(crate) type TileInputs<'a, 's> = (
     &'a [EntrySpans],
 );
 
-/// One blended (entry, pixel) pair of the tile, as the entry-by-entry walk finds it.
-#[derive(Clone, Copy, Debug)]
-struct BlendedPair {
-    slot: u32,
-    /// The transmittance in front of the entry at the pixel.
-    transmittance: f32,
-    /// The tile-local pixel.
-    pixel: u16,
-}
-
 /// Reusable per-task scratch of [`composite_tile`] (rebuilt per tile).
 #[derive(Default)]
 pub(crate) struct TileComposite {
     pixels: Vec<PixelState>,
-    /// The tile's blended pairs in the order found: entry by entry, pixel order within an entry
-    /// (one sequential list; regrouped by pixel at the end of the tile).
-    blended: Vec<BlendedPair>,
-    /// Per pixel: where its next pair goes in the per-pixel output.
-    cursor: Vec<u32>,
 }
 
 /// Composites the tile `(i0, j0, i1, j1)` whose list is `list` (with the entries' `spans`):
 /// writes one [`PixelOut`] per tile-local pixel (row-major over the tile's own width) into
-/// `pixels`, the blended slots of each pixel, pixel after pixel and front to back within a
-/// pixel, into `blended.0` (with the transmittance in front of each in `blended.1`), and adds `α·T` of each blended pair to `impact[slot]` (in pixel
-/// order). With `DISTORTION` the depth distortion of each pixel is accumulated too
+/// `pixels`, the blended pairs into `blended` entry by entry ([`PairOrder::ByEntry`], the
+/// order found), and adds `α·T` of each blended pair to `impact[slot]` (in pixel order). With `DISTORTION` the depth distortion of each pixel is accumulated too
 /// ([`DistortionState`]); without it that code is not compiled in.
 pub(crate) fn composite_tile<const DISTORTION: bool>(
     scratch: &mut TileComposite,
     inputs: TileInputs<'_, '_>,
     impact: &mut [f32],
     pixels: &mut Vec<PixelOut>,
-    blended: (&mut Vec<u32>, &mut Vec<f32>),
+    blended: &mut TileBlended,
 ) {
     #[cfg(target_arch = "x86_64")]
     if super::lanes::wide_lanes() {
@@ -142,7 +123,7 @@ unsafe fn composite_tile_avx2<const DISTORTION: bool>(
     inputs: TileInputs<'_, '_>,
     impact: &mut [f32],
     pixels: &mut Vec<PixelOut>,
-    blended: (&mut Vec<u32>, &mut Vec<f32>),
+    blended: &mut TileBlended,
 ) {
     composite_tile_body::<DISTORTION>(scratch, inputs, impact, pixels, blended);
 }
@@ -154,21 +135,27 @@ fn composite_tile_body<const DISTORTION: bool>(
     (camera, set, settings, prepared, list, (i0, j0, i1, j1), spans): TileInputs<'_, '_>,
     impact: &mut [f32],
     pixels: &mut Vec<PixelOut>,
-    out_blended: (&mut Vec<u32>, &mut Vec<f32>),
+    out: &mut TileBlended,
 ) {
     let params = &settings.composite;
     let ts = set.texture_size;
     let tw = (i1 - i0) as usize;
     let n = tw * (j1 - j0) as usize;
-    let TileComposite {
-        pixels: states,
-        blended,
-        cursor,
-    } = scratch;
+    let states = &mut scratch.pixels;
     states.clear();
     states.resize(n, PixelState::START);
+    out.order = PairOrder::ByEntry;
+    out.slots.clear();
+    out.transmittance.clear();
+    let TileBlended {
+        entry_pairs: blended,
+        offsets,
+        ..
+    } = out;
     blended.clear();
+    offsets.clear();
     for (k, (span, &b)) in spans.iter().zip(list).enumerate() {
+        offsets.push(blended.len() as u32);
         if let Some(&ahead) = list.get(k + 12) {
             prefetch_record(&prepared[ahead as usize]);
         }
@@ -245,17 +232,18 @@ fn composite_tile_body<const DISTORTION: bool>(
                         state.spread.add(mapped_depth(depth), blend.weight, blend.transmittance);
                     }
                     entry_impact += blend.weight;
-                    state.blended += 1;
-                    blended.push(BlendedPair {
-                        slot: k as u32,
-                        transmittance: blend.transmittance,
+                    blended.push(EntryPair {
                         pixel: q as u16,
+                        x: (q - row) as u8,
+                        y,
+                        transmittance: blend.transmittance,
                     });
                 }
             }
         }
         impact[k] = entry_impact;
     }
+    offsets.push(blended.len() as u32);
     let bg = settings.background;
     pixels.clear();
     for state in states.iter() {
@@ -268,29 +256,9 @@ fn composite_tile_body<const DISTORTION: bool>(
             normal: Vec3::new(nx, ny, nz),
             final_t: state.composite.transmittance,
             evaluated: state.evaluated,
-            blended: state.blended,
             nan_alpha: state.nan_alpha,
             distortion: if DISTORTION { state.spread.distortion } else { 0.0 },
         });
-    }
-    // The pairs regrouped pixel by pixel (a counting sort; entries stay front to back within a
-    // pixel, the order they were found in).
-    let (blended_slots, blended_transmittance) = out_blended;
-    // Every value is overwritten below: only new slots are filled.
-    crate::memory::resize_for_overwrite(blended_slots, blended.len(), 0);
-    crate::memory::resize_for_overwrite(blended_transmittance, blended.len(), 0.0);
-    cursor.clear();
-    let mut start = 0u32;
-    cursor.extend(states.iter().map(|state| {
-        let at = start;
-        start += state.blended;
-        at
-    }));
-    for pair in blended.iter() {
-        let at = &mut cursor[usize::from(pair.pixel)];
-        blended_slots[*at as usize] = pair.slot;
-        blended_transmittance[*at as usize] = pair.transmittance;
-        *at += 1;
     }
 }
 

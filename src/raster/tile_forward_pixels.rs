@@ -10,7 +10,7 @@
 //! the same); the choice is made per tile ([`composite_tile`](super::tile_forward::composite_tile))
 //! and tested in `tests/suite/raster_lanes.rs`.
 
-use super::forward::{CANDIDATE_CHUNK, EntrySpans, prefetch_record, prefetch_taps};
+use super::forward::{CANDIDATE_CHUNK, EntrySpans, PairOrder, TileBlended, prefetch_record, prefetch_taps};
 use super::preprocess::Prepared;
 use super::tile_forward::{FORWARD_FEATURES, PixelOut, TileInputs};
 use super::{ActivatedRef, RenderSettings};
@@ -30,13 +30,14 @@ pub(crate) struct PixelWalk {
 }
 
 /// The tile of `inputs` composited pixel by pixel: the outputs of
-/// [`composite_tile`](super::tile_forward::composite_tile), bit for bit.
+/// [`composite_tile`](super::tile_forward::composite_tile), bit for bit, except that the
+/// blended pairs are grouped pixel by pixel ([`PairOrder::ByPixel`]).
 pub(crate) fn composite_tile_by_pixel<const DISTORTION: bool>(
     scratch: &mut PixelWalk,
     (camera, set, settings, prepared, list, rect @ (i0, j0, i1, j1), spans): TileInputs<'_, '_>,
     impact: &mut [f32],
     pixels: &mut Vec<PixelOut>,
-    (blended_slots, blended_transmittance): (&mut Vec<u32>, &mut Vec<f32>),
+    blended: &mut TileBlended,
 ) {
     let tw = (i1 - i0) as usize;
     let n_q = tw * (j1 - j0) as usize;
@@ -44,8 +45,18 @@ pub(crate) fn composite_tile_by_pixel<const DISTORTION: bool>(
     lists.build(spans, tw, (j1 - j0) as usize);
     samples.build(camera, set, prepared, list, rect, spans, lists);
     pixels.clear();
-    blended_slots.clear();
-    blended_transmittance.clear();
+    blended.order = PairOrder::ByPixel;
+    blended.entry_pairs.clear();
+    let TileBlended {
+        slots,
+        transmittance,
+        offsets,
+        ..
+    } = blended;
+    slots.clear();
+    transmittance.clear();
+    offsets.clear();
+    offsets.push(0);
     for q in 0..n_q {
         pixels.push(shade_pixel::<DISTORTION>(
             settings,
@@ -54,8 +65,9 @@ pub(crate) fn composite_tile_by_pixel<const DISTORTION: bool>(
             lists.of(q),
             samples.of(lists, q),
             impact,
-            (&mut *blended_slots, &mut *blended_transmittance),
+            (&mut *slots, &mut *transmittance),
         ));
+        offsets.push(slots.len() as u32);
     }
 }
 
@@ -82,7 +94,6 @@ fn shade_pixel<const DISTORTION: bool>(
     let mut spread = DistortionState::default();
     let mut median = 0.0;
     let mut evaluated = own.len() as u32;
-    let mut blended = 0;
     let mut nan_alpha = 0;
     for cand in candidates {
         let k = cand.slot as usize;
@@ -112,7 +123,6 @@ fn shade_pixel<const DISTORTION: bool>(
             spread.add(mapped_depth(cand.depth), blend.weight, blend.transmittance);
         }
         impact[k] += blend.weight;
-        blended += 1;
         blended_slots.push(k as u32);
         blended_transmittance.push(blend.transmittance);
     }
@@ -126,7 +136,6 @@ fn shade_pixel<const DISTORTION: bool>(
         normal: Vec3::new(nx, ny, nz),
         final_t: state.transmittance,
         evaluated,
-        blended,
         nan_alpha,
         distortion: if DISTORTION { spread.distortion } else { 0.0 },
     }

@@ -4,6 +4,7 @@
 //! like the work it stands for"); `examples/model_stats.rs` prints them for trained models and
 //! `benches/raster.rs` for its generated scenes.
 
+use super::forward::tile_pixels;
 use super::{ActivatedRef, RenderOutput};
 
 /// Statistics of one render (see the [module documentation](self)). Quantiles are nearest-rank.
@@ -52,7 +53,11 @@ impl WorkloadStats {
         let mut blended_counts: Vec<u32> = state
             .tiles
             .iter()
-            .flat_map(|tile| tile.offsets.windows(2).map(|w| w[1] - w[0]))
+            .enumerate()
+            .flat_map(|(t, tile)| {
+                let (i0, j0, i1, j1) = tile_pixels(&state.bins, t, out.width, out.height);
+                tile.per_pixel_counts(((i1 - i0) * (j1 - j0)) as usize)
+            })
             .filter(|&n| n > 0)
             .collect();
         blended_counts.sort_unstable();

@@ -59,7 +59,13 @@ fn everything(scene: &ActivatedBillboards, cam: &Camera, settings: &RenderSettin
     bits.extend(grads.log_scales.iter().flat_map(|s| s.to_array().map(f32::to_bits)));
     bits.extend(grads.textures.iter().flat_map(|t| t.map(f32::to_bits)));
     bits.extend(grads.background.to_array().map(f32::to_bits));
-    bits.extend(out.state.tiles.iter().flat_map(|tile| tile.slots.iter().copied()));
+    // Each tile's blended pairs (pixel, slot, transmittance in front), in one order whatever
+    // the walk grouped them by.
+    bits.extend(out.state.tiles.iter().flat_map(|tile| {
+        tile.pairs_by_pixel()
+            .into_iter()
+            .flat_map(|(q, slot, t)| [q, slot, t.to_bits()])
+    }));
     bits.extend(touched);
     bits.extend([out.stats.evaluated_pairs as u32, out.stats.blended_pairs as u32]);
     bits
