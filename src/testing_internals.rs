@@ -15,6 +15,23 @@ pub mod bilinear {
     pub fn sampling_taps_row(u: &[f32; LANES], v: &[f32; LANES], ts: usize) -> RowTaps {
         crate::stages::bilinear::taps_row_with::<false>(u, v, ts)
     }
+
+    /// `previous` refilled in place with the taps of `(u, v)` (`RowTaps::refill`, as the tile
+    /// loops make their taps), with the weights' derivatives when `derivatives`.
+    pub fn refilled_taps_row(
+        mut previous: RowTaps,
+        derivatives: bool,
+        u: &[f32; LANES],
+        v: &[f32; LANES],
+        ts: usize,
+    ) -> RowTaps {
+        if derivatives {
+            previous.refill::<true>(u, v, ts);
+        } else {
+            previous.refill::<false>(u, v, ts);
+        }
+        previous
+    }
 }
 
 /// Farthest-point sampling internals (`init::fps`).

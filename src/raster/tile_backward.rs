@@ -21,7 +21,7 @@ use super::forward::{EntryPair, PairOrder, RenderOutput, prefetch_record, tile_p
 use super::preprocess::Prepared;
 use super::tile_forward::{prefetch_texel_rect, texel_footprint};
 use super::{ActivatedRef, backward::ImageGradients};
-use crate::stages::bilinear::taps_row;
+use crate::stages::bilinear::RowTaps;
 use crate::stages::composite::{CompositeBackState, Step, classify};
 use crate::stages::ray_plane::{LANES, intersect_lanes, intersect_vjp_lanes};
 use glam::Vec3;
@@ -168,6 +168,8 @@ fn by_entry_body(
     // record, read to find them, was fetched some entries before.
     const AHEAD: usize = 3;
     const RECORD_AHEAD: usize = 8;
+    // The taps of a chunk of pairs, refilled in place.
+    let mut lane_taps = RowTaps::default();
     for k in (0..list.len()).rev() {
         if let Some(ahead) = k.checked_sub(RECORD_AHEAD) {
             prefetch_record(&prepared[list[ahead] as usize]);
@@ -209,7 +211,7 @@ fn by_entry_body(
             let px: [f32; LANES] = std::array::from_fn(|l| (i0 + u32::from(pair_of(l).x)) as f32 + 0.5);
             let py: [f32; LANES] = std::array::from_fn(|l| (j0 + u32::from(pair_of(l).y)) as f32 + 0.5);
             let hits = intersect_lanes(&pr.transform, &plane, camera, &px, &py);
-            let lane_taps = taps_row(&hits.u, &hits.v, ts);
+            lane_taps.refill::<true>(&hits.u, &hits.v, ts);
             // Per pair in pixel order: the compositing backward and the texel gradients; then
             // the hits' gradients lane-wise, added to the record in pixel order.
             let (mut d_u, mut d_v, mut d_depth) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);

@@ -17,7 +17,7 @@ use super::forward::{EntryPair, EntrySpans, PairOrder, TileBlended, prefetch_ptr
 use super::preprocess::Prepared;
 use super::{ActivatedRef, RenderSettings};
 use crate::camera::Camera;
-use crate::stages::bilinear::taps_row_with;
+use crate::stages::bilinear::RowTaps;
 use crate::stages::composite::{CompositeState, Step};
 use crate::stages::depth_distortion::{DistortionState, mapped_depth};
 use crate::stages::ray_plane::{LANES, intersect_lanes, row_centres};
@@ -154,6 +154,8 @@ fn composite_tile_body<const DISTORTION: bool>(
     } = out;
     blended.clear();
     offsets.clear();
+    // The taps of a chunk of lanes, refilled in place (for sampling only: no derivatives).
+    let mut taps = RowTaps::default();
     for (k, (span, &b)) in spans.iter().zip(list).enumerate() {
         offsets.push(blended.len() as u32);
         if let Some(&ahead) = list.get(k + 12) {
@@ -190,7 +192,7 @@ fn composite_tile_body<const DISTORTION: bool>(
                 let first = i0 + (lanes.start - row) as u32;
                 let px = row_centres(first);
                 let hits = intersect_lanes(&p.transform, &plane, camera, &px, &[py; LANES]);
-                let taps = taps_row_with::<false>(&hits.u, &hits.v, ts);
+                taps.refill::<false>(&hits.u, &hits.v, ts);
                 // The samples of the chunk's pixels first, so that their texel reads overlap
                 // instead of each waiting behind the previous pixel's compositing.
                 let mut samples = [None; LANES];

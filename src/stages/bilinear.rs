@@ -497,7 +497,7 @@ pub fn sample_vjp(
 /// zero mask in `keep`, so that its product is replaced by zero and it emits no gradient. Over
 /// the inside taps this is [`taps`] exactly; the zeros added in between change no bit (a sum
 /// that starts at +0 is never −0, and adding ±0 to anything else is exact).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct RowTaps {
     ts: u32,
     /// The derivative arrays were computed (see [`taps_row_with`]).
@@ -535,22 +535,52 @@ pub fn taps_row(u: &[f32; LANES], v: &[f32; LANES], ts: usize) -> RowTaps {
 /// debug builds check). The forward pass, which only samples, skips their 32 products.
 #[inline(always)]
 pub(crate) fn taps_row_with<const DERIVATIVES: bool>(u: &[f32; LANES], v: &[f32; LANES], ts: usize) -> RowTaps {
-    assert!((2..=65536).contains(&ts), "texture size must be in 2..=65536, got {ts}");
-    let n = ts as i32;
-    let limit = ts as f64;
-    let s = (0.5 * (ts - 1) as f64) as f32;
     // Every value written once, in place: a zeroed `RowTaps` filled in afterwards was a
     // `memset` call per row of taps (4 % of a forward + backward's instructions).
     let mut taps = std::mem::MaybeUninit::<RowTaps>::uninit();
     let out = taps.as_mut_ptr();
-    // SAFETY: `out` points into `taps`; fields are only written until `assume_init`.
+    // SAFETY: `out` points into `taps`, which nothing reads before `assume_init`.
     unsafe {
-        (&raw mut (*out).ts).write(ts as u32);
-        (&raw mut (*out).derivatives).write(DERIVATIVES);
         if !DERIVATIVES {
             (&raw mut (*out).d_weight_du).write([[0.0; LANES]; 4]);
             (&raw mut (*out).d_weight_dv).write([[0.0; LANES]; 4]);
         }
+        write_taps_row::<DERIVATIVES>(out, u, v, ts);
+    }
+    // SAFETY: every field was written: the derivative arrays above (without `DERIVATIVES`),
+    // and every other field by `write_taps_row`.
+    unsafe { taps.assume_init() }
+}
+
+impl RowTaps {
+    /// Overwrites `self` with `taps_row_with::<DERIVATIVES>(u, v, ts)` in place: the same
+    /// values, except that without `DERIVATIVES` the derivative arrays keep their old values
+    /// (which nothing may read: such taps are for sampling only). The tile loops keep one
+    /// `RowTaps` and refill it per row of lanes, so that the 400 to 650 bytes of taps are
+    /// neither zeroed nor copied into place each time.
+    #[inline(always)]
+    pub(crate) fn refill<const DERIVATIVES: bool>(&mut self, u: &[f32; LANES], v: &[f32; LANES], ts: usize) {
+        // SAFETY: `self` is a valid, exclusively borrowed `RowTaps`; plain values are written
+        // into its fields.
+        unsafe { write_taps_row::<DERIVATIVES>(self, u, v, ts) }
+    }
+}
+
+/// Writes every field of the [`RowTaps`] at `out` for `(u, v)`, except the derivative arrays
+/// when not `DERIVATIVES`: the body of [`taps_row_with`] and [`RowTaps::refill`].
+///
+/// # Safety
+/// `out` must be valid for writes of a `RowTaps` and not aliased while this runs.
+#[inline(always)]
+unsafe fn write_taps_row<const DERIVATIVES: bool>(out: *mut RowTaps, u: &[f32; LANES], v: &[f32; LANES], ts: usize) {
+    assert!((2..=65536).contains(&ts), "texture size must be in 2..=65536, got {ts}");
+    let n = ts as i32;
+    let limit = ts as f64;
+    let s = (0.5 * (ts - 1) as f64) as f32;
+    // SAFETY: `out` is valid for writes (the caller's contract).
+    unsafe {
+        (&raw mut (*out).ts).write(ts as u32);
+        (&raw mut (*out).derivatives).write(DERIVATIVES);
     }
     for lane in 0..LANES {
         let x = texel_coordinate(u[lane], ts);
@@ -578,7 +608,8 @@ pub(crate) fn taps_row_with<const DERIVATIVES: bool>(u: &[f32; LANES], v: &[f32;
         let row_inside = [iy >= 0, iy + 1 < n];
         let col = [ix.clamp(0, n - 1) as u32, (ix + 1).clamp(0, n - 1) as u32];
         let row = [iy.clamp(0, n - 1) as u32, (iy + 1).clamp(0, n - 1) as u32];
-        // SAFETY: as above; each (tap, lane) element is written once by this loop.
+        // SAFETY: as above (the caller's contract); each (tap, lane) element is written once
+        // by this loop.
         unsafe {
             (&raw mut (*out).has_taps[lane]).write(has_taps);
             for (k, (dy, dx)) in [(0, 0), (0, 1), (1, 0), (1, 1)].into_iter().enumerate() {
@@ -592,9 +623,6 @@ pub(crate) fn taps_row_with<const DERIVATIVES: bool>(u: &[f32; LANES], v: &[f32;
             }
         }
     }
-    // SAFETY: every field was written: `ts`, `derivatives` and (without `DERIVATIVES`) the
-    // derivative arrays above, and every lane of the others by the loop (`LANES` lanes × 4 taps).
-    unsafe { taps.assume_init() }
 }
 
 impl RowTaps {

@@ -13,7 +13,7 @@ use bbsplat::stages::ray_plane::{
 };
 use bbsplat::stages::splat_transform::{ROW_LANES, SplatTransform, SupportQuad, splat_frame, view_plane};
 use bbsplat::strategies::{billboard_in_front, camera, seeded_config};
-use bbsplat::testing_internals::bilinear::sampling_taps_row;
+use bbsplat::testing_internals::bilinear::{refilled_taps_row, sampling_taps_row};
 use glam::{Vec2, Vec3};
 use proptest::prelude::*;
 
@@ -82,6 +82,12 @@ fn texture(ts: usize, seed: u64) -> Vec<[f32; 4]> {
 /// bit for bit.
 fn check_taps(u: &[f32; LANES], v: &[f32; LANES], ts: usize) -> Result<(), String> {
     let row = taps_row(u, v, ts);
+    // Refilled in place over the taps of other coordinates, as the tile loops make them: the
+    // same values in every field.
+    let refilled = refilled_taps_row(taps_row(v, u, ts), true, u, v, ts);
+    if format!("{refilled:?}") != format!("{row:?}") {
+        return Err(format!("refilled taps differ: {refilled:?} against {row:?}"));
+    }
     for lane in 0..LANES {
         let scalar = taps(u[lane], v[lane], ts);
         let lane_taps = row.lane(lane);
@@ -115,13 +121,17 @@ fn check_samples_of(
     let row = taps_row(u, v, ts);
     // The forward pass's taps, made without the weights' derivatives, sample the same bits.
     let sampling_row = sampling_taps_row(u, v, ts);
+    // And so do the sampling taps refilled in place over others (whose stale derivatives stay).
+    let refilled_row = refilled_taps_row(taps_row(v, u, ts), false, u, v, ts);
     for lane in 0..LANES {
         let scalar = taps(u[lane], v[lane], ts);
         let texels = texture_of(lane);
         // Every NaN counts as one value: Rust does not specify NaN payloads and signs.
         let bits = |x: [f32; 4]| x.map(|c| if c.is_nan() { f32::NAN.to_bits() } else { c.to_bits() });
         let sampled = row.sample_rgba(lane, &texels).map(bits);
-        if sampling_row.sample_rgba(lane, &texels).map(bits) != sampled {
+        if sampling_row.sample_rgba(lane, &texels).map(bits) != sampled
+            || refilled_row.sample_rgba(lane, &texels).map(bits) != sampled
+        {
             return Err(format!(
                 "lane {lane} ({}, {}): sampling-only taps sample differently",
                 u[lane], v[lane]
