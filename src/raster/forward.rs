@@ -100,6 +100,21 @@ impl TileBlended {
 
     /// Every pair as `(tile-local pixel, slot, transmittance in front)`, pixel by pixel and
     /// front to back within a pixel, whatever [`TileBlended::order`] is.
+    ///
+    /// ```
+    /// use bbsplat::billboards::{RandomSceneConfig, random_scene, random_scene_camera};
+    /// use bbsplat::raster::{RenderSettings, render};
+    /// let scene = random_scene(&RandomSceneConfig::benchmark(300, 48, 48));
+    /// let out = render(&scene.borrowed(), &random_scene_camera(48, 48), &RenderSettings::default());
+    /// let mut pairs = 0;
+    /// for tile in &out.state.tiles {
+    ///     let listed = tile.pairs_by_pixel();
+    ///     // Pixel by pixel, and nearer entries (lower slots) first within a pixel.
+    ///     assert!(listed.windows(2).all(|w| (w[0].0, w[0].1) < (w[1].0, w[1].1)));
+    ///     pairs += listed.len();
+    /// }
+    /// assert_eq!(pairs as u64, out.stats.blended_pairs);
+    /// ```
     pub fn pairs_by_pixel(&self) -> Vec<(u32, u32, f32)> {
         match self.order {
             PairOrder::ByPixel => (0..self.offsets.len().saturating_sub(1))

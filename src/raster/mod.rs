@@ -35,7 +35,9 @@ use crate::stages::composite::CompositeParams;
 use glam::{Vec2, Vec3};
 
 pub use backward::{RenderGradients, render_backward};
-pub use forward::{ForwardState, RenderBuffers, RenderOutput, RenderStats, TileBlended, render, render_with};
+pub use forward::{
+    ForwardState, PairOrder, RenderBuffers, RenderOutput, RenderStats, TileBlended, render, render_with,
+};
 pub use workload::WorkloadStats;
 
 /// Side of a square screen tile in pixels.
