@@ -142,31 +142,48 @@ fn sample_four(texel: impl Fn(u32) -> [f32; 4], index: [u32; 4], w: [f32; 4], ma
     (Vec4::ZERO + keep(0, w[0] * t0) + keep(1, w[1] * t1) + keep(2, w[2] * t2) + keep(3, w[3] * t3)).to_array()
 }
 
-/// The backward of an RGBA sample over `taps` taps, tap `k` given by `tap(k)` as `(texel index,
-/// weight, ∂weight/∂u, ∂weight/∂v)`, or `None` for a tap to skip (outside the texture): calls
-/// `emit(texel, weight · d_rgba)` per tap in tap order and returns `(∂L/∂u, ∂L/∂v)` (the one
-/// copy of this arithmetic: [`BilinearTaps::vjp_rgba`] and [`RowTaps::vjp_rgba`]). The taps are
-/// read through `tap` so that each caller reads its own layout in place, with no copies.
+/// The backward of [`sample_four`]: with the four taps' `(texel index, weight, ∂weight/∂u,
+/// ∂weight/∂v)` and masks as there, calls `emit(texel, weight · d_rgba)` per inside tap (mask
+/// [`KEEP`]) in tap order and returns `(∂L/∂u, ∂L/∂v)` (the one copy of this arithmetic:
+/// [`BilinearTaps::vjp_rgba`] and [`RowTaps::vjp_rgba`]). Every tap's texel is read, an outside
+/// tap's too (its index is clamped into the texture, or 0), so that the four taps' values seen
+/// through the upstream gradient are computed side by side; each is the sum a tap-by-tap loop
+/// forms, in its order, and an outside tap's terms are replaced by +0 before they are added.
+/// That changes no bit: a sum that starts at +0 is never −0, so adding +0 leaves it as it is,
+/// and an outside tap never adds `0 · ∞ = NaN`.
 #[inline(always)]
-fn vjp_taps(
+#[allow(clippy::too_many_arguments)]
+fn vjp_four(
     texel: impl Fn(u32) -> [f32; 4],
-    taps: usize,
-    tap: impl Fn(usize) -> Option<(u32, f32, f32, f32)>,
+    index: [u32; 4],
+    weight: [f32; 4],
+    d_weight_du: [f32; 4],
+    d_weight_dv: [f32; 4],
+    masks: [u32; 4],
     d_rgba: [f32; 4],
     mut emit: impl FnMut(u32, [f32; 4]),
 ) -> (f32, f32) {
     let d = Vec4::from_array(d_rgba);
+    let t = index.map(texel);
+    // Lane k is tap k: its texel's channel c.
+    let channel = |c: usize| Vec4::new(t[0][c], t[1][c], t[2][c], t[3][c]);
+    // Each tap's texel seen through the upstream gradient: alpha first, then r, g, b.
+    let seen = channel(3) * d_rgba[3] + channel(0) * d_rgba[0] + channel(1) * d_rgba[1] + channel(2) * d_rgba[2];
+    let keep = |x: Vec4| {
+        let x = x.to_array();
+        std::array::from_fn::<f32, 4, _>(|k| f32::from_bits(x[k].to_bits() & masks[k]))
+    };
+    let du_terms = keep(Vec4::from_array(d_weight_du) * seen);
+    let dv_terms = keep(Vec4::from_array(d_weight_dv) * seen);
     let (mut du, mut dv) = (0.0f32, 0.0f32);
-    for k in 0..taps {
-        let Some((index, weight, d_weight_du, d_weight_dv)) = tap(k) else {
-            continue;
-        };
-        let t = texel(index);
-        // The texel's value seen through the upstream gradient: alpha first, then r, g, b.
-        let seen = t[3] * d_rgba[3] + t[0] * d_rgba[0] + t[1] * d_rgba[1] + t[2] * d_rgba[2];
-        du += d_weight_du * seen;
-        dv += d_weight_dv * seen;
-        emit(index, (weight * d).to_array());
+    for k in 0..4 {
+        du += du_terms[k];
+        dv += dv_terms[k];
+    }
+    for k in 0..4 {
+        if masks[k] == KEEP {
+            emit(index[k], (weight[k] * d).to_array());
+        }
     }
     (du, dv)
 }
@@ -452,8 +469,18 @@ impl BilinearTaps {
     #[inline]
     pub fn vjp_rgba(&self, texels: &[[f32; 4]], d_rgba: [f32; 4], emit: impl FnMut(u32, [f32; 4])) -> (f32, f32) {
         check_rgba_texels(texels.len(), self.ts);
-        let tap = |k: usize| Some((self.index[k], self.weight[k], self.d_weight_du[k], self.d_weight_dv[k]));
-        vjp_taps(|i| texels[i as usize], self.len as usize, tap, d_rgba, emit)
+        // The taps past `len` are unused: index 0, masked out.
+        let masks = std::array::from_fn(|k| if k < self.len as usize { KEEP } else { 0 });
+        vjp_four(
+            |i| texels[i as usize],
+            self.index,
+            self.weight,
+            self.d_weight_du,
+            self.d_weight_dv,
+            masks,
+            d_rgba,
+            emit,
+        )
     }
 }
 
@@ -691,19 +718,16 @@ impl RowTaps {
             return None;
         }
         check_rgba_texels(texels.len(), self.ts);
-        // Each value read in place (`w.map(|w| w[lane])` would copy every tap's whole lane
-        // array to the stack first).
-        let tap = |k: usize| {
-            (self.keep[k][lane] == KEEP).then(|| {
-                (
-                    self.index[k][lane],
-                    self.weight[k][lane],
-                    self.d_weight_du[k][lane],
-                    self.d_weight_dv[k][lane],
-                )
-            })
-        };
-        Some(vjp_taps(|i| rgba_texel(texels, i), 4, tap, d_rgba, emit))
+        Some(vjp_four(
+            |i| rgba_texel(texels, i),
+            std::array::from_fn(|k| self.index[k][lane]),
+            std::array::from_fn(|k| self.weight[k][lane]),
+            std::array::from_fn(|k| self.d_weight_du[k][lane]),
+            std::array::from_fn(|k| self.d_weight_dv[k][lane]),
+            std::array::from_fn(|k| self.keep[k][lane]),
+            d_rgba,
+            emit,
+        ))
     }
 
     /// The taps and weights of lane `lane` (what sampling reads): [`RowTaps::lane`] followed by
