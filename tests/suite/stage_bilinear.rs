@@ -616,3 +616,77 @@ fn rgba_matches_the_planar_sample_and_vjp() {
         assert_eq!(sparse, dense);
     }
 }
+
+/// `vjp_rgba` (the four taps side by side, outside taps' terms replaced by +0) against the plain
+/// tap-by-tap loop it replaced, bit for bit: `(∂u, ∂v)` and every emitted texel gradient, in
+/// order. Interior cells and every border (taps outside the texture), texels with negative
+/// values, zeros of both signs and infinities, and upstream gradients with signed zeros, so that
+/// the "seen" values and the `∂u`, `∂v` terms include −0, and an unused tap slot (index 0)
+/// would meet an infinite texel.
+#[test]
+fn vjp_rgba_equals_the_tap_by_tap_loop_bit_for_bit() {
+    let ts = 8;
+    let mut rng = bbsplat::rng::Rng::new(11);
+    let specials = [0.0f32, -0.0, 1.0, -1.0, f32::INFINITY, 0.5];
+    let gradients = [
+        [0.2f32, -0.9, 0.4, 0.7],
+        [-0.0, 0.0, -0.0, 0.0],
+        [0.0, -0.0, 1.5, -0.0],
+        [-0.3, -0.0, -0.0, 2.0],
+    ];
+    // The loop the lane-wise form replaced: taps in order, each term added as it is formed.
+    let reference = |t: &bilinear::BilinearTaps, texels: &[[f32; 4]], d: [f32; 4]| {
+        let (mut du, mut dv) = (0.0f32, 0.0f32);
+        let mut emitted = Vec::new();
+        for k in 0..t.len() {
+            let i = t.indices()[k];
+            let x = texels[i as usize];
+            let seen = x[3] * d[3] + x[0] * d[0] + x[1] * d[1] + x[2] * d[2];
+            du += t.weight_derivatives_u()[k] * seen;
+            dv += t.weight_derivatives_v()[k] * seen;
+            let w = t.weights()[k];
+            emitted.push((i, [w * d[0], w * d[1], w * d[2], w * d[3]].map(f32::to_bits)));
+        }
+        ((du.to_bits(), dv.to_bits()), emitted)
+    };
+    let mut cases = 0;
+    let mut partial = 0;
+    for trial in 0..400 {
+        let texels: Vec<[f32; 4]> = (0..ts * ts)
+            .map(|_| {
+                [(); 4].map(|_| {
+                    if rng.uniform() < 0.3 {
+                        specials[(rng.uniform() * specials.len() as f32) as usize % specials.len()]
+                    } else {
+                        rng.uniform() * 2.0 - 1.0
+                    }
+                })
+            })
+            .collect();
+        // Half the cases on the border ring (|c| near 1 + 2/(ts − 1)), where taps fall outside.
+        let coordinate = |r: f32| {
+            if trial % 2 == 0 {
+                r * 2.0 - 1.0
+            } else {
+                (1.0 + r * 0.28) * if r < 0.5 { -1.0 } else { 1.0 }
+            }
+        };
+        let (u, v) = (coordinate(rng.uniform()), coordinate(rng.uniform()));
+        let Some(t) = taps(u, v, ts) else { continue };
+        partial += usize::from(t.len() < 4);
+        for d in gradients {
+            let mut emitted = Vec::new();
+            let (du, dv) = t.vjp_rgba(&texels, d, |i, g| emitted.push((i, g.map(f32::to_bits))));
+            assert_eq!(
+                ((du.to_bits(), dv.to_bits()), emitted),
+                reference(&t, &texels, d),
+                "({u}, {v}), d = {d:?}"
+            );
+            cases += 1;
+        }
+    }
+    assert!(
+        cases > 1000 && partial > 100,
+        "{cases} cases, {partial} with outside taps"
+    );
+}
