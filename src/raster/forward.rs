@@ -140,20 +140,6 @@ impl TileBlended {
             }
         }
     }
-
-    /// The number of blended pairs of each of the tile's `pixels` pixels.
-    pub(crate) fn per_pixel_counts(&self, pixels: usize) -> Vec<u32> {
-        match self.order {
-            PairOrder::ByPixel => self.offsets.windows(2).map(|w| w[1] - w[0]).collect(),
-            PairOrder::ByEntry => {
-                let mut counts = vec![0u32; pixels];
-                for pair in &self.entry_pairs {
-                    counts[usize::from(pair.pixel)] += 1;
-                }
-                counts
-            }
-        }
-    }
 }
 
 /// The images and per-billboard statistics of a render.

@@ -6,8 +6,8 @@
 //! the colour behind, starting at the background) in a small per-tile array; visiting the
 //! entries in reverse list order visits every pixel's blended entries back to front, as the
 //! per-pixel recursion needs. The transmittance in front of each blended pair comes from the
-//! forward pass (kept in its [`super::TileBlended`], grouped by entry), so no pixel's compositing is
-//! replayed from the front. The alpha of each pair is sampled again and classified with the
+//! forward pass (kept in its [`super::TileBlended`], grouped by entry), so no pixel's
+//! compositing is replayed from the front. The alpha of each pair is sampled again and classified with the
 //! stored transmittance, which gives the forward's [`Blend`](crate::stages::composite::Blend)
 //! record bit for bit.
 //!

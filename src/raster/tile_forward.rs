@@ -93,8 +93,9 @@ pub(crate) struct TileComposite {
 /// Composites the tile `(i0, j0, i1, j1)` whose list is `list` (with the entries' `spans`):
 /// writes one [`PixelOut`] per tile-local pixel (row-major over the tile's own width) into
 /// `pixels`, the blended pairs into `blended` entry by entry ([`PairOrder::ByEntry`], the
-/// order found), and adds `α·T` of each blended pair to `impact[slot]` (in pixel order). With `DISTORTION` the depth distortion of each pixel is accumulated too
-/// ([`DistortionState`]); without it that code is not compiled in.
+/// order found), and adds `α·T` of each blended pair to `impact[slot]` (in pixel order). With
+/// `DISTORTION` the depth distortion of each pixel is accumulated too ([`DistortionState`]);
+/// without it that code is not compiled in.
 pub(crate) fn composite_tile<const DISTORTION: bool>(
     scratch: &mut TileComposite,
     inputs: TileInputs<'_, '_>,

@@ -4,7 +4,6 @@
 //! like the work it stands for"); `examples/model_stats.rs` prints them for trained models and
 //! `benches/raster.rs` for its generated scenes.
 
-use super::forward::tile_pixels;
 use super::{ActivatedRef, RenderOutput};
 
 /// Statistics of one render (see the [module documentation](self)). Quantiles are nearest-rank.
@@ -50,15 +49,16 @@ impl WorkloadStats {
         let state = &out.state;
         let pixels = u64::from(out.width) * u64::from(out.height);
         let per_pixel = |n: u64| if pixels == 0 { 0.0 } else { n as f64 / pixels as f64 };
+        // Per covered pixel, its blended pairs: the runs of equal pixels in each tile's list.
         let mut blended_counts: Vec<u32> = state
             .tiles
             .iter()
-            .enumerate()
-            .flat_map(|(t, tile)| {
-                let (i0, j0, i1, j1) = tile_pixels(&state.bins, t, out.width, out.height);
-                tile.per_pixel_counts(((i1 - i0) * (j1 - j0)) as usize)
+            .flat_map(|tile| {
+                tile.pairs_by_pixel()
+                    .chunk_by(|a, b| a.0 == b.0)
+                    .map(|run| run.len() as u32)
+                    .collect::<Vec<u32>>()
             })
-            .filter(|&n| n > 0)
             .collect();
         blended_counts.sort_unstable();
         let mut sizes = Vec::new();
