@@ -212,7 +212,7 @@ fn by_entry_body(
             let py: [f32; LANES] = std::array::from_fn(|l| (j0 + u32::from(pair_of(l).y)) as f32 + 0.5);
             let hits = intersect_lanes(&pr.transform, &plane, camera, &px, &py);
             lane_taps.refill::<true>(&hits.u, &hits.v, ts);
-            // Per pair in pixel order: the compositing backward and the texel gradients; then
+            // Per pair in pixel order: the compositing backward, then the texel gradients; then
             // the hits' gradients lane-wise, added to the record in pixel order.
             let (mut d_u, mut d_v, mut d_depth) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
             // The samples of the chunk's pairs first, so that their texel reads overlap.
@@ -221,6 +221,12 @@ fn by_entry_body(
             for (lane, sample) in samples.iter_mut().enumerate().take(chunk.len()) {
                 *sample = lane_taps.sample_rgba(lane, texture);
             }
+            // The compositing backward of the chunk's pairs in pixel order, then their texel
+            // gradients in the same order: two loops, each with fewer values live at once (one
+            // loop doing both spilled them to the stack), and the texel loop's destination
+            // chosen once per chunk. Each sum still receives its terms in the same order.
+            let mut d_rgba = [[0.0f32; 4]; LANES];
+            let mut has_grad = [false; LANES];
             for (lane, pair) in chunk.iter().enumerate() {
                 debug_assert!(hits.valid[lane], "a blended pair hits its billboard");
                 let depth = hits.depth[lane];
@@ -241,18 +247,26 @@ fn by_entry_body(
                     params,
                 );
                 let [dr, dg, db, _, dz] = grad.d_features;
-                let d_rgba = [dr, dg, db, grad.d_alpha];
-                let vjp = if sole[k] {
-                    // SAFETY: `owns` holds for entry `range.start + k`, and this task is the
-                    // only one processing it.
-                    lane_taps.vjp_rgba(lane, texture, d_rgba, |texel, g| unsafe { sole_rows.add(b, texel, g) })
-                } else {
-                    lane_taps.vjp_rgba(lane, texture, d_rgba, |texel, g| sums.add(k as u32, texel, g))
-                };
-                (d_u[lane], d_v[lane]) = vjp.unwrap_or_default();
+                d_rgba[lane] = [dr, dg, db, grad.d_alpha];
+                has_grad[lane] = true;
                 d_depth[lane] = dz;
                 record.rgb += Vec3::new(dr, dg, db);
                 record.blended = true;
+            }
+            if sole[k] {
+                for lane in (0..chunk.len()).filter(|&l| has_grad[l]) {
+                    // SAFETY: `owns` holds for entry `range.start + k`, and this task is the
+                    // only one processing it.
+                    let vjp = lane_taps.vjp_rgba(lane, texture, d_rgba[lane], |texel, g| unsafe {
+                        sole_rows.add(b, texel, g)
+                    });
+                    (d_u[lane], d_v[lane]) = vjp.unwrap_or_default();
+                }
+            } else {
+                for lane in (0..chunk.len()).filter(|&l| has_grad[l]) {
+                    let vjp = lane_taps.vjp_rgba(lane, texture, d_rgba[lane], |texel, g| sums.add(k as u32, texel, g));
+                    (d_u[lane], d_v[lane]) = vjp.unwrap_or_default();
+                }
             }
             let d_t = intersect_vjp_lanes(&pr.transform, &hits, (&px, &py), (&d_u, &d_v, &d_depth));
             for lane in 0..chunk.len() {
