@@ -32,6 +32,18 @@ pub mod bilinear {
         }
         previous
     }
+
+    /// The tile backward's texel backward of a chunk of lanes on one texture
+    /// (`RowTaps::vjp_rgba_lanes`): `RowTaps::vjp_rgba` of each active lane, in lane order.
+    pub fn vjp_rgba_lanes(
+        taps: &RowTaps,
+        texels: &[[f32; 4]],
+        d_rgba: &[[f32; 4]; LANES],
+        active: &[bool; LANES],
+        emit: impl FnMut(u32, [f32; 4]),
+    ) -> ([f32; LANES], [f32; LANES]) {
+        taps.vjp_rgba_lanes(texels, d_rgba, active, emit)
+    }
 }
 
 /// Farthest-point sampling internals (`init::fps`).

@@ -214,7 +214,7 @@ fn by_entry_body(
             lane_taps.refill::<true>(&hits.u, &hits.v, ts);
             // Per pair in pixel order: the compositing backward, then the texel gradients; then
             // the hits' gradients lane-wise, added to the record in pixel order.
-            let (mut d_u, mut d_v, mut d_depth) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+            let mut d_depth = [0.0f32; LANES];
             // The samples of the chunk's pairs first, so that their texel reads overlap.
             // (A loop: `array::from_fn` here was compiled out of line, for the baseline.)
             let mut samples: [Option<[f32; 4]>; LANES] = [None; LANES];
@@ -253,21 +253,15 @@ fn by_entry_body(
                 record.rgb += Vec3::new(dr, dg, db);
                 record.blended = true;
             }
-            if sole[k] {
-                for lane in (0..chunk.len()).filter(|&l| has_grad[l]) {
-                    // SAFETY: `owns` holds for entry `range.start + k`, and this task is the
-                    // only one processing it.
-                    let vjp = lane_taps.vjp_rgba(lane, texture, d_rgba[lane], |texel, g| unsafe {
-                        sole_rows.add(b, texel, g)
-                    });
-                    (d_u[lane], d_v[lane]) = vjp.unwrap_or_default();
-                }
+            let (d_u, d_v) = if sole[k] {
+                // SAFETY: `owns` holds for entry `range.start + k`, and this task is the only
+                // one processing it.
+                lane_taps.vjp_rgba_lanes(texture, &d_rgba, &has_grad, |texel, g| unsafe {
+                    sole_rows.add(b, texel, g)
+                })
             } else {
-                for lane in (0..chunk.len()).filter(|&l| has_grad[l]) {
-                    let vjp = lane_taps.vjp_rgba(lane, texture, d_rgba[lane], |texel, g| sums.add(k as u32, texel, g));
-                    (d_u[lane], d_v[lane]) = vjp.unwrap_or_default();
-                }
-            }
+                lane_taps.vjp_rgba_lanes(texture, &d_rgba, &has_grad, |texel, g| sums.add(k as u32, texel, g))
+            };
             let d_t = intersect_vjp_lanes(&pr.transform, &hits, (&px, &py), (&d_u, &d_v, &d_depth));
             for lane in 0..chunk.len() {
                 add_transform(&mut record.transform, &d_t.lane(lane));

@@ -144,8 +144,10 @@ fn sample_four(texel: impl Fn(u32) -> [f32; 4], index: [u32; 4], w: [f32; 4], ma
 
 /// The backward of [`sample_four`]: with the four taps' `(texel index, weight, ∂weight/∂u,
 /// ∂weight/∂v)` and masks as there, calls `emit(texel, weight · d_rgba)` per inside tap (mask
-/// [`KEEP`]) in tap order and returns `(∂L/∂u, ∂L/∂v)` (the one copy of this arithmetic:
-/// [`BilinearTaps::vjp_rgba`] and [`RowTaps::vjp_rgba`]). Every tap's texel is read, an outside
+/// [`KEEP`]) in tap order and returns `(∂L/∂u, ∂L/∂v)` (behind [`BilinearTaps::vjp_rgba`] and
+/// [`RowTaps::vjp_rgba`]; its three pieces, [`seen_four`], [`masked_term`] and [`emit_four`],
+/// are the one copy of this arithmetic, which [`RowTaps::vjp_rgba_lanes`] arranges lane-wise).
+/// Every tap's texel is read, an outside
 /// tap's too (its index is clamped into the texture, or 0), so that the four taps' values seen
 /// through the upstream gradient are computed side by side; each is the sum a tap-by-tap loop
 /// forms, in its order, and an outside tap's terms are replaced by +0 before they are added.
@@ -163,29 +165,48 @@ fn vjp_four(
     d_rgba: [f32; 4],
     mut emit: impl FnMut(u32, [f32; 4]),
 ) -> (f32, f32) {
-    let d = Vec4::from_array(d_rgba);
-    let t = index.map(texel);
-    // Lane k is tap k: its texel's channel c.
-    let channel = |c: usize| Vec4::new(t[0][c], t[1][c], t[2][c], t[3][c]);
-    // Each tap's texel seen through the upstream gradient: alpha first, then r, g, b.
-    let seen = channel(3) * d_rgba[3] + channel(0) * d_rgba[0] + channel(1) * d_rgba[1] + channel(2) * d_rgba[2];
-    let keep = |x: Vec4| {
-        let x = x.to_array();
-        std::array::from_fn::<f32, 4, _>(|k| f32::from_bits(x[k].to_bits() & masks[k]))
-    };
-    let du_terms = keep(Vec4::from_array(d_weight_du) * seen);
-    let dv_terms = keep(Vec4::from_array(d_weight_dv) * seen);
+    let seen = seen_four(index.map(texel), d_rgba).to_array();
     let (mut du, mut dv) = (0.0f32, 0.0f32);
     for k in 0..4 {
-        du += du_terms[k];
-        dv += dv_terms[k];
+        du += masked_term(d_weight_du[k], seen[k], masks[k]);
+        dv += masked_term(d_weight_dv[k], seen[k], masks[k]);
     }
+    emit_four(index, weight, masks, d_rgba, &mut emit);
+    (du, dv)
+}
+
+/// Each of four taps' texels `t` seen through the upstream gradient `d_rgba` (lane `k` of the
+/// result is tap `k`): `t·d` summed alpha first, then r, g, b (part of [`vjp_four`]).
+#[inline(always)]
+fn seen_four(t: [[f32; 4]; 4], d_rgba: [f32; 4]) -> Vec4 {
+    // Lane k is tap k: its texel's channel c.
+    let channel = |c: usize| Vec4::new(t[0][c], t[1][c], t[2][c], t[3][c]);
+    channel(3) * d_rgba[3] + channel(0) * d_rgba[0] + channel(1) * d_rgba[1] + channel(2) * d_rgba[2]
+}
+
+/// One tap's term `∂weight · seen` of `∂L/∂u` or `∂L/∂v`, or +0 for an outside tap (mask 0;
+/// part of [`vjp_four`]).
+#[inline(always)]
+fn masked_term(d_weight: f32, seen: f32, mask: u32) -> f32 {
+    f32::from_bits((d_weight * seen).to_bits() & mask)
+}
+
+/// `emit(texel, weight · d_rgba)` per inside tap (mask [`KEEP`]), in tap order (part of
+/// [`vjp_four`]).
+#[inline(always)]
+fn emit_four(
+    index: [u32; 4],
+    weight: [f32; 4],
+    masks: [u32; 4],
+    d_rgba: [f32; 4],
+    emit: &mut impl FnMut(u32, [f32; 4]),
+) {
+    let d = Vec4::from_array(d_rgba);
     for k in 0..4 {
         if masks[k] == KEEP {
             emit(index[k], (weight[k] * d).to_array());
         }
     }
-    (du, dv)
 }
 
 /// Continuous texel coordinate of a billboard coordinate: `(c + 1)/2 · (ts − 1)`, in f64.
@@ -728,6 +749,62 @@ impl RowTaps {
             d_rgba,
             emit,
         ))
+    }
+
+    /// [`RowTaps::vjp_rgba`] of every lane `l` with `active[l]`, in lane order, with upstream
+    /// gradient `d_rgba[l]`: the same calls of `emit`, in the same order, and per lane the same
+    /// `(∂L/∂u, ∂L/∂v)` bit for bit, or `(0, 0)` for a lane that is not active or has no taps
+    /// (where [`RowTaps::vjp_rgba`] gives `None`). The tile backward's form: the texel reads and
+    /// emits go lane by lane, but the `∂weight · seen` sums run for the eight lanes side by side
+    /// on the tap-major arrays, instead of each lane gathering its taps' derivatives one by one.
+    ///
+    /// # Panics
+    /// If `texels.len() != ts²`.
+    #[inline(always)]
+    pub(crate) fn vjp_rgba_lanes(
+        &self,
+        texels: &[[f32; 4]],
+        d_rgba: &[[f32; 4]; LANES],
+        active: &[bool; LANES],
+        mut emit: impl FnMut(u32, [f32; 4]),
+    ) -> ([f32; LANES], [f32; LANES]) {
+        debug_assert!(self.derivatives, "taps for sampling only have no derivatives");
+        check_rgba_texels(texels.len(), self.ts);
+        // Per tap and lane: the tap's texel seen through the lane's upstream gradient.
+        let mut seen = [[0.0f32; LANES]; 4];
+        let mut used = [false; LANES];
+        for lane in 0..LANES {
+            if !(active[lane] && self.has_taps[lane]) {
+                continue;
+            }
+            used[lane] = true;
+            let index: [u32; 4] = std::array::from_fn(|k| self.index[k][lane]);
+            let lane_seen = seen_four(index.map(|i| rgba_texel(texels, i)), d_rgba[lane]).to_array();
+            for k in 0..4 {
+                seen[k][lane] = lane_seen[k];
+            }
+            emit_four(
+                index,
+                std::array::from_fn(|k| self.weight[k][lane]),
+                std::array::from_fn(|k| self.keep[k][lane]),
+                d_rgba[lane],
+                &mut emit,
+            );
+        }
+        let (mut du, mut dv) = ([0.0f32; LANES], [0.0f32; LANES]);
+        for k in 0..4 {
+            for l in 0..LANES {
+                du[l] += masked_term(self.d_weight_du[k][l], seen[k][l], self.keep[k][l]);
+                dv[l] += masked_term(self.d_weight_dv[k][l], seen[k][l], self.keep[k][l]);
+            }
+        }
+        // A lane that read no texels has no gradient (its derivative arrays may hold anything).
+        for l in 0..LANES {
+            if !used[l] {
+                (du[l], dv[l]) = (0.0, 0.0);
+            }
+        }
+        (du, dv)
     }
 
     /// The taps and weights of lane `lane` (what sampling reads): [`RowTaps::lane`] followed by

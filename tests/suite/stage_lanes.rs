@@ -13,7 +13,7 @@ use bbsplat::stages::ray_plane::{
 };
 use bbsplat::stages::splat_transform::{ROW_LANES, SplatTransform, SupportQuad, splat_frame, view_plane};
 use bbsplat::strategies::{billboard_in_front, camera, seeded_config};
-use bbsplat::testing_internals::bilinear::{refilled_taps_row, sampling_taps_row};
+use bbsplat::testing_internals::bilinear::{refilled_taps_row, sampling_taps_row, vjp_rgba_lanes};
 use glam::{Vec2, Vec3};
 use proptest::prelude::*;
 
@@ -154,6 +154,38 @@ fn check_samples_of(
         let pair_bits = |p: Option<(f32, f32)>| p.map(|(a, b)| bits([a, b, 0.0, 0.0]));
         if pair_bits(lane_vjp) != pair_bits(vjp) || lane_emitted != emitted {
             return Err(format!("lane {lane} ({}, {}): backward differs", u[lane], v[lane]));
+        }
+    }
+    // The chunk form on one texture (lane 0's), with a gradient per lane and some lanes off:
+    // lane by lane the per-lane backward, its emits in lane order, and (0, 0) where it gives
+    // `None` or the lane is off.
+    let texels = texture_of(0);
+    let bits = |x: f32| if x.is_nan() { f32::NAN.to_bits() } else { x.to_bits() };
+    for off in [usize::MAX, 1, 2] {
+        let active: [bool; LANES] = std::array::from_fn(|l| l % 3 != off);
+        let d_rgba: [[f32; 4]; LANES] =
+            std::array::from_fn(|l| [0.3 + l as f32, -1.7, 0.05 * l as f32, 2.5 - l as f32]);
+        let mut chunk_emitted = Vec::new();
+        let (du, dv) = vjp_rgba_lanes(&row, &texels, &d_rgba, &active, |i, g| {
+            chunk_emitted.push((i, g.map(bits)))
+        });
+        let mut emitted = Vec::new();
+        for lane in 0..LANES {
+            let expected = if active[lane] {
+                row.vjp_rgba(lane, &texels, d_rgba[lane], |i, g| emitted.push((i, g.map(bits))))
+            } else {
+                None
+            };
+            let (eu, ev) = expected.unwrap_or_default();
+            if [bits(du[lane]), bits(dv[lane])] != [bits(eu), bits(ev)] {
+                return Err(format!(
+                    "lane {lane} ({}, {}), lanes off {off}: chunk backward ({}, {}) against ({eu}, {ev})",
+                    u[lane], v[lane], du[lane], dv[lane]
+                ));
+            }
+        }
+        if chunk_emitted != emitted {
+            return Err(format!("lanes off {off}: the chunk backward emits differently"));
         }
     }
     Ok(())
