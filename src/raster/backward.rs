@@ -11,9 +11,11 @@
 //! result does not depend on how rayon schedules tiles. Texture gradients are summed per
 //! (entry, texel) as the pixels produce them, in a per-thread accumulator of dense cells with
 //! touched flags, and handed on sparse per entry (only the texels some pixel of the tile
-//! touched); see `TexelSums`. A billboard with a single tile entry (most billboards of a dense
-//! view) has nothing to sum across tiles: its tile adds each texel contribution straight to the
-//! billboard's gradient row as the pixels produce it (see `SoleEntryRows`).
+//! touched); see `TexelSums`. The first of a billboard's entries (in tile order) needs no sum:
+//! its tile adds each texel contribution straight to the billboard's gradient row as the pixels
+//! produce it, and the reduction adds the other entries' sums to the row after it (see
+//! `FirstEntryRows`); a billboard with a single tile entry (most billboards of a dense view)
+//! thus has no texel sums at all.
 
 use super::binning::TileBins;
 use super::forward::{
@@ -183,7 +185,7 @@ pub(super) struct EntryRecord {
     pub(super) transform: SplatTransform,
     pub(super) rgb: Vec3,
     /// The tile; its texel gradients are `tiles[tile].texels[texels.0..texels.1]` (empty when
-    /// the tile added them to the billboard's gradient row itself, see [`SoleEntryRows`]).
+    /// the tile added them to the billboard's gradient row itself, see [`FirstEntryRows`]).
     pub(super) tile: u32,
     pub(super) texels: (u32, u32),
     /// Some pixel of the tile blended this entry (it has gradients to reduce).
@@ -198,22 +200,26 @@ pub(super) const EMPTY_RECORD: EntryRecord = EntryRecord {
     blended: false,
 };
 
-/// The texture-gradient rows of the billboards with exactly one tile entry, written by the
-/// tile pass directly.
+/// The texture-gradient rows of the billboards, written during the tile pass by the tile of
+/// each billboard's first entry (in tile order).
 ///
-/// A billboard with a single entry has nothing to sum across tiles, so its tile adds each
-/// texel contribution to the row the moment a pixel produces it, in pixel order, instead of
-/// summing them per (entry, texel) in [`TexelSums`] and handing the sums on (most billboards of
-/// a dense view: 0.9 entries per billboard in the benchmark). The rows of such billboards are
-/// disjoint between tiles (each belongs to the one tile holding its entry), so tiles running in
-/// parallel never touch the same row, and the reduction does not touch them.
+/// A billboard's first entry is the first term of the per-billboard sum over entries in tile
+/// order, so its tile adds each texel contribution to the row the moment a pixel produces it,
+/// in pixel order, instead of summing them per (entry, texel) in [`TexelSums`] and handing the
+/// sums on; the reduction then adds the other entries' sums to the row, in tile order, after
+/// the tile pass. A billboard with a single entry (most billboards of a dense view: 0.9 entries
+/// per billboard in the benchmark) is then done in its tile; a trained scene's billboards have
+/// about 5 entries, and the first one's texels no longer go through a list (about a fifth of
+/// them). Each row has one writer during the tile pass (the tile holding the billboard's first
+/// entry), so tiles running in parallel never touch the same row.
 ///
 /// Rounding: into a zero row (a fresh [`RenderGradients`]) this gives the sums bit for bit
 /// (`((0 + g₁) + g₂) + …` equals `0 + ((g₁ + g₂) + …)` in IEEE arithmetic, signed zeros
-/// included); into a row that already holds other views' gradients, the view's contributions
-/// are added one at a time rather than as one sum. Either way the order is fixed (pixel order),
+/// included, which is what adding the first entry's sum to the zero row gave); into a row that
+/// already holds other views' gradients, the view's first-entry contributions are added one at
+/// a time rather than as one sum. Either way the order is fixed (pixel order, then tile order),
 /// so the result does not depend on the thread count.
-pub(super) struct SoleEntryRows {
+pub(super) struct FirstEntryRows {
     /// Start of `RenderGradients::textures`.
     rows: *mut [f32; 4],
     /// Texels per billboard (`TS²`).
@@ -222,31 +228,31 @@ pub(super) struct SoleEntryRows {
     len: usize,
 }
 
-// SAFETY: the pointer is only dereferenced through `SoleEntryRows::add`, whose callers (the
+// SAFETY: the pointer is only dereferenced through `FirstEntryRows::add`, whose callers (the
 // tile tasks) each write only rows that `owns` gives them: one entry per billboard passes, and
 // the tile ranges are disjoint, so no two tasks write the same row. The buffer outlives the tile
-// pass, during which nothing else accesses it.
-unsafe impl Sync for SoleEntryRows {}
+// pass, during which nothing else accesses it (the reduction runs after it).
+unsafe impl Sync for FirstEntryRows {}
 // SAFETY: the struct is a pointer into a buffer that outlives the tile pass plus two sizes;
 // moving it to a worker thread moves no data, and the writes through it follow the rules above.
-unsafe impl Send for SoleEntryRows {}
+unsafe impl Send for FirstEntryRows {}
 
-impl SoleEntryRows {
-    /// Whether the task processing global entry `entry` (of billboard `b`) writes `b`'s row: `b`
-    /// has exactly one entry and it is `entry`. At most one entry passes for each billboard
-    /// (the one `billboard_entries` names), whatever the bins hold, so with disjoint tile
-    /// ranges (checked by [`render_backward`]) at most one task writes each row.
+impl FirstEntryRows {
+    /// Whether the task processing global entry `entry` (of billboard `b`) writes `b`'s row:
+    /// `entry` is `b`'s first entry (in tile order). At most one entry passes for each
+    /// billboard (the first one `billboard_entries` names), whatever the bins hold, so with
+    /// disjoint tile ranges (checked by [`render_backward`]) at most one task writes each row.
     #[inline]
     pub(super) fn owns(&self, bins: &TileBins, b: u32, entry: usize) -> bool {
         let b = b as usize;
         let (start, end) = (bins.billboard_offsets[b], bins.billboard_offsets[b + 1]);
-        end.wrapping_sub(start) == 1 && bins.billboard_entries[start as usize] as usize == entry
+        end > start && bins.billboard_entries[start as usize] as usize == entry
     }
 
     /// `row[texel] += value` for billboard `b`'s texture gradients.
     ///
     /// # Safety
-    /// [`SoleEntryRows::owns`] holds for `b` and an entry that the caller's task alone
+    /// [`FirstEntryRows::owns`] holds for `b` and an entry that the caller's task alone
     /// processes, during the tile pass.
     #[inline]
     pub(super) unsafe fn add(&self, b: usize, texel: u32, value: [f32; 4]) {
@@ -303,8 +309,8 @@ struct Scratch {
     blended: Vec<Blended>,
     candidates: TileCandidates,
     /// Per tile-list slot: the tile adds the entry's texture gradients to its billboard's row
-    /// itself (see [`SoleEntryRows`]).
-    sole: Vec<bool>,
+    /// itself (see [`FirstEntryRows`]).
+    direct: Vec<bool>,
     /// The scratch of the entry-by-entry tile pass.
     by_entry: EntryScratch,
     /// A tile's blended slots regrouped pixel by pixel, when its forward grouped them by entry.
@@ -490,7 +496,7 @@ fn backward_tile(
     tile: usize,
     records: &mut [EntryRecord],
     normal_records: &mut [Vec3],
-    sole_rows: &SoleEntryRows,
+    first_rows: &FirstEntryRows,
     scratch: &mut Scratch,
     sums: &mut TexelSums,
 ) -> TileGrads {
@@ -518,21 +524,21 @@ fn backward_tile(
     let bg = settings.background;
     // The entries whose billboard has no other entry: their texel gradients go straight to the
     // billboard's gradient row, which is prefetched with the texels of each candidate.
-    let sole = &mut scratch.sole;
-    sole.clear();
-    sole.extend(
+    let direct = &mut scratch.direct;
+    direct.clear();
+    direct.extend(
         list.iter()
             .enumerate()
-            .map(|(k, &b)| sole_rows.owns(bins, b, range.start + k)),
+            .map(|(k, &b)| first_rows.owns(bins, b, range.start + k)),
     );
-    let sole: &[bool] = sole;
+    let direct: &[bool] = direct;
     // Where each candidate's texel gradients will go is prefetched with its texels: the
-    // billboard's gradient row for a sole entry, else the (slot, texel) cells of the sums
+    // billboard's gradient row for a billboard's first entry, else the (slot, texel) cells of the sums
     // (a `slots × TS²` array, a random cache line per candidate otherwise).
     let cell_sums = sums.cell_sums();
     let prefetch_gradient_cells = |k: u32, taps: &BilinearTaps| {
-        if sole[k as usize] {
-            sole_rows.prefetch(list[k as usize] as usize, taps);
+        if direct[k as usize] {
+            first_rows.prefetch(list[k as usize] as usize, taps);
         } else {
             prefetch_taps(cell_sums.wrapping_add(k as usize * ts * ts), taps.indices());
         }
@@ -615,11 +621,11 @@ fn backward_tile(
                 let slot = bl.slot;
                 let d_rgba = [d_colour.x, d_colour.y, d_colour.z, d_tex_alpha];
                 let taps = &candidates[bl.candidate as usize].taps;
-                let (du, dv) = if sole[slot as usize] {
+                let (du, dv) = if direct[slot as usize] {
                     // SAFETY: `owns` holds for entry `range.start + slot`, and this task is the
                     // only one processing it.
                     taps.vjp_rgba(set.texture_of(b), d_rgba, |texel, g| unsafe {
-                        sole_rows.add(b, texel, g)
+                        first_rows.add(b, texel, g)
                     })
                 } else {
                     sums.mark(slot);
@@ -754,8 +760,8 @@ pub fn render_backward(
         set.len() * texels,
         "gradient buffers must match the billboard set"
     );
-    // The tile tasks write the rows of single-entry billboards themselves; that each row has
-    // one writer rests on the tiles' entry ranges being disjoint (`SoleEntryRows::owns`).
+    // The tile tasks write the rows of their billboards' first entries themselves; that each
+    // row has one writer rests on the tiles' entry ranges being disjoint (`FirstEntryRows::owns`).
     assert!(
         bins.tile_offsets.len() == n_tiles + 1
             && bins.tile_offsets[0] == 0
@@ -763,7 +769,7 @@ pub fn render_backward(
             && bins.tile_offsets[n_tiles] as usize == bins.entries.len(),
         "the tiles' entry ranges must partition the entries in order"
     );
-    let sole_rows = SoleEntryRows {
+    let first_rows = FirstEntryRows {
         rows: grads.textures.as_mut_ptr(),
         texels,
         len: set.len(),
@@ -782,7 +788,7 @@ pub fn render_backward(
                 // Each tile is walked as its forward walked it (the grouping of its pairs), and
                 // pixel by pixel for the normal and distortion maps; the same bits either way.
                 if aux || state.tiles[t].order == PairOrder::ByPixel {
-                    backward_tile(set, out, image_grads, t, records, normals, &sole_rows, scratch, sums)
+                    backward_tile(set, out, image_grads, t, records, normals, &first_rows, scratch, sums)
                 } else {
                     backward_tile_by_entry(
                         set,
@@ -790,7 +796,7 @@ pub fn render_backward(
                         image_grads,
                         t,
                         records,
-                        &sole_rows,
+                        &first_rows,
                         &mut scratch.by_entry,
                         sums,
                     )
@@ -859,8 +865,8 @@ pub fn render_backward(
                 if lb + 4 < len {
                     let la = lb + 4;
                     // The billboard will be reduced when one of its entries was blended (its
-                    // texel list may be empty: single-entry billboards' texel gradients are
-                    // already in the rows).
+                    // texel lists may be empty: its first entry's texel gradients are already
+                    // in the row).
                     let mut blended = false;
                     for rec in entry_records(b0 + la) {
                         blended |= rec.blended;

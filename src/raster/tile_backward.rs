@@ -12,11 +12,11 @@
 //! record bit for bit.
 //!
 //! Every sum keeps its order: an entry's geometric gradients, its texel sums and the texel rows
-//! of single-entry billboards receive their pixels' contributions in pixel order, as in the
+//! of billboards' first entries receive their pixels' contributions in pixel order, as in the
 //! pixel-by-pixel walk (`backward_tile`, which still serves the normal and distortion maps), so
 //! the gradients are the same bits (checksums of `raster_stats`; the raster tests).
 
-use super::backward::{EMPTY_RECORD, EntryRecord, SoleEntryRows, TexelSums, TileGrads, add_transform};
+use super::backward::{EMPTY_RECORD, EntryRecord, FirstEntryRows, TexelSums, TileGrads, add_transform};
 use super::forward::{EntryPair, PairOrder, RenderOutput, prefetch_record, tile_pixels};
 use super::preprocess::Prepared;
 use super::tile_forward::{prefetch_texel_rect, texel_footprint};
@@ -41,13 +41,13 @@ struct PixelBack {
 pub(super) struct EntryScratch {
     pixels: Vec<PixelBack>,
     /// Per slot: the tile adds the entry's texture gradients to its billboard's row itself.
-    sole: Vec<bool>,
+    direct: Vec<bool>,
 }
 
 /// The backward pass of tile `tile` without the normal and distortion maps: fills `records`
-/// (the tile's entries) and returns the texel sums of the entries whose billboard has other
-/// entries and the tile's background gradient; texel gradients of single-entry billboards go
-/// straight to their rows through `sole_rows`. Bit for bit what the pixel-by-pixel walk gives.
+/// (the tile's entries) and returns the texel sums of the entries that are not their
+/// billboard's first and the tile's background gradient; texel gradients of first entries go
+/// straight to their rows through `first_rows`. Bit for bit what the pixel-by-pixel walk gives.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn backward_tile_by_entry(
     set: &ActivatedRef<'_>,
@@ -55,16 +55,16 @@ pub(super) fn backward_tile_by_entry(
     grads_in: &ImageGradients<'_>,
     tile: usize,
     records: &mut [EntryRecord],
-    sole_rows: &SoleEntryRows,
+    first_rows: &FirstEntryRows,
     scratch: &mut EntryScratch,
     sums: &mut TexelSums,
 ) -> TileGrads {
     #[cfg(target_arch = "x86_64")]
     if super::lanes::wide_lanes() {
         // SAFETY: the CPU has AVX2 and FMA (checked at run time by `wide_lanes`).
-        return unsafe { by_entry_avx2(set, out, grads_in, tile, records, sole_rows, scratch, sums) };
+        return unsafe { by_entry_avx2(set, out, grads_in, tile, records, first_rows, scratch, sums) };
     }
-    by_entry_body(set, out, grads_in, tile, records, sole_rows, scratch, sums)
+    by_entry_body(set, out, grads_in, tile, records, first_rows, scratch, sums)
 }
 
 /// [`by_entry_body`] compiled for AVX2 and FMA (same operations, same bits).
@@ -80,11 +80,11 @@ unsafe fn by_entry_avx2(
     grads_in: &ImageGradients<'_>,
     tile: usize,
     records: &mut [EntryRecord],
-    sole_rows: &SoleEntryRows,
+    first_rows: &FirstEntryRows,
     scratch: &mut EntryScratch,
     sums: &mut TexelSums,
 ) -> TileGrads {
-    by_entry_body(set, out, grads_in, tile, records, sole_rows, scratch, sums)
+    by_entry_body(set, out, grads_in, tile, records, first_rows, scratch, sums)
 }
 
 /// The body of [`backward_tile_by_entry`], inlined into each instruction-set variant.
@@ -96,7 +96,7 @@ fn by_entry_body(
     grads_in: &ImageGradients<'_>,
     tile: usize,
     records: &mut [EntryRecord],
-    sole_rows: &SoleEntryRows,
+    first_rows: &FirstEntryRows,
     scratch: &mut EntryScratch,
     sums: &mut TexelSums,
 ) -> TileGrads {
@@ -119,12 +119,12 @@ fn by_entry_body(
         ..EMPTY_RECORD
     });
     sums.start(list.len(), ts * ts);
-    let EntryScratch { pixels, sole } = scratch;
-    sole.clear();
-    sole.extend(
+    let EntryScratch { pixels, direct } = scratch;
+    direct.clear();
+    direct.extend(
         list.iter()
             .enumerate()
-            .map(|(k, &b)| sole_rows.owns(bins, b, range.start + k)),
+            .map(|(k, &b)| first_rows.owns(bins, b, range.start + k)),
     );
     // Per pixel: the upstream gradients, the state behind the last blended entry (the
     // background), and the background's gradient `Σ g·T_final` in pixel order.
@@ -185,8 +185,8 @@ fn by_entry_body(
                 })
             {
                 prefetch_texel_rect(set.texture_of(b).as_ptr(), ts, rect);
-                if sole[ahead] {
-                    prefetch_texel_rect(sole_rows.row_start(b), ts, rect);
+                if direct[ahead] {
+                    prefetch_texel_rect(first_rows.row_start(b), ts, rect);
                 } else {
                     prefetch_texel_rect(sums.cell_sums().wrapping_add(ahead * ts * ts), ts, rect);
                 }
@@ -201,7 +201,7 @@ fn by_entry_body(
         let plane = pr.view_plane();
         let texture = set.texture_of(b);
         let record = &mut records[k];
-        if !sole[k] {
+        if !direct[k] {
             sums.mark(k as u32);
         }
         for chunk in of.chunks(LANES) {
@@ -253,11 +253,11 @@ fn by_entry_body(
                 record.rgb += Vec3::new(dr, dg, db);
                 record.blended = true;
             }
-            let (d_u, d_v) = if sole[k] {
+            let (d_u, d_v) = if direct[k] {
                 // SAFETY: `owns` holds for entry `range.start + k`, and this task is the only
                 // one processing it.
                 lane_taps.vjp_rgba_lanes(texture, &d_rgba, &has_grad, |texel, g| unsafe {
-                    sole_rows.add(b, texel, g)
+                    first_rows.add(b, texel, g)
                 })
             } else {
                 lane_taps.vjp_rgba_lanes(texture, &d_rgba, &has_grad, |texel, g| sums.add(k as u32, texel, g))

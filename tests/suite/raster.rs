@@ -762,7 +762,8 @@ fn bit_identical_across_runs_and_thread_counts() {
 /// 1, 2 and 8 threads, and equal to the two views' separate gradients summed up to rounding.
 /// The billboards are about 4 pixels wide, so most have a single tile entry and their texture
 /// rows receive the second view's contributions one at a time on top of the first view's
-/// (the tile pass writes them directly); the others go through the per-billboard reduction.
+/// (the tile pass writes each billboard's first entry directly); the other entries go through
+/// the per-billboard reduction.
 /// The texture gradients differ from the separate sums by at most 5.4e-8 of the largest
 /// `|g₁| + |g₂|` (measured, seed 31); the bound is 1e-6. The SH gradients, summed per view by
 /// the reduction, equal the separate sums exactly. A tile pass that overwrote the rows instead
@@ -817,6 +818,69 @@ fn two_views_accumulate_deterministically() {
     for ((a, x), y) in g1.sh.iter().zip(&separate[0].sh).zip(&separate[1].sh) {
         assert_eq!(*a, x + y, "sh");
     }
+}
+
+/// The texture gradients are summed per billboard over its entries in tile order, each entry's
+/// sum in pixel order: every texel of every billboard equals, bit for bit, `((0 + s₁) + s₂) + …`
+/// over the tiles in order, where `sₜ` is what the backward gives when only tile `t`'s pixels
+/// have an upstream gradient (the other tiles then add exact zeros, and a sum that starts at +0
+/// is never −0, so adding them changes no bit). The tile pass writes each billboard's first
+/// entry straight into its row and the reduction adds the others after it; writing the last
+/// entry first instead fails this.
+#[test]
+fn texture_gradients_sum_each_billboards_entries_in_tile_order() {
+    let (w, h) = (96, 80);
+    let scene = small_scene(300, w, h, 8, 14.0, (0.3, 0.9), 41);
+    let cam = random_scene_camera(w, h);
+    let out = render(&scene.borrowed(), &cam, &settings(Vec3::splat(0.5)));
+    let bins = &out.state.bins;
+    let multi = bins.billboard_offsets.windows(2).filter(|w| w[1] - w[0] > 1).count();
+    assert!(multi > 50, "{multi} billboards with several tile entries");
+    let d_rgb: Vec<f32> = (0..3 * cam.pixel_count())
+        .map(|i| ((i as u64 * 2_654_435_761) % 1999) as f32 / 1999.0 - 0.5)
+        .collect();
+    let backward = |d_rgb: &[f32]| {
+        let mut g = RenderGradients::zeros(scene.len(), scene.texture_size);
+        let ig = ImageGradients {
+            rgb: d_rgb,
+            alpha: None,
+            depth: None,
+            normal: None,
+            distortion: None,
+            camera: false,
+        };
+        render_backward(&scene.borrowed(), &out, &ig, &mut g);
+        g.textures
+    };
+    let whole = backward(&d_rgb);
+    let mut expected = vec![[0.0f32; 4]; whole.len()];
+    let tile = bbsplat::raster::TILE_SIZE;
+    for t in 0..(bins.tiles_x * bins.tiles_y) {
+        let (tx, ty) = (t % bins.tiles_x, t / bins.tiles_x);
+        let mut masked = vec![0.0f32; d_rgb.len()];
+        for j in ty * tile..((ty + 1) * tile).min(h) {
+            for i in tx * tile..((tx + 1) * tile).min(w) {
+                let p = 3 * (j * w + i) as usize;
+                masked[p..p + 3].copy_from_slice(&d_rgb[p..p + 3]);
+            }
+        }
+        for (e, s) in expected.iter_mut().zip(backward(&masked)) {
+            for c in 0..4 {
+                e[c] += s[c];
+            }
+        }
+    }
+    let bits = |g: &[[f32; 4]]| g.iter().flat_map(|t| t.map(f32::to_bits)).collect::<Vec<_>>();
+    let differing = bits(&whole)
+        .iter()
+        .zip(bits(&expected))
+        .filter(|(a, b)| *a != b)
+        .count();
+    assert_eq!(
+        differing, 0,
+        "{differing} texture-gradient values differ from the in-order sum"
+    );
+    assert!(whole.iter().any(|t| t.iter().any(|&x| x != 0.0)));
 }
 
 /// Every value a render reports (images, impact, visibility, counters), as bits.
@@ -992,7 +1056,7 @@ fn clearing_the_reported_rows_restores_zero_gradients() {
     assert_eq!(g, RenderGradients::zeros(scene.len(), scene.texture_size));
 }
 
-/// The tile pass writes the texture gradients of single-entry billboards in place, which is
+/// The tile pass writes the texture gradients of each billboard's first entry in place, which is
 /// only race-free while the tiles' entry ranges partition the entries: a forward output whose
 /// (public) bins were altered so that two tiles share entries is refused with a clear panic
 /// before any tile runs.
