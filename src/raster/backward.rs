@@ -209,9 +209,10 @@ pub(super) const EMPTY_RECORD: EntryRecord = EntryRecord {
 /// sums on; the reduction then adds the other entries' sums to the row, in tile order, after
 /// the tile pass. A billboard with a single entry (most billboards of a dense view: 0.9 entries
 /// per billboard in the benchmark) is then done in its tile; a trained scene's billboards have
-/// about 5 entries, and the first one's texels no longer go through a list (about a fifth of
-/// them). Each row has one writer during the tile pass (the tile holding the billboard's first
-/// entry), so tiles running in parallel never touch the same row.
+/// about 5 entries, and the first one's texels no longer go through a list (14 % of the list
+/// entries of the trained-like object scene, `docs/perf.md`). Each row has one writer during the
+/// tile pass (the tile holding the billboard's first entry), so tiles running in parallel never
+/// touch the same row.
 ///
 /// Rounding: into a zero row (a fresh [`RenderGradients`]) this gives the sums bit for bit
 /// (`((0 + g₁) + g₂) + …` equals `0 + ((g₁ + g₂) + …)` in IEEE arithmetic, signed zeros
@@ -522,7 +523,7 @@ fn backward_tile(
     let mut background = Vec3::ZERO;
     sums.start(list.len(), ts * ts);
     let bg = settings.background;
-    // The entries whose billboard has no other entry: their texel gradients go straight to the
+    // The entries that are their billboard's first: their texel gradients go straight to the
     // billboard's gradient row, which is prefetched with the texels of each candidate.
     let direct = &mut scratch.direct;
     direct.clear();
@@ -533,8 +534,8 @@ fn backward_tile(
     );
     let direct: &[bool] = direct;
     // Where each candidate's texel gradients will go is prefetched with its texels: the
-    // billboard's gradient row for a billboard's first entry, else the (slot, texel) cells of the sums
-    // (a `slots × TS²` array, a random cache line per candidate otherwise).
+    // billboard's gradient row for a billboard's first entry, else the (slot, texel) cells of
+    // the sums (a `slots × TS²` array, a random cache line per candidate otherwise).
     let cell_sums = sums.cell_sums();
     let prefetch_gradient_cells = |k: u32, taps: &BilinearTaps| {
         if direct[k as usize] {

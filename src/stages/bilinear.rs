@@ -147,10 +147,10 @@ fn sample_four(texel: impl Fn(u32) -> [f32; 4], index: [u32; 4], w: [f32; 4], ma
 /// [`KEEP`]) in tap order and returns `(∂L/∂u, ∂L/∂v)` (behind [`BilinearTaps::vjp_rgba`] and
 /// [`RowTaps::vjp_rgba`]; its three pieces, [`seen_four`], [`masked_term`] and [`emit_four`],
 /// are the one copy of this arithmetic, which [`RowTaps::vjp_rgba_lanes`] arranges lane-wise).
-/// Every tap's texel is read, an outside
-/// tap's too (its index is clamped into the texture, or 0), so that the four taps' values seen
-/// through the upstream gradient are computed side by side; each is the sum a tap-by-tap loop
-/// forms, in its order, and an outside tap's terms are replaced by +0 before they are added.
+/// Every tap's texel is read, an outside tap's too (its index is clamped into the texture, or
+/// 0), so that the four taps' values seen through the upstream gradient are computed side by
+/// side; each is the sum a tap-by-tap loop forms, in its order, and an outside tap's terms are
+/// replaced by +0 before they are added.
 /// That changes no bit: a sum that starts at +0 is never −0, so adding +0 leaves it as it is,
 /// and an outside tap never adds `0 · ∞ = NaN`.
 #[inline(always)]
