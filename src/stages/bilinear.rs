@@ -772,6 +772,8 @@ impl RowTaps {
         check_rgba_texels(texels.len(), self.ts);
         // Per tap and lane: the tap's texel seen through the lane's upstream gradient.
         let mut seen = [[0.0f32; LANES]; 4];
+        // Set in the loop: the same flags derived up front cost 1.5 % more instructions per
+        // object forward + backward (measured; the compiler lays the loop out worse).
         let mut used = [false; LANES];
         for lane in 0..LANES {
             if !(active[lane] && self.has_taps[lane]) {
