@@ -106,22 +106,27 @@ fn main() {
         };
         render_backward(&set, &out, &ig, &mut g1);
         let mut h = 0xcbf29ce484222325u64;
-        let mut mix = |v: &[f32]| {
+        let mix = |h: &mut u64, v: &[f32]| {
             for x in v {
-                h = (h ^ x.to_bits() as u64).wrapping_mul(0x100000001b3);
+                *h = (*h ^ x.to_bits() as u64).wrapping_mul(0x100000001b3);
             }
         };
-        mix(&out.rgb);
-        mix(&out.alpha);
-        mix(&out.depth);
-        mix(&out.impact);
-        mix(&g1.sh);
+        mix(&mut h, &out.rgb);
+        mix(&mut h, &out.alpha);
+        mix(&mut h, &out.depth);
+        // The images alone (they do not depend on the tile size; the sums below do).
+        println!("images checksum {h:016x}");
+        mix(&mut h, &out.impact);
+        mix(&mut h, &g1.sh);
         // Planar order (alpha, then colour by channel): the checksum of the planar layout.
         let (d_alpha, d_colour) = planar_textures(&g1.textures, set.texels());
-        mix(&d_alpha);
-        mix(&d_colour);
-        mix(&g1.positions.iter().flat_map(|p| p.to_array()).collect::<Vec<_>>());
-        mix(&g1.quaternions.concat());
+        mix(&mut h, &d_alpha);
+        mix(&mut h, &d_colour);
+        mix(
+            &mut h,
+            &g1.positions.iter().flat_map(|p| p.to_array()).collect::<Vec<_>>(),
+        );
+        mix(&mut h, &g1.quaternions.concat());
         println!("checksum {h:016x}");
         let (t, c) = (Instant::now(), cpu_ms());
         for _ in 0..calls {

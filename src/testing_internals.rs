@@ -271,7 +271,7 @@ pub mod raster {
 
     /// One tile entry's spans: its first and last tile row and, per tile row, its first and
     /// last column (empty when the first exceeds the last).
-    pub type Spans = ([u8; 2], [[u8; 2]; 16]);
+    pub type Spans = ([u8; 2], [[u8; 2]; crate::raster::TILE_SIZE as usize]);
 
     /// One tile entry's spans computed both ways ([`entry_spans_both_ways`]).
     #[derive(Clone, Copy, Debug)]
@@ -416,5 +416,19 @@ pub mod marching_cubes {
     /// (`corner · 3 + axis`, `corner` the edge's end with the lower coordinate).
     pub fn case_triangles(case: u8) -> Vec<[u8; 3]> {
         crate::mesh::marching_cubes::triangulate_case(case)
+    }
+}
+
+/// The tile passes' scheduling (`raster::schedule`).
+pub mod schedule {
+    /// `map_heaviest_first`: `work(scratch, index, item)` on every item, on the current rayon
+    /// pool, handed out in order of decreasing `cost` (ties by index); results in item order.
+    pub fn map_heaviest_first<T: Send, R: Send, S>(
+        items: Vec<T>,
+        cost: impl Fn(usize) -> u64,
+        init: impl Fn() -> S + Sync,
+        work: impl Fn(&mut S, usize, T) -> R + Sync,
+    ) -> Vec<R> {
+        crate::raster::schedule::map_heaviest_first(items, cost, init, work)
     }
 }

@@ -23,6 +23,7 @@ use super::forward::{
     split_by_lengths, tile_pixels,
 };
 use super::preprocess::Prepared;
+use super::schedule::map_heaviest_first;
 use super::tile_backward::{EntryScratch, backward_tile_by_entry};
 use super::{ActivatedRef, SH_FLOATS};
 use crate::camera::offset_from;
@@ -780,11 +781,17 @@ pub fn render_backward(
     let aux = image_grads.has_aux();
     let mut normal_records = vec![Vec3::ZERO; if aux { bins.entries.len() } else { 0 }];
     let normal_lengths = (0..n_tiles).map(|t| if aux { bins.tile_range(t).len() } else { 0 });
-    let tiles: Vec<TileGrads> = split_by_lengths(&mut records, (0..n_tiles).map(|t| bins.tile_range(t).len()))
-        .into_par_iter()
+    // Each tile's work is estimated by its blended pairs and entries; the heaviest tiles go
+    // first.
+    let tile_work: Vec<_> = split_by_lengths(&mut records, (0..n_tiles).map(|t| bins.tile_range(t).len()))
+        .into_iter()
         .zip(split_by_lengths(&mut normal_records, normal_lengths))
-        .enumerate()
-        .map_init(Scratch::default, |scratch, (t, (records, normals))| {
+        .collect();
+    let tiles: Vec<TileGrads> = map_heaviest_first(
+        tile_work,
+        |t| (state.tiles[t].len() + bins.tile_range(t).len()) as u64,
+        Scratch::default,
+        |scratch, t, (records, normals)| {
             TEXEL_SUMS.with_borrow_mut(|sums| {
                 // Each tile is walked as its forward walked it (the grouping of its pairs), and
                 // pixel by pixel for the normal and distortion maps; the same bits either way.
@@ -803,8 +810,8 @@ pub fn render_backward(
                     )
                 }
             })
-        })
-        .collect();
+        },
+    );
     for tg in &tiles {
         grads.background += tg.background;
     }

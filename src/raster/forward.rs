@@ -3,6 +3,7 @@
 use super::binning::{BinScratch, TileBins, bin_into};
 use super::preprocess::{Prepared, preprocess_into};
 use super::row_spans::{BillboardRows, is_wide};
+use super::schedule::map_heaviest_first;
 use super::tile_forward::{PixelOut, TileComposite, composite_tile};
 use super::tile_forward_pixels::{PixelWalk, composite_tile_by_pixel};
 use super::{ActivatedRef, RenderSettings, TILE_SIZE};
@@ -672,36 +673,38 @@ pub fn render_with(
     let with_distortion = settings.distortion;
     let tile_distortion = &mut spare.tile_distortion;
     tile_distortion.resize_with(n_tiles, Default::default);
-    impact_chunks
-        .into_par_iter()
-        .zip(tiles.par_iter_mut().zip(tile_outputs.par_iter_mut()))
-        .zip(tile_distortion.par_iter_mut())
-        .enumerate()
-        .for_each_init(
-            TileScratch::default,
-            |scratch, (t, ((impact, (blended_pairs, pixels)), tile_distortion))| {
-                let list = &bins.entries[bins.tile_range(t)];
-                let rect @ (i0, j0, _, _) = tile_pixels(&bins, t, w, h);
-                let TileScratch { spans, composite, walk } = scratch;
-                local_spans(&prepared, billboard_rows, list, (i0, j0), half_side, spans);
-                let tile = (camera, set, settings, &*prepared, list, rect, &spans[..]);
-                let blended = &mut *blended_pairs;
-                // Tiles of small billboards go pixel by pixel (the same bits; see
-                // `tile_forward_pixels`).
-                let by_pixel =
-                    super::lanes::walk_by_pixel(spans.iter().map(|s| usize::from(s.pixels)).sum(), spans.len());
-                match (with_distortion, by_pixel) {
-                    (true, true) => composite_tile_by_pixel::<true>(walk, tile, impact, pixels, blended),
-                    (true, false) => composite_tile::<true>(composite, tile, impact, pixels, blended),
-                    (false, true) => composite_tile_by_pixel::<false>(walk, tile, impact, pixels, blended),
-                    (false, false) => composite_tile::<false>(composite, tile, impact, pixels, blended),
-                }
-                if with_distortion {
-                    tile_distortion.clear();
-                    tile_distortion.extend(pixels.iter().map(|px| px.distortion));
-                }
-            },
-        );
+    // Each tile's work is estimated by its entry count; the heaviest tiles go first.
+    let tile_work: Vec<_> = impact_chunks
+        .into_iter()
+        .zip(tiles.iter_mut().zip(tile_outputs.iter_mut()))
+        .zip(tile_distortion.iter_mut())
+        .collect();
+    map_heaviest_first(
+        tile_work,
+        |t| bins.tile_range(t).len() as u64,
+        TileScratch::default,
+        |scratch, t, ((impact, (blended_pairs, pixels)), tile_distortion)| {
+            let list = &bins.entries[bins.tile_range(t)];
+            let rect @ (i0, j0, _, _) = tile_pixels(&bins, t, w, h);
+            let TileScratch { spans, composite, walk } = scratch;
+            local_spans(&prepared, billboard_rows, list, (i0, j0), half_side, spans);
+            let tile = (camera, set, settings, &*prepared, list, rect, &spans[..]);
+            let blended = &mut *blended_pairs;
+            // Tiles of small billboards go pixel by pixel (the same bits; see
+            // `tile_forward_pixels`).
+            let by_pixel = super::lanes::walk_by_pixel(spans.iter().map(|s| usize::from(s.pixels)).sum(), spans.len());
+            match (with_distortion, by_pixel) {
+                (true, true) => composite_tile_by_pixel::<true>(walk, tile, impact, pixels, blended),
+                (true, false) => composite_tile::<true>(composite, tile, impact, pixels, blended),
+                (false, true) => composite_tile_by_pixel::<false>(walk, tile, impact, pixels, blended),
+                (false, false) => composite_tile::<false>(composite, tile, impact, pixels, blended),
+            }
+            if with_distortion {
+                tile_distortion.clear();
+                tile_distortion.extend(pixels.iter().map(|px| px.distortion));
+            }
+        },
+    );
     let tile_outputs = &spare.tile_outputs;
     let blended_count: u64 = tiles.iter().map(|tile| tile.len() as u64).sum();
     let (evaluated_pairs, nan_alpha_pairs): (u64, u64) = tile_outputs

@@ -26,6 +26,7 @@ pub mod lanes;
 pub mod preprocess;
 pub mod reference;
 pub(crate) mod row_spans;
+pub(crate) mod schedule;
 mod tile_backward;
 mod tile_forward;
 mod tile_forward_pixels;

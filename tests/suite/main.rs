@@ -41,6 +41,7 @@ mod raster_binning;
 mod raster_camera;
 mod raster_lanes;
 mod raster_preprocess;
+mod raster_schedule;
 mod raster_spans;
 mod raster_workload;
 mod report;

@@ -1,0 +1,61 @@
+//! The order in which the tile passes hand tiles to rayon's threads: the heaviest first.
+//!
+//! A tile is one task, and tiles differ a hundredfold in work (the middle of an object against
+//! its empty surroundings). Split by index, as a parallel iterator does, a pass can end with one
+//! thread finishing a heavy tile while the other waits. Handing the tiles out one at a time from
+//! a list sorted by estimated work, heaviest first (greedy longest-processing-time scheduling),
+//! leaves only light tiles for the end.
+//!
+//! The order changes no value: every tile computes into its own outputs from inputs no other
+//! tile writes, and each thread's scratch is reset per tile, so the results are the same bits
+//! whichever thread runs a tile and in whatever order (the thread-count tests of
+//! `tests/suite/raster.rs` and `tests/suite/determinism.rs`).
+
+use rayon::prelude::*;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// Runs `work(scratch, index, item)` on every item of `items`, on the current rayon pool's
+/// threads, handing the items out one at a time in order of decreasing `cost` (ties by index);
+/// each thread makes one scratch with `init`. Returns the results in item order.
+pub(crate) fn map_heaviest_first<T, R, S>(
+    items: Vec<T>,
+    cost: impl Fn(usize) -> u64,
+    init: impl Fn() -> S + Sync,
+    work: impl Fn(&mut S, usize, T) -> R + Sync,
+) -> Vec<R>
+where
+    T: Send,
+    R: Send,
+{
+    let n = items.len();
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by_key(|&i| (std::cmp::Reverse(cost(i)), i));
+    let inputs: Vec<Mutex<Option<T>>> = items.into_iter().map(|item| Mutex::new(Some(item))).collect();
+    let outputs: Vec<Mutex<Option<R>>> = (0..n).map(|_| Mutex::new(None)).collect();
+    let next = AtomicUsize::new(0);
+    let workers = rayon::current_num_threads().min(n);
+    (0..workers).into_par_iter().for_each(|_| {
+        let mut scratch = init();
+        loop {
+            let k = next.fetch_add(1, Ordering::Relaxed);
+            let Some(&i) = order.get(k) else { break };
+            let item = take(&inputs[i]).expect("each item is handed out once");
+            let result = work(&mut scratch, i, item);
+            *outputs[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(result);
+        }
+    });
+    outputs
+        .into_iter()
+        .map(|slot| {
+            slot.into_inner()
+                .unwrap_or_else(|e| e.into_inner())
+                .expect("every item was run")
+        })
+        .collect()
+}
+
+/// Takes the value out of `slot` (a poisoned lock still holds its value).
+fn take<T>(slot: &Mutex<Option<T>>) -> Option<T> {
+    slot.lock().unwrap_or_else(|e| e.into_inner()).take()
+}
