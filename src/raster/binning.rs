@@ -1,4 +1,5 @@
-//! Tile binning: which billboards each 16×16 tile must consider, in depth order.
+//! Tile binning: which billboards each tile ([`TILE_SIZE`] pixels square) must consider, in depth
+//! order.
 
 use super::TILE_SIZE;
 use super::forward::split_by_lengths;

@@ -2,8 +2,8 @@
 //! depth order, is applied to the pixels of its span before the next entry is read.
 //!
 //! Each pixel keeps its own front-to-back compositing state ([`CompositeState`], the stage's
-//! own code) in a small per-tile array (about 60 bytes a pixel, 15 KiB for a 16×16 tile, which
-//! stays in L1). An entry's record, plane and texture are loaded once for all its pixels, so a
+//! own code) in a per-tile array (about 60 bytes a pixel, 135 KiB for a 48×48 tile, which
+//! stays in L2). An entry's record, plane and texture are loaded once for all its pixels, so a
 //! pixel walking 20-60 billboards no longer reads 20-60 scattered records and textures; and no
 //! per-pixel candidate list is built, stored and read back. Per pixel the entries still arrive
 //! front to back (the list order), so every pixel sees exactly the sequence of (alpha, features)
