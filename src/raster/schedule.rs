@@ -8,8 +8,9 @@
 //!
 //! The order changes no value: every tile computes into its own outputs from inputs no other
 //! tile writes, and each thread's scratch is reset per tile, so the results are the same bits
-//! whichever thread runs a tile and in whatever order (the thread-count tests of
-//! `tests/suite/raster.rs` and `tests/suite/determinism.rs`).
+//! whichever thread runs a tile and in whatever order (`bit_identical_across_runs_and_thread_counts`
+//! in `tests/suite/raster.rs`: 1, 2 and 8 threads over 20 tiles; the trainer's in
+//! `tests/suite/train_demo.rs`). `tests/suite/raster_schedule.rs` tests the hand-out itself.
 
 use rayon::prelude::*;
 use std::sync::Mutex;

@@ -742,8 +742,15 @@ fn with_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
 
 #[test]
 fn bit_identical_across_runs_and_thread_counts() {
-    let scene = small_scene(400, 96, 80, 16, 12.0, (0.0, 1.0), 21);
-    let cam = random_scene_camera(96, 80);
+    // Enough tiles (5 × 4) that 2 and 8 threads each get several, handed out by weight.
+    let (w, h) = (240u32, 180u32);
+    let (tiles_x, tiles_y) = (
+        w.div_ceil(bbsplat::raster::TILE_SIZE),
+        h.div_ceil(bbsplat::raster::TILE_SIZE),
+    );
+    assert!(tiles_x * tiles_y >= 16, "{tiles_x} × {tiles_y} tiles");
+    let scene = small_scene(2400, w, h, 16, 12.0, (0.0, 1.0), 21);
+    let cam = random_scene_camera(w, h);
     let s = settings(Vec3::splat(0.5));
     let run = |threads: usize| with_threads(threads, || render_and_backward(&scene, &cam, &s));
     let (o1, g1, t1) = run(1);

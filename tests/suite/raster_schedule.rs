@@ -35,23 +35,22 @@ fn items_start_heaviest_first_ties_by_index() {
 
 #[test]
 fn each_thread_makes_one_scratch_and_every_item_runs_once() {
+    use std::sync::atomic::{AtomicUsize, Ordering};
     let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().expect("pool");
-    let made = std::sync::atomic::AtomicUsize::new(0);
+    let (made, runs) = (AtomicUsize::new(0), AtomicUsize::new(0));
     let got = pool.install(|| {
         map_heaviest_first(
             (0..500u32).collect(),
             |i| (i % 17) as u64,
-            || {
-                made.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                0usize
-            },
-            |runs, _, x| {
-                *runs += 1;
+            || made.fetch_add(1, Ordering::Relaxed),
+            |_, _, x| {
+                runs.fetch_add(1, Ordering::Relaxed);
                 x
             },
         )
     });
     assert_eq!(got, (0..500u32).collect::<Vec<_>>());
+    assert_eq!(runs.into_inner(), 500, "each item run once");
     assert!((1..=2).contains(&made.into_inner()), "one scratch per worker");
 }
 
