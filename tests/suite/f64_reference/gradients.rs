@@ -303,6 +303,10 @@ pub enum Kind {
     /// 24 billboards about 30 px wide over 24×24 px, TS 4, SH degree 2, alpha texels in
     /// [0.6, 1]: most pixels stop, many alphas are clamped.
     Opaque,
+    /// 30 billboards about 20 px wide over 80×80 px, TS 6, SH degree 3: the image spans 2×2
+    /// tiles of 48 px, so many billboards have several tile entries, whose per-entry gradients
+    /// the backward reduces in tile order (the other kinds lie inside one tile).
+    AcrossTiles,
 }
 
 fn spec_of(kind: Kind, seed: u64) -> Spec {
@@ -310,6 +314,11 @@ fn spec_of(kind: Kind, seed: u64) -> Spec {
         Kind::General => {
             let mut s = Spec::new(30, 32, 6, seed);
             s.footprint = 12.0;
+            s
+        }
+        Kind::AcrossTiles => {
+            let mut s = Spec::new(30, 80, 6, seed);
+            s.footprint = 20.0;
             s
         }
         Kind::Opaque => {
@@ -514,6 +523,38 @@ fn gradient_textures() {
 #[test]
 fn gradient_background() {
     check(Group::Background);
+}
+
+/// Every group on scenes whose billboards span several tiles ([`Kind::AcrossTiles`], first
+/// seeds from 2000 and 2050 keeping their margins: 2004 and 2051, with 16 and 19 billboards of
+/// several tile entries; at least 5 checked), with the tolerances of the tests above. Measured
+/// worst (directions / coordinates): positions 2.0e-5 / 2.6e-5, quaternions 2.1e-5 / 1.5e-5,
+/// log-scales 8.0e-6 / 2.1e-6, SH 1.9e-6 / 8.7e-7, textures 2.3e-6 / 1.2e-6, background
+/// 3.9e-6 / 2.8e-6: within the bounds of [`tolerance`], measured on single-tile scenes. Scaling
+/// the reduction's geometric records of every entry after a billboard's first by 1.01 fails
+/// this test and no other test of `f64_reference::gradients`, `raster::fd_*` or
+/// `raster_backward` (tried 2026-11-28).
+#[test]
+fn gradients_across_tiles() {
+    for first in [2000, 2050] {
+        let case = find_case(Kind::AcrossTiles, first);
+        let (b, cam, settings) = scene(&spec_of(Kind::AcrossTiles, case.seed));
+        let bins = render(&b.borrowed(), &cam, &settings).state.bins;
+        let spanning = bins.billboard_offsets.windows(2).filter(|w| w[1] - w[0] > 1).count();
+        assert!(
+            spanning >= 5,
+            "seed {}: only {spanning} billboards span several tiles",
+            case.seed
+        );
+        for group in GROUPS {
+            let e = group_errors(&case, group, 1.0);
+            eprintln!(
+                "f64_reference across tiles {group:?} seed {} ({spanning} spanning): {e:?}",
+                case.seed
+            );
+            assert!(passes(&e, group), "{group:?}, seed {}: {e:?}", case.seed);
+        }
+    }
 }
 
 /// The check catches a 1 % error in any group: the crate's gradient of one group scaled by
