@@ -419,6 +419,33 @@ pub mod marching_cubes {
     }
 }
 
+/// The explicit AVX2 build of the forward tile (`raster::tile_forward_avx2`): its lane-wise
+/// decision and sample, to test against the scalar stages. Each gives `None` on a CPU without
+/// AVX2 and FMA (or with the baseline build forced).
+pub mod forward_avx2 {
+    use crate::stages::bilinear::RowTaps;
+    use crate::stages::composite::{CompositeParams, Step};
+    use crate::stages::ray_plane::LANES;
+
+    /// The decision of eight lanes (transmittance in front, raw alpha) as `classify`'s steps
+    /// (`clamped` is taken from the raw alpha).
+    #[cfg(target_arch = "x86_64")]
+    pub fn classify_lanes(
+        transmittance: &[f32; LANES],
+        a: &[f32; LANES],
+        params: &CompositeParams,
+    ) -> Option<[Step; LANES]> {
+        crate::raster::tile_forward_avx2::classify_lanes(transmittance, a, params)
+    }
+
+    /// The RGBA samples of every lane of `taps` (lanes without taps included: their values are
+    /// unspecified).
+    #[cfg(target_arch = "x86_64")]
+    pub fn sample_rgba_lanes(taps: &RowTaps, texture: &[[f32; 4]]) -> Option<[[f32; 4]; LANES]> {
+        crate::raster::tile_forward_avx2::sample_rgba_lanes(taps, texture)
+    }
+}
+
 /// The tile passes' scheduling (`raster::schedule`).
 pub mod schedule {
     /// `map_heaviest_first`: `work(scratch, index, item)` on every item, on the current rayon

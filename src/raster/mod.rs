@@ -30,6 +30,7 @@ pub(crate) mod row_spans;
 pub(crate) mod schedule;
 mod tile_backward;
 mod tile_forward;
+pub(crate) mod tile_forward_avx2;
 mod tile_forward_pixels;
 pub mod workload;
 

@@ -88,6 +88,9 @@ pub(crate) type TileInputs<'a, 's> = (
 #[derive(Default)]
 pub(crate) struct TileComposite {
     pixels: Vec<PixelState>,
+    /// The states of the AVX2 build ([`super::tile_forward_avx2`]).
+    #[cfg(target_arch = "x86_64")]
+    lanes: super::tile_forward_avx2::LaneStates,
 }
 
 /// Composites the tile `(i0, j0, i1, j1)` whose list is `list` (with the entries' `spans`):
@@ -96,6 +99,11 @@ pub(crate) struct TileComposite {
 /// order found), and adds `α·T` of each blended pair to `impact[slot]` (in pixel order). With
 /// `DISTORTION` the depth distortion of each pixel is accumulated too ([`DistortionState`]);
 /// without it that code is not compiled in.
+///
+/// On a CPU with AVX2 and FMA this runs the explicit vector implementation of
+/// [`super::tile_forward_avx2`] (eight pixels of a run side by side); elsewhere, and when
+/// [`super::lanes::force_baseline`] is on, the body below, pixel after pixel with the stages'
+/// own code, which is the reference the vector one is tested against bit for bit.
 pub(crate) fn composite_tile<const DISTORTION: bool>(
     scratch: &mut TileComposite,
     inputs: TileInputs<'_, '_>,
@@ -106,30 +114,21 @@ pub(crate) fn composite_tile<const DISTORTION: bool>(
     #[cfg(target_arch = "x86_64")]
     if super::lanes::wide_lanes() {
         // SAFETY: the CPU has AVX2 and FMA (checked at run time by `wide_lanes`).
-        unsafe { composite_tile_avx2::<DISTORTION>(scratch, inputs, impact, pixels, blended) };
+        unsafe {
+            super::tile_forward_avx2::composite_tile_avx2::<DISTORTION>(
+                &mut scratch.lanes,
+                inputs,
+                impact,
+                pixels,
+                blended,
+            );
+        }
         return;
     }
     composite_tile_body::<DISTORTION>(scratch, inputs, impact, pixels, blended);
 }
 
-/// [`composite_tile_body`] compiled for AVX2 and FMA (8 f32 lanes per register; the code is the
-/// same, and Rust fuses no multiply-add by itself, so the results are the same bits).
-///
-/// # Safety
-/// The CPU must support AVX2 and FMA.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn composite_tile_avx2<const DISTORTION: bool>(
-    scratch: &mut TileComposite,
-    inputs: TileInputs<'_, '_>,
-    impact: &mut [f32],
-    pixels: &mut Vec<PixelOut>,
-    blended: &mut TileBlended,
-) {
-    composite_tile_body::<DISTORTION>(scratch, inputs, impact, pixels, blended);
-}
-
-/// The body of [`composite_tile`], inlined into each instruction-set variant.
+/// The body of [`composite_tile`] on the baseline instruction set (the scalar reference).
 #[inline(always)]
 fn composite_tile_body<const DISTORTION: bool>(
     scratch: &mut TileComposite,
@@ -267,7 +266,7 @@ fn composite_tile_body<const DISTORTION: bool>(
 
 /// The tile-local pixel rectangle `(x0, y0, x1, y1)` (inclusive) holding an entry's span, or
 /// `None` when the span is empty.
-fn span_rect(span: &EntrySpans) -> Option<(u8, u8, u8, u8)> {
+pub(crate) fn span_rect(span: &EntrySpans) -> Option<(u8, u8, u8, u8)> {
     let ([x0, x1], [y0, y1]) = (span.columns, span.rows);
     (x0 <= x1).then_some((x0, y0, x1, y1))
 }

@@ -721,6 +721,30 @@ impl RowTaps {
         ))
     }
 
+    /// The lane arrays of the taps, for explicit vector code: per tap (in [`BilinearTaps`]
+    /// order) and lane the texel index (clamped into the texture, so always below `ts²`), the
+    /// weight and the keep mask (all bits set for a tap inside the texture, else 0), and per
+    /// lane whether it has taps. [`RowTaps::sample_rgba`] is, for a lane with taps,
+    /// `Σ_k (weight[k] · texel[index[k]]) & keep[k]`, summed from +0 in tap order.
+    #[inline(always)]
+    #[allow(clippy::type_complexity)]
+    pub(crate) fn lane_arrays(
+        &self,
+    ) -> (
+        &[[u32; LANES]; 4],
+        &[[f32; LANES]; 4],
+        &[[u32; LANES]; 4],
+        &[bool; LANES],
+    ) {
+        (&self.index, &self.weight, &self.keep, &self.has_taps)
+    }
+
+    /// The texture side the taps were computed for.
+    #[inline(always)]
+    pub(crate) fn texture_side(&self) -> usize {
+        self.ts as usize
+    }
+
     /// Lane `lane`'s [`BilinearTaps::vjp_rgba`], bit for bit, reading the lanes directly;
     /// `None` without taps.
     ///

@@ -67,7 +67,11 @@ fn everything(scene: &ActivatedBillboards, cam: &Camera, settings: &RenderSettin
             .flat_map(|(q, slot, t)| [q, slot, t.to_bits()])
     }));
     bits.extend(touched);
-    bits.extend([out.stats.evaluated_pairs as u32, out.stats.blended_pairs as u32]);
+    bits.extend([
+        out.stats.evaluated_pairs as u32,
+        out.stats.blended_pairs as u32,
+        out.stats.nan_alpha_pairs as u32,
+    ]);
     bits
 }
 
@@ -136,4 +140,139 @@ fn every_build_and_walk_agree_bit_for_bit_on_the_benchmark_scene() {
     let cam = random_scene_camera(128, 128);
     let scene = random_scene(&RandomSceneConfig::benchmark(8000, 128, 128));
     assert_all_equal(&all_variants(&scene, &cam, &RenderSettings::default(), false));
+}
+
+/// The AVX2 forward's explicit code is used: the CPU has AVX2 and FMA and the baseline is not
+/// forced (callers hold [`SWITCH`]). On a CPU without them the two tests below check only that
+/// the AVX2 entry points refuse to run, and say so.
+fn avx2_available() -> bool {
+    lanes::force_baseline(false);
+    let wide = lanes::wide_lanes();
+    println!("wide lanes (AVX2 + FMA) on this CPU: {wide}");
+    wide
+}
+
+/// The AVX2 forward's lane-wise decision is `classify` bit for bit, on every threshold's edge:
+/// raw alphas at, just below and just above `min_alpha` and `max_alpha`, 0, −0, 1, beyond,
+/// NaN and ±∞, and transmittances at and around the one where `T·(1 − α)` meets
+/// `min_transmittance`, under the default, reference and smooth parameters.
+#[test]
+fn avx2_forward_decision_equals_classify() {
+    use bbsplat::stages::composite::{CompositeParams, Step, classify};
+    use bbsplat::testing_internals::forward_avx2::classify_lanes;
+    let _guard = SWITCH.lock().unwrap_or_else(|e| e.into_inner());
+    let wide = avx2_available();
+    let mut rng = Rng::new(11);
+    let mut compared = 0;
+    for params in [
+        CompositeParams::default(),
+        CompositeParams::reference(),
+        CompositeParams::smooth(),
+    ] {
+        let (lo, hi) = (params.min_alpha, params.max_alpha);
+        let mut alphas = vec![
+            0.0,
+            -0.0,
+            lo,
+            lo.next_down(),
+            lo.next_up(),
+            hi,
+            hi.next_down(),
+            hi.next_up(),
+            1.0,
+            1.5,
+            -1.0,
+            1e-30,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+        ];
+        alphas.extend((0..40).map(|_| rng.uniform()));
+        for &a in &alphas {
+            // Transmittances around the stop threshold for this alpha, and ordinary ones.
+            let clamped = if a > hi { hi } else { a };
+            let edge = params.min_transmittance / (1.0 - clamped);
+            let mut ts = vec![
+                1.0,
+                0.5,
+                0.0,
+                edge,
+                edge.next_up(),
+                edge.next_down(),
+                params.min_transmittance,
+            ];
+            ts.extend((0..9).map(|_| rng.uniform()));
+            for chunk in ts.chunks(8) {
+                let t: [f32; 8] = std::array::from_fn(|l| chunk[l % chunk.len()]);
+                let got = classify_lanes(&t, &[a; 8], &params);
+                assert_eq!(got.is_some(), wide, "the AVX2 decision runs exactly when AVX2 is on");
+                for (l, got) in got.iter().flat_map(|g| g.iter().enumerate()) {
+                    let want = classify(t[l], a, &params);
+                    let same = match (want, *got) {
+                        (Step::Skip, Step::Skip) | (Step::Stop, Step::Stop) => true,
+                        (Step::Blend(w), Step::Blend(g)) => {
+                            [w.alpha, w.transmittance, w.weight, w.next_transmittance].map(f32::to_bits)
+                                == [g.alpha, g.transmittance, g.weight, g.next_transmittance].map(f32::to_bits)
+                                && w.clamped == g.clamped
+                        }
+                        _ => false,
+                    };
+                    assert!(same, "T {} a {a}: classify {want:?}, AVX2 {got:?}", t[l]);
+                    compared += 1;
+                }
+            }
+        }
+    }
+    assert!(compared > 1000 || !wide);
+}
+
+/// The AVX2 forward's sample of eight lanes is `RowTaps::sample_rgba` bit for bit on every lane
+/// with taps: coordinates across the texture, on its border ring and exactly on texel lines,
+/// textures with NaN, ±∞ and −0 texels among random ones.
+#[test]
+fn avx2_forward_sample_equals_the_row_taps_sample() {
+    use bbsplat::testing_internals::bilinear::sampling_taps_row;
+    use bbsplat::testing_internals::forward_avx2::sample_rgba_lanes;
+    let _guard = SWITCH.lock().unwrap_or_else(|e| e.into_inner());
+    let wide = avx2_available();
+    let mut rng = Rng::new(12);
+    let mut compared = 0;
+    for ts in [2usize, 3, 8, 16] {
+        let mut texture: Vec<[f32; 4]> = (0..ts * ts)
+            .map(|_| [rng.uniform(), rng.uniform(), rng.uniform(), rng.uniform()])
+            .collect();
+        for (k, special) in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -0.0]
+            .into_iter()
+            .enumerate()
+        {
+            let t = rng.below((ts * ts) as u64) as usize;
+            texture[t][k] = special;
+        }
+        let line = |i: usize| -1.0 + 2.0 * i as f32 / (ts - 1) as f32;
+        for round in 0..200 {
+            let coordinate = |rng: &mut Rng| match round % 3 {
+                0 => rng.range(-1.4, 1.4),
+                1 => line(rng.below(ts as u64) as usize),
+                _ => rng.range(-1.0, 1.0),
+            };
+            let u: [f32; 8] = std::array::from_fn(|_| coordinate(&mut rng));
+            let v: [f32; 8] = std::array::from_fn(|_| coordinate(&mut rng));
+            let taps = sampling_taps_row(&u, &v, ts);
+            let got = sample_rgba_lanes(&taps, &texture);
+            assert_eq!(got.is_some(), wide, "the AVX2 sample runs exactly when AVX2 is on");
+            for (l, got) in got.iter().flat_map(|g| g.iter().enumerate()) {
+                if let Some(want) = taps.sample_rgba(l, &texture) {
+                    assert_eq!(
+                        want.map(f32::to_bits),
+                        got.map(f32::to_bits),
+                        "ts {ts}, (u, v) = ({}, {}): {want:?} against {got:?}",
+                        u[l],
+                        v[l],
+                    );
+                    compared += 1;
+                }
+            }
+        }
+    }
+    assert!(compared > 4000 || !wide);
 }

@@ -1,0 +1,489 @@
+//! The forward pass of one tile billboard by billboard ([`super::tile_forward`]), written in
+//! explicit AVX2 instructions: the eight pixels of a run are sampled, classified and composited
+//! side by side in vector registers, their states kept as one array per value (structure of
+//! arrays), instead of one pixel after another.
+//!
+//! It is a second implementation of the same arithmetic, and gives the same bits as the
+//! baseline build of [`super::tile_forward`] (the scalar reference, which runs the stages'
+//! own code: [`crate::stages::composite::CompositeState`] and
+//! [`crate::stages::bilinear::RowTaps::sample_rgba`]). Per lane every value is made by the
+//! same IEEE operations in the same order, none fused (AVX2 has no implicit fusing; every
+//! multiply and add below is its own instruction):
+//! - the sample: `((((+0 + w₀t₀) + w₁t₁) + w₂t₂) + w₃t₃)` per channel, each product replaced by
+//!   +0 where its tap's keep mask is 0 (`sample_four`);
+//! - the decision (`classify`): `α = a > max_alpha ? max_alpha : a`; skipped unless
+//!   `α ≥ min_alpha` (so NaN is skipped); `T' = T·(1 − α)`; stop when not skipped and
+//!   `T' < min_transmittance`; otherwise blended with weight `α·T`;
+//! - the blend (`CompositeState::blend`): `acc + f·w` per feature, `T ← T'`;
+//! - the median rule, the evaluated and NaN-alpha counts, the impact sum and the pairs, each
+//!   as the reference does them (the impact and the pairs lane by lane in pixel order).
+//!
+//! `tests/suite/raster_lanes.rs` compares every output and gradient bit with the baseline
+//! build on trained-like and random scenes, and the raster tests check the rest.
+
+#![cfg(target_arch = "x86_64")]
+
+use super::forward::{EntryPair, PairOrder, TileBlended, prefetch_record};
+use super::tile_forward::{FORWARD_FEATURES, PixelOut, TileInputs, prefetch_texel_rect, span_rect, texel_footprint};
+use crate::stages::bilinear::RowTaps;
+#[cfg(feature = "testing")]
+use crate::stages::composite::{Blend, Step};
+use crate::stages::composite::{CompositeParams, CompositeState};
+use crate::stages::depth_distortion::{DistortionState, mapped_depth};
+use crate::stages::ray_plane::{LANES, intersect_lanes, row_centres};
+use glam::Vec3;
+use std::arch::x86_64::*;
+
+/// The running state of a tile's pixels, one array per value: pixel `q` (tile-local,
+/// row-major) is element `q` of each; every array has [`LANES`] elements of padding after the
+/// last pixel, so that a run of [`LANES`] from any pixel is in bounds (lanes past a span are
+/// read and written back unchanged).
+#[derive(Default)]
+pub(crate) struct LaneStates {
+    transmittance: Vec<f32>,
+    features: [Vec<f32>; FORWARD_FEATURES],
+    /// All bits set once the pixel has stopped compositing, else 0.
+    done: Vec<u32>,
+    median: Vec<f32>,
+    evaluated: Vec<u32>,
+    nan_alpha: Vec<u32>,
+    /// Only with the depth distortion (else empty).
+    spread: Vec<DistortionState>,
+}
+
+/// `v` as `len` copies of `value`, keeping its allocation.
+fn refill<T: Copy>(v: &mut Vec<T>, len: usize, value: T) {
+    v.clear();
+    v.resize(len, value);
+}
+
+impl LaneStates {
+    /// Every pixel of a tile of `n` pixels at the start of compositing.
+    fn reset(&mut self, n: usize, distortion: bool) {
+        let len = n + LANES;
+        refill(&mut self.transmittance, len, 1.0);
+        for f in &mut self.features {
+            refill(f, len, 0.0);
+        }
+        refill(&mut self.done, len, 0);
+        refill(&mut self.median, len, 0.0);
+        refill(&mut self.evaluated, len, 0);
+        refill(&mut self.nan_alpha, len, 0);
+        let start = DistortionState {
+            s1: 0.0,
+            s2: 0.0,
+            distortion: 0.0,
+        };
+        refill(&mut self.spread, if distortion { len } else { 0 }, start);
+    }
+}
+
+/// The eight lanes of `v` from `q` (bounds checked).
+#[inline(always)]
+unsafe fn load_ps(v: &[f32], q: usize) -> __m256 {
+    let lanes = &v[q..q + LANES];
+    // SAFETY: `lanes` holds LANES floats; unaligned loads are allowed.
+    unsafe { _mm256_loadu_ps(lanes.as_ptr()) }
+}
+
+#[inline(always)]
+unsafe fn store_ps(v: &mut [f32], q: usize, x: __m256) {
+    let lanes = &mut v[q..q + LANES];
+    // SAFETY: as in `load_ps`.
+    unsafe { _mm256_storeu_ps(lanes.as_mut_ptr(), x) }
+}
+
+#[inline(always)]
+unsafe fn load_si(v: &[u32], q: usize) -> __m256i {
+    let lanes = &v[q..q + LANES];
+    // SAFETY: as in `load_ps`.
+    unsafe { _mm256_loadu_si256(lanes.as_ptr().cast()) }
+}
+
+#[inline(always)]
+unsafe fn store_si(v: &mut [u32], q: usize, x: __m256i) {
+    let lanes = &mut v[q..q + LANES];
+    // SAFETY: as in `load_ps`.
+    unsafe { _mm256_storeu_si256(lanes.as_mut_ptr().cast(), x) }
+}
+
+/// A lane mask (all bits set or 0) of eight `bool`s.
+#[inline(always)]
+unsafe fn bool_mask(b: &[bool; LANES]) -> __m256i {
+    // SAFETY: a `bool` is one byte, 0 or 1; eight of them are read as one u64.
+    unsafe {
+        let bytes = _mm_loadl_epi64(b.as_ptr().cast());
+        _mm256_cmpgt_epi32(_mm256_cvtepu8_epi32(bytes), _mm256_setzero_si256())
+    }
+}
+
+/// The RGBA samples of the eight lanes, as four vectors (r, g, b, alpha): see the module docs.
+/// Every lane's four texels are read (their indices are clamped into the texture).
+#[inline(always)]
+unsafe fn sample_lanes(taps: &RowTaps, texture: &[[f32; 4]]) -> [__m256; 4] {
+    let ts = taps.texture_side();
+    assert_eq!(texture.len(), ts * ts, "texels must hold ts × ts RGBA values");
+    let (index, weight, keep, _) = taps.lane_arrays();
+    let base = texture.as_ptr().cast::<f32>();
+    // SAFETY: every index is below ts² = texture.len() (`RowTaps` clamps them), so each
+    // 16-byte load reads one texel of `texture`; the rest are register operations.
+    unsafe {
+        let mut acc = [_mm256_setzero_ps(); 4];
+        for k in 0..4 {
+            let texel = |l: usize| _mm_loadu_ps(base.add(4 * index[k][l] as usize));
+            // Lanes 0-3 in the low halves, 4-7 in the high halves.
+            let a = _mm256_set_m128(texel(4), texel(0));
+            let b = _mm256_set_m128(texel(5), texel(1));
+            let c = _mm256_set_m128(texel(6), texel(2));
+            let d = _mm256_set_m128(texel(7), texel(3));
+            let ab_lo = _mm256_unpacklo_ps(a, b); // r0 r1 g0 g1
+            let ab_hi = _mm256_unpackhi_ps(a, b); // b0 b1 a0 a1
+            let cd_lo = _mm256_unpacklo_ps(c, d); // r2 r3 g2 g3
+            let cd_hi = _mm256_unpackhi_ps(c, d); // b2 b3 a2 a3
+            let channels = [
+                _mm256_castpd_ps(_mm256_unpacklo_pd(_mm256_castps_pd(ab_lo), _mm256_castps_pd(cd_lo))),
+                _mm256_castpd_ps(_mm256_unpackhi_pd(_mm256_castps_pd(ab_lo), _mm256_castps_pd(cd_lo))),
+                _mm256_castpd_ps(_mm256_unpacklo_pd(_mm256_castps_pd(ab_hi), _mm256_castps_pd(cd_hi))),
+                _mm256_castpd_ps(_mm256_unpackhi_pd(_mm256_castps_pd(ab_hi), _mm256_castps_pd(cd_hi))),
+            ];
+            let w = _mm256_loadu_ps(weight[k].as_ptr());
+            let m = _mm256_castsi256_ps(_mm256_loadu_si256(keep[k].as_ptr().cast()));
+            for (sum, t) in acc.iter_mut().zip(channels) {
+                *sum = _mm256_add_ps(*sum, _mm256_and_ps(_mm256_mul_ps(w, t), m));
+            }
+        }
+        acc
+    }
+}
+
+/// The compositing thresholds broadcast to every lane.
+struct Thresholds {
+    max_alpha: __m256,
+    min_alpha: __m256,
+    min_transmittance: __m256,
+}
+
+impl Thresholds {
+    #[inline(always)]
+    fn of(params: &CompositeParams) -> Self {
+        // SAFETY: broadcasts need AVX, which every caller has enabled.
+        unsafe {
+            Self {
+                max_alpha: _mm256_set1_ps(params.max_alpha),
+                min_alpha: _mm256_set1_ps(params.min_alpha),
+                min_transmittance: _mm256_set1_ps(params.min_transmittance),
+            }
+        }
+    }
+}
+
+/// [`crate::stages::composite::classify`] of eight lanes (transmittance in front, raw alpha):
+/// the lane is skipped where `kept` is 0, stops where `stop` is set, and is blended (with
+/// `alpha`, `weight` and `next`) elsewhere.
+struct LaneDecision {
+    /// Alpha after the clamp.
+    alpha: __m256,
+    /// `T·(1 − α)`.
+    next: __m256,
+    /// `α·T`.
+    weight: __m256,
+    /// Lane mask: `α ≥ min_alpha` (false for NaN): not skipped.
+    kept: __m256,
+    /// Lane mask: not skipped, and `T·(1 − α) < min_transmittance`.
+    stop: __m256,
+}
+
+#[inline(always)]
+unsafe fn decide(transmittance: __m256, a: __m256, th: &Thresholds) -> LaneDecision {
+    // SAFETY: register operations of AVX, enabled by every caller.
+    unsafe {
+        let clamped = _mm256_cmp_ps::<_CMP_GT_OQ>(a, th.max_alpha);
+        let alpha = _mm256_blendv_ps(a, th.max_alpha, clamped);
+        let kept = _mm256_cmp_ps::<_CMP_GE_OQ>(alpha, th.min_alpha);
+        let next = _mm256_mul_ps(transmittance, _mm256_sub_ps(_mm256_set1_ps(1.0), alpha));
+        let stop = _mm256_and_ps(kept, _mm256_cmp_ps::<_CMP_LT_OQ>(next, th.min_transmittance));
+        LaneDecision {
+            alpha,
+            next,
+            weight: _mm256_mul_ps(alpha, transmittance),
+            kept,
+            stop,
+        }
+    }
+}
+
+/// For the tests (`testing_internals`): [`decide`] of eight lanes as the scalar [`Step`]s it stands for (with
+/// `clamped` taken from the raw alpha, which the tile loop does not need), or `None` without
+/// AVX2.
+#[cfg(feature = "testing")]
+pub(crate) fn classify_lanes(
+    transmittance: &[f32; LANES],
+    a: &[f32; LANES],
+    params: &CompositeParams,
+) -> Option<[Step; LANES]> {
+    if !super::lanes::wide_lanes() {
+        return None;
+    }
+    // SAFETY: the CPU has AVX2 and FMA (checked just above).
+    Some(unsafe { classify_lanes_avx2(transmittance, a, params) })
+}
+
+#[cfg(feature = "testing")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn classify_lanes_avx2(
+    transmittance: &[f32; LANES],
+    a: &[f32; LANES],
+    params: &CompositeParams,
+) -> [Step; LANES] {
+    let lanes = |v: __m256| {
+        let mut out = [0.0f32; LANES];
+        // SAFETY: `out` holds LANES floats.
+        unsafe { _mm256_storeu_ps(out.as_mut_ptr(), v) };
+        out
+    };
+    // SAFETY: the arrays hold LANES floats; AVX2 is enabled.
+    let d = unsafe {
+        decide(
+            _mm256_loadu_ps(transmittance.as_ptr()),
+            _mm256_loadu_ps(a.as_ptr()),
+            &Thresholds::of(params),
+        )
+    };
+    let mask = |v: __m256| _mm256_movemask_ps(v) as u32;
+    let (alpha, next, weight, kept, stop) = (
+        lanes(d.alpha),
+        lanes(d.next),
+        lanes(d.weight),
+        mask(d.kept),
+        mask(d.stop),
+    );
+    std::array::from_fn(|l| {
+        if stop >> l & 1 == 1 {
+            Step::Stop
+        } else if kept >> l & 1 == 0 {
+            Step::Skip
+        } else {
+            Step::Blend(Blend {
+                alpha: alpha[l],
+                transmittance: transmittance[l],
+                weight: weight[l],
+                next_transmittance: next[l],
+                clamped: a[l] > params.max_alpha,
+            })
+        }
+    })
+}
+
+/// For the tests (`testing_internals`): [`sample_lanes`] of every lane as `[r, g, b, alpha]`, or `None` without AVX2.
+#[cfg(feature = "testing")]
+pub(crate) fn sample_rgba_lanes(taps: &RowTaps, texture: &[[f32; 4]]) -> Option<[[f32; 4]; LANES]> {
+    if !super::lanes::wide_lanes() {
+        return None;
+    }
+    // SAFETY: the CPU has AVX2 and FMA (checked just above).
+    Some(unsafe { sample_rgba_lanes_avx2(taps, texture) })
+}
+
+#[cfg(feature = "testing")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn sample_rgba_lanes_avx2(taps: &RowTaps, texture: &[[f32; 4]]) -> [[f32; 4]; LANES] {
+    // SAFETY: AVX2 is enabled; `sample_lanes` checks the texture's size.
+    let channels = unsafe { sample_lanes(taps, texture) };
+    let mut out = [[0.0f32; LANES]; 4];
+    for (o, c) in out.iter_mut().zip(channels) {
+        // SAFETY: `o` holds LANES floats.
+        unsafe { _mm256_storeu_ps(o.as_mut_ptr(), c) };
+    }
+    std::array::from_fn(|l| std::array::from_fn(|c| out[c][l]))
+}
+
+/// [`super::tile_forward::composite_tile`] in explicit AVX2 (same outputs, bit for bit).
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA.
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
+    states: &mut LaneStates,
+    (camera, set, settings, prepared, list, (i0, j0, i1, j1), spans): TileInputs<'_, '_>,
+    impact: &mut [f32],
+    pixels: &mut Vec<PixelOut>,
+    out: &mut TileBlended,
+) {
+    let params = &settings.composite;
+    let ts = set.texture_size;
+    let tw = (i1 - i0) as usize;
+    let n = tw * (j1 - j0) as usize;
+    states.reset(n, DISTORTION);
+    out.order = PairOrder::ByEntry;
+    out.slots.clear();
+    out.transmittance.clear();
+    let TileBlended {
+        entry_pairs: blended,
+        offsets,
+        ..
+    } = out;
+    blended.clear();
+    offsets.clear();
+    let iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    let thresholds = Thresholds::of(params);
+    let (one, half, median_alpha) = (_mm256_set1_ps(1.0), _mm256_set1_ps(0.5), _mm256_set1_ps(0.05));
+    let mut taps = RowTaps::default();
+    for (k, (span, &b)) in spans.iter().zip(list).enumerate() {
+        offsets.push(blended.len() as u32);
+        if let Some(&ahead) = list.get(k + 12) {
+            prefetch_record(&prepared[ahead as usize]);
+        }
+        if let (Some(&ahead), Some(ahead_span)) = (list.get(k + 6), spans.get(k + 6))
+            && let Some(pa) = prepared[ahead as usize].as_ref()
+            && let Some(rect) =
+                span_rect(ahead_span).and_then(|r| texel_footprint(pa, r, (i0, j0), ts, usize::from(ahead_span.pixels)))
+        {
+            prefetch_texel_rect(set.texture_of(ahead as usize).as_ptr(), ts, rect);
+        }
+        let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
+        let plane = p.view_plane();
+        let texture = set.texture_of(b as usize);
+        let colour = [
+            _mm256_set1_ps(p.rgb.x),
+            _mm256_set1_ps(p.rgb.y),
+            _mm256_set1_ps(p.rgb.z),
+        ];
+        let normal = [
+            _mm256_set1_ps(p.normal.x),
+            _mm256_set1_ps(p.normal.y),
+            _mm256_set1_ps(p.normal.z),
+        ];
+        let mut entry_impact = impact[k];
+        for y in span.rows[0]..=span.rows[1] {
+            let [x0, x1] = span.cols[y as usize];
+            let (x0, x1) = (usize::from(x0), usize::from(x1));
+            let py = (j0 + u32::from(y)) as f32 + 0.5;
+            let row = y as usize * tw;
+            let mut x = x0;
+            while x <= x1 {
+                let count = LANES.min(x1 + 1 - x);
+                let q0 = row + x;
+                let first = i0 + x as u32;
+                x += count;
+                // SAFETY: AVX2 and FMA are enabled for this function (its caller checked the
+                // CPU); the loads and stores go through the bounds-checked helpers above and
+                // `sample_lanes` reads texels at indices `RowTaps` clamps into the texture.
+                unsafe {
+                    let in_run = _mm256_cmpgt_epi32(_mm256_set1_epi32(count as i32), iota);
+                    let done = load_si(&states.done, q0);
+                    let active = _mm256_andnot_si256(done, in_run);
+                    if _mm256_testz_si256(active, active) != 0 {
+                        continue;
+                    }
+                    // `evaluated += 1` on the active lanes (a mask is −1).
+                    let evaluated = _mm256_sub_epi32(load_si(&states.evaluated, q0), active);
+                    store_si(&mut states.evaluated, q0, evaluated);
+                    let px = row_centres(first);
+                    let hits = intersect_lanes(&p.transform, &plane, camera, &px, &[py; LANES]);
+                    taps.refill::<false>(&hits.u, &hits.v, ts);
+                    let [r, g, bl, a] = sample_lanes(&taps, texture);
+                    let stepping = _mm256_castsi256_ps(_mm256_and_si256(
+                        active,
+                        _mm256_and_si256(bool_mask(&hits.valid), bool_mask(taps.lane_arrays().3)),
+                    ));
+                    let transmittance = load_ps(&states.transmittance, q0);
+                    let LaneDecision {
+                        alpha,
+                        next,
+                        weight,
+                        kept,
+                        stop,
+                    } = decide(transmittance, a, &thresholds);
+                    let blend = _mm256_and_ps(stepping, _mm256_andnot_ps(stop, kept));
+                    let skipped_nan =
+                        _mm256_andnot_ps(kept, _mm256_and_ps(stepping, _mm256_cmp_ps::<_CMP_UNORD_Q>(a, a)));
+                    let nan_alpha = _mm256_sub_epi32(load_si(&states.nan_alpha, q0), _mm256_castps_si256(skipped_nan));
+                    store_si(&mut states.nan_alpha, q0, nan_alpha);
+                    store_si(
+                        &mut states.done,
+                        q0,
+                        _mm256_or_si256(done, _mm256_castps_si256(_mm256_and_ps(stepping, stop))),
+                    );
+                    let blend_bits = _mm256_movemask_ps(blend) as u32;
+                    if blend_bits == 0 {
+                        continue;
+                    }
+                    let depth = _mm256_loadu_ps(hits.depth.as_ptr());
+                    let features = [
+                        _mm256_add_ps(r, colour[0]),
+                        _mm256_add_ps(g, colour[1]),
+                        _mm256_add_ps(bl, colour[2]),
+                        one,
+                        depth,
+                        normal[0],
+                        normal[1],
+                        normal[2],
+                    ];
+                    for (acc, f) in states.features.iter_mut().zip(features) {
+                        let old = load_ps(acc, q0);
+                        let new = _mm256_add_ps(old, _mm256_mul_ps(f, weight));
+                        store_ps(acc, q0, _mm256_blendv_ps(old, new, blend));
+                    }
+                    store_ps(
+                        &mut states.transmittance,
+                        q0,
+                        _mm256_blendv_ps(transmittance, next, blend),
+                    );
+                    let rule = _mm256_and_ps(
+                        blend,
+                        _mm256_and_ps(
+                            _mm256_cmp_ps::<_CMP_GT_OQ>(transmittance, half),
+                            _mm256_cmp_ps::<_CMP_GT_OQ>(alpha, median_alpha),
+                        ),
+                    );
+                    let median = load_ps(&states.median, q0);
+                    store_ps(&mut states.median, q0, _mm256_blendv_ps(median, depth, rule));
+                    // The blended lanes one by one, in pixel order.
+                    let mut weights = [0.0f32; LANES];
+                    let mut fronts = [0.0f32; LANES];
+                    _mm256_storeu_ps(weights.as_mut_ptr(), weight);
+                    _mm256_storeu_ps(fronts.as_mut_ptr(), transmittance);
+                    let mut bits = blend_bits;
+                    while bits != 0 {
+                        let l = bits.trailing_zeros() as usize;
+                        bits &= bits - 1;
+                        let q = q0 + l;
+                        if DISTORTION {
+                            states.spread[q].add(mapped_depth(hits.depth[l]), weights[l], fronts[l]);
+                        }
+                        entry_impact += weights[l];
+                        blended.push(EntryPair {
+                            pixel: q as u16,
+                            x: (q - row) as u8,
+                            y,
+                            transmittance: fronts[l],
+                        });
+                    }
+                }
+            }
+        }
+        impact[k] = entry_impact;
+    }
+    offsets.push(blended.len() as u32);
+    let bg = settings.background;
+    pixels.clear();
+    for q in 0..n {
+        let state = CompositeState::<FORWARD_FEATURES> {
+            transmittance: states.transmittance[q],
+            features: std::array::from_fn(|c| states.features[c][q]),
+            done: states.done[q] != 0,
+        };
+        let [r, g, b, alpha, depth, nx, ny, nz] = state.finish(&[bg.x, bg.y, bg.z, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        pixels.push(PixelOut {
+            rgb: Vec3::new(r, g, b),
+            alpha,
+            depth,
+            median: states.median[q],
+            normal: Vec3::new(nx, ny, nz),
+            final_t: state.transmittance,
+            evaluated: states.evaluated[q],
+            nan_alpha: states.nan_alpha[q],
+            distortion: if DISTORTION { states.spread[q].distortion } else { 0.0 },
+        });
+    }
+}
