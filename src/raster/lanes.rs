@@ -18,11 +18,14 @@
 //! operations in the same order (Rust never fuses a multiply and an add by itself), so they give
 //! the same bits; the baseline build is the reference the wide one is tested against
 //! (`tests/suite/raster_lanes.rs`), and [`force_baseline`] selects it for such tests and for
-//! machines where one wants to rule the wide path out. One loop has a second, explicit
+//! machines where one wants to rule the wide path out. Two loops have a second, explicit
 //! implementation instead of a second build: the forward's billboard-by-billboard tile
-//! (`tile_forward_avx2.rs`, AVX2 intrinsics, eight pixels sampled and composited side by side),
-//! tested against the baseline the same way, and its lane-wise decision and sample directly
-//! against the stages' scalar `classify` and `RowTaps::sample_rgba`.
+//! (`tile_forward_avx2.rs`, AVX2 intrinsics, eight pixels sampled and composited side by side)
+//! and the compositing backward of each chunk of eight pairs in the backward's
+//! billboard-by-billboard tile (`tile_backward_avx2.rs`), tested against the baseline the same
+//! way (bit for bit, also above the alpha clamp under both clamp gradients), and the forward's
+//! lane-wise decision and sample directly against the stages' scalar `classify` and
+//! `RowTaps::sample_rgba`.
 
 use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
 

@@ -29,6 +29,7 @@ pub mod reference;
 pub(crate) mod row_spans;
 pub(crate) mod schedule;
 mod tile_backward;
+mod tile_backward_avx2;
 mod tile_forward;
 pub(crate) mod tile_forward_avx2;
 mod tile_forward_pixels;

@@ -19,6 +19,8 @@
 use super::backward::{EMPTY_RECORD, EntryRecord, FirstEntryRows, TexelSums, TileGrads, add_transform};
 use super::forward::{EntryPair, PairOrder, RenderOutput, prefetch_record, tile_pixels};
 use super::preprocess::Prepared;
+#[cfg(target_arch = "x86_64")]
+use super::tile_backward_avx2::chunk_backward;
 use super::tile_forward::{prefetch_texel_rect, texel_footprint};
 use super::{ActivatedRef, backward::ImageGradients};
 use crate::stages::bilinear::RowTaps;
@@ -27,13 +29,13 @@ use crate::stages::ray_plane::{LANES, intersect_lanes, intersect_vjp_lanes};
 use glam::Vec3;
 
 /// Channels of the back-to-front recursion: colour (3), opacity (1), depth (1).
-const CHANNELS: usize = 5;
+pub(super) const CHANNELS: usize = 5;
 
 /// The back-to-front state of one pixel and its upstream gradient.
 #[derive(Clone, Copy, Debug)]
-struct PixelBack {
-    back: CompositeBackState<CHANNELS>,
-    d_out: [f32; CHANNELS],
+pub(super) struct PixelBack {
+    pub(super) back: CompositeBackState<CHANNELS>,
+    pub(super) d_out: [f32; CHANNELS],
 }
 
 /// Reusable per-task scratch of [`backward_tile_by_entry`] (rebuilt per tile).
@@ -64,10 +66,11 @@ pub(super) fn backward_tile_by_entry(
         // SAFETY: the CPU has AVX2 and FMA (checked at run time by `wide_lanes`).
         return unsafe { by_entry_avx2(set, out, grads_in, tile, records, first_rows, scratch, sums) };
     }
-    by_entry_body(set, out, grads_in, tile, records, first_rows, scratch, sums)
+    by_entry_body::<false>(set, out, grads_in, tile, records, first_rows, scratch, sums)
 }
 
-/// [`by_entry_body`] compiled for AVX2 and FMA (same operations, same bits).
+/// [`by_entry_body`] compiled for AVX2 and FMA, with each chunk's compositing backward in
+/// explicit AVX2 ([`super::tile_backward_avx2`]; same bits).
 ///
 /// # Safety
 /// The CPU must support AVX2 and FMA.
@@ -84,13 +87,16 @@ unsafe fn by_entry_avx2(
     scratch: &mut EntryScratch,
     sums: &mut TexelSums,
 ) -> TileGrads {
-    by_entry_body(set, out, grads_in, tile, records, first_rows, scratch, sums)
+    by_entry_body::<true>(set, out, grads_in, tile, records, first_rows, scratch, sums)
 }
 
-/// The body of [`backward_tile_by_entry`], inlined into each instruction-set variant.
+/// The body of [`backward_tile_by_entry`], inlined into each instruction-set variant; with
+/// `WIDE` (AVX2 and FMA enabled by the caller) each chunk's compositing backward runs in
+/// explicit AVX2 ([`super::tile_backward_avx2::chunk_backward`]), else pair by pair with the
+/// stages' code below (the reference).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn by_entry_body(
+fn by_entry_body<const WIDE: bool>(
     set: &ActivatedRef<'_>,
     out: &RenderOutput,
     grads_in: &ImageGradients<'_>,
@@ -212,6 +218,47 @@ fn by_entry_body(
             let py: [f32; LANES] = std::array::from_fn(|l| (j0 + u32::from(pair_of(l).y)) as f32 + 0.5);
             let hits = intersect_lanes(&pr.transform, &plane, camera, &px, &py);
             lane_taps.refill::<true>(&hits.u, &hits.v, ts);
+            #[cfg(target_arch = "x86_64")]
+            if WIDE {
+                let rgb = &mut record.rgb;
+                let add_rgb = |d: Vec3| *rgb += d;
+                // SAFETY: `WIDE` is only set by `by_entry_avx2`, whose caller checked AVX2 and
+                // FMA; for the direct adds, `owns` holds for entry `range.start + k`, and this
+                // task is the only one processing it.
+                let g = unsafe {
+                    if direct[k] {
+                        chunk_backward(
+                            chunk,
+                            &lane_taps,
+                            &hits,
+                            texture,
+                            pr.rgb,
+                            params,
+                            pixels,
+                            add_rgb,
+                            |t, g| first_rows.add(b, t, g),
+                        )
+                    } else {
+                        chunk_backward(
+                            chunk,
+                            &lane_taps,
+                            &hits,
+                            texture,
+                            pr.rgb,
+                            params,
+                            pixels,
+                            add_rgb,
+                            |t, g| sums.add(k as u32, t, g),
+                        )
+                    }
+                };
+                record.blended |= g.blended.iter().any(|&b| b);
+                let d_t = intersect_vjp_lanes(&pr.transform, &hits, (&px, &py), (&g.d_u, &g.d_v, &g.d_depth));
+                for lane in 0..chunk.len() {
+                    add_transform(&mut record.transform, &d_t.lane(lane));
+                }
+                continue;
+            }
             // Per pair in pixel order: the compositing backward, then the texel gradients; then
             // the hits' gradients lane-wise, added to the record in pixel order.
             let mut d_depth = [0.0f32; LANES];

@@ -117,47 +117,79 @@ unsafe fn bool_mask(b: &[bool; LANES]) -> __m256i {
     }
 }
 
-/// The RGBA samples of the eight lanes, as four vectors (r, g, b, alpha): see the module docs.
-/// Every lane's four texels are read (their indices are clamped into the texture).
+/// The texels of tap `k` of the eight lanes as four vectors (r, g, b, alpha): each lane's
+/// 16-byte texel loaded and the eight transposed. The caller has checked that `texture` holds
+/// `ts²` texels (every index of `taps` is below `ts²`).
 #[inline(always)]
-unsafe fn sample_lanes(taps: &RowTaps, texture: &[[f32; 4]]) -> [__m256; 4] {
+pub(super) unsafe fn tap_channels(index: &[u32; LANES], texture: &[[f32; 4]]) -> [__m256; 4] {
+    let base = texture.as_ptr().cast::<f32>();
+    // SAFETY: every index is below `texture.len()` (the caller's contract), so each 16-byte load
+    // reads one texel of `texture`; the rest are register operations.
+    unsafe {
+        let texel = |l: usize| _mm_loadu_ps(base.add(4 * index[l] as usize));
+        // Lanes 0-3 in the low halves, 4-7 in the high halves.
+        let a = _mm256_set_m128(texel(4), texel(0));
+        let b = _mm256_set_m128(texel(5), texel(1));
+        let c = _mm256_set_m128(texel(6), texel(2));
+        let d = _mm256_set_m128(texel(7), texel(3));
+        transpose_four(a, b, c, d)
+    }
+}
+
+/// Four vectors holding `[x₀ y₀ z₀ w₀ | x₄ y₄ z₄ w₄]`, `[x₁ … | x₅ …]`, `[x₂ … | x₆ …]`,
+/// `[x₃ … | x₇ …]` (two 4-vectors each) as the eight lanes of x, y, z and w.
+#[inline(always)]
+pub(super) unsafe fn transpose_four(a: __m256, b: __m256, c: __m256, d: __m256) -> [__m256; 4] {
+    // SAFETY: register operations of AVX, enabled by every caller.
+    unsafe {
+        let ab_lo = _mm256_unpacklo_ps(a, b); // x0 x1 y0 y1
+        let ab_hi = _mm256_unpackhi_ps(a, b); // z0 z1 w0 w1
+        let cd_lo = _mm256_unpacklo_ps(c, d); // x2 x3 y2 y3
+        let cd_hi = _mm256_unpackhi_ps(c, d); // z2 z3 w2 w3
+        let pd = _mm256_castps_pd;
+        [
+            _mm256_castpd_ps(_mm256_unpacklo_pd(pd(ab_lo), pd(cd_lo))),
+            _mm256_castpd_ps(_mm256_unpackhi_pd(pd(ab_lo), pd(cd_lo))),
+            _mm256_castpd_ps(_mm256_unpacklo_pd(pd(ab_hi), pd(cd_hi))),
+            _mm256_castpd_ps(_mm256_unpackhi_pd(pd(ab_hi), pd(cd_hi))),
+        ]
+    }
+}
+
+/// The RGBA samples of the eight lanes, as four vectors (r, g, b, alpha), and the texels of
+/// each tap (`[tap][channel]`): see the module docs. Every lane's four texels are read (their
+/// indices are clamped into the texture).
+#[inline(always)]
+pub(super) unsafe fn sample_lanes_with_texels(taps: &RowTaps, texture: &[[f32; 4]]) -> ([__m256; 4], [[__m256; 4]; 4]) {
     let ts = taps.texture_side();
     assert_eq!(texture.len(), ts * ts, "texels must hold ts × ts RGBA values");
     let (index, weight, keep, _) = taps.lane_arrays();
-    let base = texture.as_ptr().cast::<f32>();
-    // SAFETY: every index is below ts² = texture.len() (`RowTaps` clamps them), so each
-    // 16-byte load reads one texel of `texture`; the rest are register operations.
+    // SAFETY: the size was checked above; the rest are register operations of AVX.
     unsafe {
         let mut acc = [_mm256_setzero_ps(); 4];
+        let mut texels = [[_mm256_setzero_ps(); 4]; 4];
         for k in 0..4 {
-            let texel = |l: usize| _mm_loadu_ps(base.add(4 * index[k][l] as usize));
-            // Lanes 0-3 in the low halves, 4-7 in the high halves.
-            let a = _mm256_set_m128(texel(4), texel(0));
-            let b = _mm256_set_m128(texel(5), texel(1));
-            let c = _mm256_set_m128(texel(6), texel(2));
-            let d = _mm256_set_m128(texel(7), texel(3));
-            let ab_lo = _mm256_unpacklo_ps(a, b); // r0 r1 g0 g1
-            let ab_hi = _mm256_unpackhi_ps(a, b); // b0 b1 a0 a1
-            let cd_lo = _mm256_unpacklo_ps(c, d); // r2 r3 g2 g3
-            let cd_hi = _mm256_unpackhi_ps(c, d); // b2 b3 a2 a3
-            let channels = [
-                _mm256_castpd_ps(_mm256_unpacklo_pd(_mm256_castps_pd(ab_lo), _mm256_castps_pd(cd_lo))),
-                _mm256_castpd_ps(_mm256_unpackhi_pd(_mm256_castps_pd(ab_lo), _mm256_castps_pd(cd_lo))),
-                _mm256_castpd_ps(_mm256_unpacklo_pd(_mm256_castps_pd(ab_hi), _mm256_castps_pd(cd_hi))),
-                _mm256_castpd_ps(_mm256_unpackhi_pd(_mm256_castps_pd(ab_hi), _mm256_castps_pd(cd_hi))),
-            ];
+            let channels = tap_channels(&index[k], texture);
             let w = _mm256_loadu_ps(weight[k].as_ptr());
             let m = _mm256_castsi256_ps(_mm256_loadu_si256(keep[k].as_ptr().cast()));
             for (sum, t) in acc.iter_mut().zip(channels) {
                 *sum = _mm256_add_ps(*sum, _mm256_and_ps(_mm256_mul_ps(w, t), m));
             }
+            texels[k] = channels;
         }
-        acc
+        (acc, texels)
     }
 }
 
+/// [`sample_lanes_with_texels`] without the texels.
+#[inline(always)]
+unsafe fn sample_lanes(taps: &RowTaps, texture: &[[f32; 4]]) -> [__m256; 4] {
+    // SAFETY: as for `sample_lanes_with_texels` (the caller enabled AVX2).
+    unsafe { sample_lanes_with_texels(taps, texture).0 }
+}
+
 /// The compositing thresholds broadcast to every lane.
-struct Thresholds {
+pub(super) struct Thresholds {
     max_alpha: __m256,
     min_alpha: __m256,
     min_transmittance: __m256,
@@ -165,7 +197,7 @@ struct Thresholds {
 
 impl Thresholds {
     #[inline(always)]
-    fn of(params: &CompositeParams) -> Self {
+    pub(super) fn of(params: &CompositeParams) -> Self {
         // SAFETY: broadcasts need AVX, which every caller has enabled.
         unsafe {
             Self {
@@ -180,21 +212,21 @@ impl Thresholds {
 /// [`crate::stages::composite::classify`] of eight lanes (transmittance in front, raw alpha):
 /// the lane is skipped where `kept` is 0, stops where `stop` is set, and is blended (with
 /// `alpha`, `weight` and `next`) elsewhere.
-struct LaneDecision {
+pub(super) struct LaneDecision {
     /// Alpha after the clamp.
-    alpha: __m256,
+    pub(super) alpha: __m256,
     /// `T·(1 − α)`.
-    next: __m256,
+    pub(super) next: __m256,
     /// `α·T`.
-    weight: __m256,
+    pub(super) weight: __m256,
     /// Lane mask: `α ≥ min_alpha` (false for NaN): not skipped.
-    kept: __m256,
+    pub(super) kept: __m256,
     /// Lane mask: not skipped, and `T·(1 − α) < min_transmittance`.
-    stop: __m256,
+    pub(super) stop: __m256,
 }
 
 #[inline(always)]
-unsafe fn decide(transmittance: __m256, a: __m256, th: &Thresholds) -> LaneDecision {
+pub(super) unsafe fn decide(transmittance: __m256, a: __m256, th: &Thresholds) -> LaneDecision {
     // SAFETY: register operations of AVX, enabled by every caller.
     unsafe {
         let clamped = _mm256_cmp_ps::<_CMP_GT_OQ>(a, th.max_alpha);

@@ -739,6 +739,15 @@ impl RowTaps {
         (&self.index, &self.weight, &self.keep, &self.has_taps)
     }
 
+    /// The weights' derivative arrays `(∂weight/∂u, ∂weight/∂v)` per tap and lane, for explicit
+    /// vector code (taps made with derivatives only).
+    #[inline(always)]
+    #[allow(clippy::type_complexity)]
+    pub(crate) fn derivative_arrays(&self) -> (&[[f32; LANES]; 4], &[[f32; LANES]; 4]) {
+        debug_assert!(self.derivatives, "taps for sampling only have no derivatives");
+        (&self.d_weight_du, &self.d_weight_dv)
+    }
+
     /// The texture side the taps were computed for.
     #[inline(always)]
     pub(crate) fn texture_side(&self) -> usize {

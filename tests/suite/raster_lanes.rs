@@ -124,6 +124,36 @@ fn every_build_and_walk_agree_bit_for_bit_on_trained_like_scenes() {
     }
 }
 
+/// Alphas above the clamp (`max_alpha`, where the exact clamp gradient is zero and the
+/// reference's passes through), under both clamp gradients: a trained-like scene whose alpha
+/// texels are scaled by 4 and capped at 1 (more than 5 % of the alpha texels above the clamp,
+/// checked).
+#[test]
+fn every_build_and_walk_agree_bit_for_bit_above_the_alpha_clamp() {
+    use bbsplat::stages::composite::{ClampGradient, CompositeParams};
+    let cam = random_scene_camera(160, 128);
+    let mut scene = trained_like_scene(&TrainedLikeConfig::object(3000, 160, 128));
+    for texel in &mut scene.textures {
+        texel[3] = (texel[3] * 4.0).min(1.0);
+    }
+    let clamped = scene.textures.iter().filter(|t| t[3] > 0.99).count();
+    assert!(
+        clamped * 20 > scene.textures.len(),
+        "only {clamped} of {} alpha texels above the clamp",
+        scene.textures.len()
+    );
+    for clamp_gradient in [ClampGradient::Exact, ClampGradient::PassThrough] {
+        let settings = RenderSettings {
+            composite: CompositeParams {
+                clamp_gradient,
+                ..CompositeParams::default()
+            },
+            ..RenderSettings::default()
+        };
+        assert_all_equal(&all_variants(&scene, &cam, &settings, false));
+    }
+}
+
 #[test]
 fn every_build_and_walk_agree_bit_for_bit_with_the_auxiliary_maps() {
     let cam = random_scene_camera(96, 80);

@@ -1,0 +1,238 @@
+//! The compositing backward of a chunk of up to eight blended pairs of one entry
+//! ([`super::tile_backward`]), written in explicit AVX2 instructions: the pairs' samples, their
+//! decisions, the back-to-front step of each pair's pixel and the texels seen through the
+//! upstream gradients run side by side in vector registers; the texel gradients are then emitted
+//! lane by lane as the scalar code emits them.
+//!
+//! A second implementation of the scalar chunk of `tile_backward.rs` (the stages' own code:
+//! [`crate::stages::composite::classify`], [`crate::stages::composite::CompositeBackState::pop`]
+//! and [`crate::stages::bilinear::RowTaps::vjp_rgba_lanes`]), with the same IEEE operations in
+//! the same order per lane, none fused, so the same bits:
+//! - the sample as in [`super::tile_forward_avx2`];
+//! - the pop: with features `f = (r, g, b, 1, depth)`, the colour behind `B` and the upstream
+//!   gradient `g`, `dot = ((((0 + (f₀−B₀)g₀) + (f₁−B₁)g₁) + (f₂−B₂)g₂) + (f₃−B₃)g₃) + (f₄−B₄)g₄`,
+//!   `∂f = w·g`, `B ← α·f + (1 − α)·B`, `∂α = T·dot` (0 where the clamp was active, unless the
+//!   clamp gradient passes through);
+//! - each tap's texel seen through `∂rgba`: `((t_α·∂α + t_r·∂r) + t_g·∂g) + t_b·∂b`, and
+//!   `∂u = Σ_k (∂w_k/∂u · seen_k) & keep_k` from +0 in tap order (likewise `∂v`).
+//!
+//! `tests/suite/raster_lanes.rs` compares every gradient bit with the baseline build.
+
+#![cfg(target_arch = "x86_64")]
+
+use super::forward::EntryPair;
+use super::tile_backward::{CHANNELS, PixelBack};
+use super::tile_forward_avx2::{Thresholds, decide, sample_lanes_with_texels, transpose_four};
+use crate::stages::bilinear::RowTaps;
+use crate::stages::composite::{ClampGradient, CompositeParams};
+use crate::stages::ray_plane::{LANES, RowHits};
+use glam::Vec3;
+use std::arch::x86_64::*;
+
+/// What the compositing backward leaves for one lane of a chunk.
+pub(super) struct ChunkGrads {
+    /// `[∂r, ∂g, ∂b, ∂α]` of the sample (zero for lanes past the chunk).
+    pub(super) d_rgba: [[f32; 4]; LANES],
+    /// The lane is one of the chunk's blended pairs.
+    pub(super) blended: [bool; LANES],
+    /// `∂L/∂depth` of the hit.
+    pub(super) d_depth: [f32; LANES],
+    /// `∂L/∂u`, `∂L/∂v` of the hit (zero where not `blended`).
+    pub(super) d_u: [f32; LANES],
+    pub(super) d_v: [f32; LANES],
+}
+
+/// Eight 4-vectors (one per lane) as four vectors of eight lanes (their first, second, third
+/// and fourth floats).
+#[inline(always)]
+unsafe fn lanes4(v: &[__m128; LANES]) -> [__m256; 4] {
+    // SAFETY: register operations of AVX, enabled by every caller.
+    unsafe {
+        transpose_four(
+            _mm256_set_m128(v[4], v[0]),
+            _mm256_set_m128(v[5], v[1]),
+            _mm256_set_m128(v[6], v[2]),
+            _mm256_set_m128(v[7], v[3]),
+        )
+    }
+}
+
+/// The eight lanes of `v`.
+#[inline(always)]
+unsafe fn store(v: __m256) -> [f32; LANES] {
+    let mut out = [0.0f32; LANES];
+    // SAFETY: `out` holds eight floats; AVX is enabled by every caller.
+    unsafe { _mm256_storeu_ps(out.as_mut_ptr(), v) };
+    out
+}
+
+/// The first four floats of `v` as one vector, and `v[4]`.
+#[inline(always)]
+unsafe fn split(v: &[f32; CHANNELS]) -> (__m128, f32) {
+    // SAFETY: `v` holds five floats; the load reads the first four.
+    (unsafe { _mm_loadu_ps(v.as_ptr()) }, v[4])
+}
+
+/// The compositing backward of the chunk `chunk` (at most [`LANES`] blended pairs of one entry,
+/// in pixel order) with the taps `taps` and hits `hits` of its pairs' pixels: see the module
+/// docs. `pixel(pair)` gives the pair's pixel recursion (behind, upstream), updated in place;
+/// `rgb` is the billboard's SH colour; `add_rgb` receives each blended lane's `(∂r, ∂g, ∂b)` in
+/// pixel order; `emit(texel, g)` each texel gradient, lane by lane and tap by tap.
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA (the caller is compiled with them).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub(super) unsafe fn chunk_backward(
+    chunk: &[EntryPair],
+    taps: &RowTaps,
+    hits: &RowHits,
+    texture: &[[f32; 4]],
+    rgb: Vec3,
+    params: &CompositeParams,
+    pixels: &mut [PixelBack],
+    mut add_rgb: impl FnMut(Vec3),
+    mut emit: impl FnMut(u32, [f32; 4]),
+) -> ChunkGrads {
+    let n = chunk.len();
+    debug_assert!((1..=LANES).contains(&n));
+    // SAFETY: AVX2 and FMA are enabled (the caller's contract); every memory access below is
+    // through bounds-checked slices and arrays, or a helper whose contract is met.
+    unsafe {
+        let ([r, g, bl, a], texels) = sample_lanes_with_texels(taps, texture);
+        let pair = |l: usize| &chunk[l.min(n - 1)];
+        let transmittance = _mm256_setr_ps(
+            pair(0).transmittance,
+            pair(1).transmittance,
+            pair(2).transmittance,
+            pair(3).transmittance,
+            pair(4).transmittance,
+            pair(5).transmittance,
+            pair(6).transmittance,
+            pair(7).transmittance,
+        );
+        let d = decide(transmittance, a, &Thresholds::of(params));
+        let in_chunk = _mm256_castsi256_ps(_mm256_cmpgt_epi32(
+            _mm256_set1_epi32(n as i32),
+            _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+        ));
+        // A replayed pair blends again (the forward blended it with these values); a lane that
+        // did not (never in practice) is left out, as the scalar chunk leaves it out.
+        let sampled = _mm256_castsi256_ps(_mm256_cmpgt_epi32(
+            _mm256_cvtepu8_epi32(_mm_loadl_epi64(taps.lane_arrays().3.as_ptr().cast())),
+            _mm256_setzero_si256(),
+        ));
+        let blended_mask = _mm256_and_ps(_mm256_and_ps(in_chunk, sampled), _mm256_andnot_ps(d.stop, d.kept));
+        let blended_bits = _mm256_movemask_ps(blended_mask) as u32;
+        // The pixels' recursions: four channels of each lane's colour behind and upstream
+        // gradient transposed into lanes, the fifth gathered.
+        let mut behind4 = [_mm_setzero_ps(); LANES];
+        let mut upstream4 = [_mm_setzero_ps(); LANES];
+        let mut behind_depth = [0.0f32; LANES];
+        let mut upstream_depth = [0.0f32; LANES];
+        for l in 0..LANES {
+            let pixel = &pixels[usize::from(pair(l).pixel)];
+            (behind4[l], behind_depth[l]) = split(&pixel.back.behind);
+            (upstream4[l], upstream_depth[l]) = split(&pixel.d_out);
+        }
+        let [b0, b1, b2, b3] = lanes4(&behind4);
+        let [g0, g1, g2, g3] = lanes4(&upstream4);
+        let b4 = _mm256_loadu_ps(behind_depth.as_ptr());
+        let g4 = _mm256_loadu_ps(upstream_depth.as_ptr());
+        let features = [
+            _mm256_add_ps(r, _mm256_set1_ps(rgb.x)),
+            _mm256_add_ps(g, _mm256_set1_ps(rgb.y)),
+            _mm256_add_ps(bl, _mm256_set1_ps(rgb.z)),
+            _mm256_set1_ps(1.0),
+            _mm256_loadu_ps(hits.depth.as_ptr()),
+        ];
+        let behind = [b0, b1, b2, b3, b4];
+        let upstream = [g0, g1, g2, g3, g4];
+        let mut dot = _mm256_setzero_ps();
+        let mut d_features = [_mm256_setzero_ps(); CHANNELS];
+        let mut next_behind = [_mm256_setzero_ps(); CHANNELS];
+        let keep = _mm256_sub_ps(_mm256_set1_ps(1.0), d.alpha);
+        for ch in 0..CHANNELS {
+            let (f, b, u) = (features[ch], behind[ch], upstream[ch]);
+            dot = _mm256_add_ps(dot, _mm256_mul_ps(_mm256_sub_ps(f, b), u));
+            d_features[ch] = _mm256_mul_ps(d.weight, u);
+            next_behind[ch] = _mm256_add_ps(_mm256_mul_ps(d.alpha, f), _mm256_mul_ps(keep, b));
+        }
+        let d_alpha = _mm256_mul_ps(transmittance, dot);
+        let d_alpha = if params.clamp_gradient == ClampGradient::PassThrough {
+            d_alpha
+        } else {
+            let clamped = _mm256_cmp_ps::<_CMP_GT_OQ>(a, _mm256_set1_ps(params.max_alpha));
+            _mm256_andnot_ps(clamped, d_alpha)
+        };
+        // Lanes past the chunk or not blended get no gradient.
+        let d_alpha = _mm256_and_ps(d_alpha, blended_mask);
+        let d_r = _mm256_and_ps(d_features[0], blended_mask);
+        let d_g = _mm256_and_ps(d_features[1], blended_mask);
+        let d_b = _mm256_and_ps(d_features[2], blended_mask);
+        let d_z = _mm256_and_ps(d_features[4], blended_mask);
+        // The blended lanes' new colour behind, back into their pixels.
+        let next_lanes = [
+            store(next_behind[0]),
+            store(next_behind[1]),
+            store(next_behind[2]),
+            store(next_behind[3]),
+            store(next_behind[4]),
+        ];
+        let (dr, dg, db, da) = (store(d_r), store(d_g), store(d_b), store(d_alpha));
+        let mut grads = ChunkGrads {
+            d_rgba: [[0.0; 4]; LANES],
+            blended: [false; LANES],
+            d_depth: store(d_z),
+            d_u: [0.0; LANES],
+            d_v: [0.0; LANES],
+        };
+        for l in 0..n {
+            if blended_bits >> l & 1 == 0 {
+                continue;
+            }
+            pixels[usize::from(chunk[l].pixel)].back.behind = std::array::from_fn(|ch| next_lanes[ch][l]);
+            add_rgb(Vec3::new(dr[l], dg[l], db[l]));
+            grads.d_rgba[l] = [dr[l], dg[l], db[l], da[l]];
+            grads.blended[l] = true;
+        }
+        // Each tap's texel seen through the upstream gradient, then ∂u and ∂v.
+        let (index, weight, keep_masks, _) = taps.lane_arrays();
+        let (d_weight_du, d_weight_dv) = taps.derivative_arrays();
+        let (mut du, mut dv) = (_mm256_setzero_ps(), _mm256_setzero_ps());
+        for k in 0..4 {
+            let [tr, tg, tb, ta] = texels[k];
+            let seen = _mm256_add_ps(
+                _mm256_add_ps(
+                    _mm256_add_ps(_mm256_mul_ps(ta, d_alpha), _mm256_mul_ps(tr, d_r)),
+                    _mm256_mul_ps(tg, d_g),
+                ),
+                _mm256_mul_ps(tb, d_b),
+            );
+            let m = _mm256_castsi256_ps(_mm256_loadu_si256(keep_masks[k].as_ptr().cast()));
+            let wu = _mm256_loadu_ps(d_weight_du[k].as_ptr());
+            let wv = _mm256_loadu_ps(d_weight_dv[k].as_ptr());
+            du = _mm256_add_ps(du, _mm256_and_ps(_mm256_mul_ps(wu, seen), m));
+            dv = _mm256_add_ps(dv, _mm256_and_ps(_mm256_mul_ps(wv, seen), m));
+        }
+        let (du, dv) = (
+            store(_mm256_and_ps(du, blended_mask)),
+            store(_mm256_and_ps(dv, blended_mask)),
+        );
+        grads.d_u = du;
+        grads.d_v = dv;
+        // The texel gradients, lane by lane in pixel order, taps in order.
+        for l in 0..n {
+            if !grads.blended[l] {
+                continue;
+            }
+            let d = glam::Vec4::from_array(grads.d_rgba[l]);
+            for k in 0..4 {
+                if keep_masks[k][l] == u32::MAX {
+                    emit(index[k][l], (weight[k][l] * d).to_array());
+                }
+            }
+        }
+        grads
+    }
+}
