@@ -171,15 +171,10 @@ pub(super) unsafe fn chunk_backward(
         let d_g = _mm256_and_ps(d_features[1], blended_mask);
         let d_b = _mm256_and_ps(d_features[2], blended_mask);
         let d_z = _mm256_and_ps(d_features[4], blended_mask);
-        // The blended lanes' new colour behind, back into their pixels.
-        let next_lanes = [
-            store(next_behind[0]),
-            store(next_behind[1]),
-            store(next_behind[2]),
-            store(next_behind[3]),
-            store(next_behind[4]),
-        ];
-        let (dr, dg, db, da) = (store(d_r), store(d_g), store(d_b), store(d_alpha));
+        // Per lane: its new colour behind (four channels, and the fifth) and its `∂rgba`,
+        // transposed back from lanes to one 4-vector per lane.
+        let mut behind_rows = [[0.0f32; 4]; LANES];
+        let behind_depth = store(next_behind[4]);
         let mut grads = ChunkGrads {
             d_rgba: [[0.0; 4]; LANES],
             blended: [false; LANES],
@@ -187,13 +182,25 @@ pub(super) unsafe fn chunk_backward(
             d_u: [0.0; LANES],
             d_v: [0.0; LANES],
         };
+        let rows = |v: [__m256; 4], out: &mut [[f32; 4]; LANES]| {
+            for (l, v) in v.into_iter().enumerate() {
+                _mm_storeu_ps(out[l].as_mut_ptr(), _mm256_castps256_ps128(v));
+                _mm_storeu_ps(out[l + 4].as_mut_ptr(), _mm256_extractf128_ps::<1>(v));
+            }
+        };
+        rows(
+            transpose_four(next_behind[0], next_behind[1], next_behind[2], next_behind[3]),
+            &mut behind_rows,
+        );
+        rows(transpose_four(d_r, d_g, d_b, d_alpha), &mut grads.d_rgba);
         for l in 0..n {
             if blended_bits >> l & 1 == 0 {
                 continue;
             }
-            pixels[usize::from(chunk[l].pixel)].back.behind = std::array::from_fn(|ch| next_lanes[ch][l]);
-            add_rgb(Vec3::new(dr[l], dg[l], db[l]));
-            grads.d_rgba[l] = [dr[l], dg[l], db[l], da[l]];
+            let [b0, b1, b2, b3] = behind_rows[l];
+            pixels[usize::from(chunk[l].pixel)].back.behind = [b0, b1, b2, b3, behind_depth[l]];
+            let [dr, dg, db, _] = grads.d_rgba[l];
+            add_rgb(Vec3::new(dr, dg, db));
             grads.blended[l] = true;
         }
         // Each tap's texel seen through the upstream gradient, then ∂u and ∂v.
