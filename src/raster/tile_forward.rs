@@ -158,17 +158,7 @@ fn composite_tile_body<const DISTORTION: bool>(
     let mut taps = RowTaps::default();
     for (k, (span, &b)) in spans.iter().zip(list).enumerate() {
         offsets.push(blended.len() as u32);
-        if let Some(&ahead) = list.get(k + 12) {
-            prefetch_record(&prepared[ahead as usize]);
-        }
-        // The texels of an entry a few ahead (their reads would otherwise miss one by one).
-        if let (Some(&ahead), Some(ahead_span)) = (list.get(k + 6), spans.get(k + 6))
-            && let Some(pa) = prepared[ahead as usize].as_ref()
-            && let Some(rect) =
-                span_rect(ahead_span).and_then(|r| texel_footprint(pa, r, (i0, j0), ts, usize::from(ahead_span.pixels)))
-        {
-            prefetch_texel_rect(set.texture_of(ahead as usize).as_ptr(), ts, rect);
-        }
+        prefetch_ahead(set, prepared, list, spans, k, (i0, j0));
         let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
         let plane = p.view_plane();
         let texture = set.texture_of(b as usize);
@@ -264,9 +254,34 @@ fn composite_tile_body<const DISTORTION: bool>(
     }
 }
 
+/// The prefetches of the forward tile loops before entry `k` of a tile at `(i0, j0)` with list
+/// `list` and spans `spans`: the record of the entry 12 ahead, and the texels of the one 6
+/// ahead (their reads would otherwise miss one by one). No effect on values.
+#[inline(always)]
+pub(crate) fn prefetch_ahead(
+    set: &ActivatedRef<'_>,
+    prepared: &[Option<Prepared>],
+    list: &[u32],
+    spans: &[EntrySpans],
+    k: usize,
+    (i0, j0): (u32, u32),
+) {
+    let ts = set.texture_size;
+    if let Some(&ahead) = list.get(k + 12) {
+        prefetch_record(&prepared[ahead as usize]);
+    }
+    if let (Some(&ahead), Some(ahead_span)) = (list.get(k + 6), spans.get(k + 6))
+        && let Some(pa) = prepared[ahead as usize].as_ref()
+        && let Some(rect) =
+            span_rect(ahead_span).and_then(|r| texel_footprint(pa, r, (i0, j0), ts, usize::from(ahead_span.pixels)))
+    {
+        prefetch_texel_rect(set.texture_of(ahead as usize).as_ptr(), ts, rect);
+    }
+}
+
 /// The tile-local pixel rectangle `(x0, y0, x1, y1)` (inclusive) holding an entry's span, or
 /// `None` when the span is empty.
-pub(crate) fn span_rect(span: &EntrySpans) -> Option<(u8, u8, u8, u8)> {
+fn span_rect(span: &EntrySpans) -> Option<(u8, u8, u8, u8)> {
     let ([x0, x1], [y0, y1]) = (span.columns, span.rows);
     (x0 <= x1).then_some((x0, y0, x1, y1))
 }

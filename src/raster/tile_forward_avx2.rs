@@ -23,8 +23,8 @@
 
 #![cfg(target_arch = "x86_64")]
 
-use super::forward::{EntryPair, PairOrder, TileBlended, prefetch_record};
-use super::tile_forward::{FORWARD_FEATURES, PixelOut, TileInputs, prefetch_texel_rect, span_rect, texel_footprint};
+use super::forward::{EntryPair, PairOrder, TileBlended};
+use super::tile_forward::{FORWARD_FEATURES, PixelOut, TileInputs, prefetch_ahead};
 use crate::stages::bilinear::RowTaps;
 #[cfg(feature = "testing")]
 use crate::stages::composite::{Blend, Step};
@@ -362,16 +362,7 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
     let mut taps = RowTaps::default();
     for (k, (span, &b)) in spans.iter().zip(list).enumerate() {
         offsets.push(blended.len() as u32);
-        if let Some(&ahead) = list.get(k + 12) {
-            prefetch_record(&prepared[ahead as usize]);
-        }
-        if let (Some(&ahead), Some(ahead_span)) = (list.get(k + 6), spans.get(k + 6))
-            && let Some(pa) = prepared[ahead as usize].as_ref()
-            && let Some(rect) =
-                span_rect(ahead_span).and_then(|r| texel_footprint(pa, r, (i0, j0), ts, usize::from(ahead_span.pixels)))
-        {
-            prefetch_texel_rect(set.texture_of(ahead as usize).as_ptr(), ts, rect);
-        }
+        prefetch_ahead(set, prepared, list, spans, k, (i0, j0));
         let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
         let plane = p.view_plane();
         let texture = set.texture_of(b as usize);
