@@ -44,6 +44,33 @@ pub(crate) struct PixelOut {
     pub(crate) distortion: f32,
 }
 
+impl PixelOut {
+    /// A pixel's outputs from its final compositing state over the background `bg` (features
+    /// `(r, g, b, 1, depth, normal)` composited over `(bg, 0, 0, 0)`) and its other counters:
+    /// the one copy every forward tile walk uses.
+    #[inline(always)]
+    pub(crate) fn of(
+        state: &CompositeState<FORWARD_FEATURES>,
+        bg: Vec3,
+        median: f32,
+        (evaluated, nan_alpha): (u32, u32),
+        distortion: f32,
+    ) -> Self {
+        let [r, g, b, alpha, depth, nx, ny, nz] = state.finish(&[bg.x, bg.y, bg.z, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        Self {
+            rgb: Vec3::new(r, g, b),
+            alpha,
+            depth,
+            median,
+            normal: Vec3::new(nx, ny, nz),
+            final_t: state.transmittance,
+            evaluated,
+            nan_alpha,
+            distortion,
+        }
+    }
+}
+
 /// The running state of one pixel while the tile's entries are applied.
 #[derive(Clone, Copy, Debug)]
 struct PixelState {
@@ -239,18 +266,14 @@ fn composite_tile_body<const DISTORTION: bool>(
     let bg = settings.background;
     pixels.clear();
     for state in states.iter() {
-        let [r, g, b, alpha, depth, nx, ny, nz] = state.composite.finish(&[bg.x, bg.y, bg.z, 0.0, 0.0, 0.0, 0.0, 0.0]);
-        pixels.push(PixelOut {
-            rgb: Vec3::new(r, g, b),
-            alpha,
-            depth,
-            median: state.median,
-            normal: Vec3::new(nx, ny, nz),
-            final_t: state.composite.transmittance,
-            evaluated: state.evaluated,
-            nan_alpha: state.nan_alpha,
-            distortion: if DISTORTION { state.spread.distortion } else { 0.0 },
-        });
+        let distortion = if DISTORTION { state.spread.distortion } else { 0.0 };
+        pixels.push(PixelOut::of(
+            &state.composite,
+            bg,
+            state.median,
+            (state.evaluated, state.nan_alpha),
+            distortion,
+        ));
     }
 }
 

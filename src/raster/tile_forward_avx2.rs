@@ -31,7 +31,6 @@ use crate::stages::composite::{Blend, Step};
 use crate::stages::composite::{CompositeParams, CompositeState};
 use crate::stages::depth_distortion::{DistortionState, mapped_depth};
 use crate::stages::ray_plane::{LANES, intersect_lanes, row_centres};
-use glam::Vec3;
 use std::arch::x86_64::*;
 
 /// The running state of a tile's pixels, one array per value: pixel `q` (tile-local,
@@ -496,17 +495,13 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
             features: std::array::from_fn(|c| states.features[c][q]),
             done: states.done[q] != 0,
         };
-        let [r, g, b, alpha, depth, nx, ny, nz] = state.finish(&[bg.x, bg.y, bg.z, 0.0, 0.0, 0.0, 0.0, 0.0]);
-        pixels.push(PixelOut {
-            rgb: Vec3::new(r, g, b),
-            alpha,
-            depth,
-            median: states.median[q],
-            normal: Vec3::new(nx, ny, nz),
-            final_t: state.transmittance,
-            evaluated: states.evaluated[q],
-            nan_alpha: states.nan_alpha[q],
-            distortion: if DISTORTION { states.spread[q].distortion } else { 0.0 },
-        });
+        let distortion = if DISTORTION { states.spread[q].distortion } else { 0.0 };
+        pixels.push(PixelOut::of(
+            &state,
+            bg,
+            states.median[q],
+            (states.evaluated[q], states.nan_alpha[q]),
+            distortion,
+        ));
     }
 }

@@ -126,19 +126,8 @@ fn shade_pixel<const DISTORTION: bool>(
         blended_slots.push(k as u32);
         blended_transmittance.push(blend.transmittance);
     }
-    let bg = settings.background;
-    let [r, g, b, alpha, depth, nx, ny, nz] = state.finish(&[bg.x, bg.y, bg.z, 0.0, 0.0, 0.0, 0.0, 0.0]);
-    PixelOut {
-        rgb: Vec3::new(r, g, b),
-        alpha,
-        depth,
-        median,
-        normal: Vec3::new(nx, ny, nz),
-        final_t: state.transmittance,
-        evaluated,
-        nan_alpha,
-        distortion: if DISTORTION { spread.distortion } else { 0.0 },
-    }
+    let distortion = if DISTORTION { spread.distortion } else { 0.0 };
+    PixelOut::of(&state, settings.background, median, (evaluated, nan_alpha), distortion)
 }
 
 /// One (pixel, entry) pair of a tile whose ray hits the billboard's texture support, sampled:
