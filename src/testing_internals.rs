@@ -427,8 +427,7 @@ pub mod forward_avx2 {
     use crate::stages::composite::{CompositeParams, Step};
     use crate::stages::ray_plane::LANES;
 
-    /// The decision of eight lanes (transmittance in front, raw alpha) as `classify`'s steps
-    /// (`clamped` is taken from the raw alpha).
+    /// The decision of eight lanes (transmittance in front, raw alpha) as `classify`'s steps.
     #[cfg(target_arch = "x86_64")]
     pub fn classify_lanes(
         transmittance: &[f32; LANES],

@@ -81,6 +81,16 @@ pub struct TileBlended {
 }
 
 impl TileBlended {
+    /// Empties every list (keeping their storage) for a tile whose pairs will be grouped as
+    /// `order` says: the one start of every forward tile walk.
+    pub(crate) fn start(&mut self, order: PairOrder) {
+        self.order = order;
+        self.slots.clear();
+        self.transmittance.clear();
+        self.entry_pairs.clear();
+        self.offsets.clear();
+    }
+
     /// How the pairs are grouped.
     pub fn order(&self) -> PairOrder {
         self.order

@@ -162,8 +162,7 @@ pub(super) unsafe fn chunk_backward(
         let d_alpha = if params.clamp_gradient == ClampGradient::PassThrough {
             d_alpha
         } else {
-            let clamped = _mm256_cmp_ps::<_CMP_GT_OQ>(a, _mm256_set1_ps(params.max_alpha));
-            _mm256_andnot_ps(clamped, d_alpha)
+            _mm256_andnot_ps(d.clamped, d_alpha)
         };
         // Lanes past the chunk or not blended get no gradient.
         let d_alpha = _mm256_and_ps(d_alpha, blended_mask);

@@ -171,16 +171,12 @@ fn composite_tile_body<const DISTORTION: bool>(
     let states = &mut scratch.pixels;
     states.clear();
     states.resize(n, PixelState::START);
-    out.order = PairOrder::ByEntry;
-    out.slots.clear();
-    out.transmittance.clear();
+    out.start(PairOrder::ByEntry);
     let TileBlended {
         entry_pairs: blended,
         offsets,
         ..
     } = out;
-    blended.clear();
-    offsets.clear();
     // The taps of a chunk of lanes, refilled in place (for sampling only: no derivatives).
     let mut taps = RowTaps::default();
     for (k, (span, &b)) in spans.iter().zip(list).enumerate() {

@@ -222,6 +222,8 @@ pub(super) struct LaneDecision {
     pub(super) kept: __m256,
     /// Lane mask: not skipped, and `T·(1 − α) < min_transmittance`.
     pub(super) stop: __m256,
+    /// Lane mask: the raw alpha was above `max_alpha` (the clamp was active).
+    pub(super) clamped: __m256,
 }
 
 #[inline(always)]
@@ -239,13 +241,13 @@ pub(super) unsafe fn decide(transmittance: __m256, a: __m256, th: &Thresholds) -
             weight: _mm256_mul_ps(alpha, transmittance),
             kept,
             stop,
+            clamped,
         }
     }
 }
 
-/// For the tests (`testing_internals`): [`decide`] of eight lanes as the scalar [`Step`]s it stands for (with
-/// `clamped` taken from the raw alpha, which the tile loop does not need), or `None` without
-/// AVX2.
+/// For the tests (`testing_internals`): [`decide`] of eight lanes as the scalar [`Step`]s it
+/// stands for, or `None` without AVX2.
 #[cfg(feature = "testing")]
 pub(crate) fn classify_lanes(
     transmittance: &[f32; LANES],
@@ -288,6 +290,7 @@ unsafe fn classify_lanes_avx2(
         mask(d.kept),
         mask(d.stop),
     );
+    let clamped = mask(d.clamped);
     std::array::from_fn(|l| {
         if stop >> l & 1 == 1 {
             Step::Stop
@@ -299,7 +302,7 @@ unsafe fn classify_lanes_avx2(
                 transmittance: transmittance[l],
                 weight: weight[l],
                 next_transmittance: next[l],
-                clamped: a[l] > params.max_alpha,
+                clamped: clamped >> l & 1 == 1,
             })
         }
     })
@@ -345,16 +348,12 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
     let tw = (i1 - i0) as usize;
     let n = tw * (j1 - j0) as usize;
     states.reset(n, DISTORTION);
-    out.order = PairOrder::ByEntry;
-    out.slots.clear();
-    out.transmittance.clear();
+    out.start(PairOrder::ByEntry);
     let TileBlended {
         entry_pairs: blended,
         offsets,
         ..
     } = out;
-    blended.clear();
-    offsets.clear();
     let iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
     let thresholds = Thresholds::of(params);
     let (one, half, median_alpha) = (_mm256_set1_ps(1.0), _mm256_set1_ps(0.5), _mm256_set1_ps(0.05));
@@ -415,6 +414,7 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
                         weight,
                         kept,
                         stop,
+                        ..
                     } = decide(transmittance, a, &thresholds);
                     let blend = _mm256_and_ps(stepping, _mm256_andnot_ps(stop, kept));
                     let skipped_nan =

@@ -45,17 +45,13 @@ pub(crate) fn composite_tile_by_pixel<const DISTORTION: bool>(
     lists.build(spans, tw, (j1 - j0) as usize);
     samples.build(camera, set, prepared, list, rect, spans, lists);
     pixels.clear();
-    blended.order = PairOrder::ByPixel;
-    blended.entry_pairs.clear();
+    blended.start(PairOrder::ByPixel);
     let TileBlended {
         slots,
         transmittance,
         offsets,
         ..
     } = blended;
-    slots.clear();
-    transmittance.clear();
-    offsets.clear();
     offsets.push(0);
     for q in 0..n_q {
         pixels.push(shade_pixel::<DISTORTION>(
