@@ -334,9 +334,10 @@ pub mod raster {
         out
     }
 
-    /// The backward pass's per-tile texture-gradient accumulator.
+    /// The backward pass's per-tile texture-gradient accumulator, with a texel list it reuses
+    /// across tiles as the backward does.
     #[derive(Default)]
-    pub struct TexelSums(crate::raster::backward::TexelSums);
+    pub struct TexelSums(crate::raster::backward::TexelSums, Vec<(u32, [f32; 4])>);
 
     impl TexelSums {
         /// Prepares for a tile of `slots` entries with `texels` texels per channel.
@@ -352,7 +353,16 @@ pub mod raster {
 
         /// The per-slot offsets and the (texel, sum) lists of the tile, resetting the cells.
         pub fn finish(&mut self, slots: usize) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
-            self.0.finish(slots)
+            let mut offsets = vec![0];
+            self.0.finish(slots, &mut self.1, |k, (start, end)| {
+                assert_eq!(
+                    (k, start),
+                    (offsets.len() - 1, offsets[k]),
+                    "slots in order, back to back"
+                );
+                offsets.push(end);
+            });
+            (offsets, self.1.clone())
         }
 
         /// Whether every cell and every slot is marked untouched and every cell holds `−0.0`

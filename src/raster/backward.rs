@@ -298,12 +298,9 @@ pub(super) fn add_transform(acc: &mut SplatTransform, d: &SplatTransform) {
     acc.tw += d.tw;
 }
 
-/// What one tile hands to the per-billboard reduction besides its entries' records.
-pub(super) struct TileGrads {
-    /// (texel index, `[∂r, ∂g, ∂b, ∂alpha]`), grouped by entry (see [`EntryRecord::texels`]).
-    pub(super) texels: Vec<(u32, [f32; 4])>,
-    pub(super) background: Vec3,
-}
+/// One tile's texel gradients of the entries that are not their billboard's first: (texel
+/// index, `[∂r, ∂g, ∂b, ∂alpha]`), grouped by entry (see [`EntryRecord::texels`]).
+pub(super) type TileTexels = Vec<(u32, [f32; 4])>;
 
 /// Reusable per-task scratch of the tile backward.
 #[derive(Default)]
@@ -434,25 +431,21 @@ impl TexelSums {
         self.slot_touched[slot as usize] = true;
     }
 
-    /// The touched cells grouped by slot, in texel order within a slot, resetting the flags for
-    /// the next tile. Returns `(offsets, texels)`: the texels of slot `k` are
-    /// `texels[offsets[k]..offsets[k + 1]]`.
+    /// The touched cells grouped by slot, in texel order within a slot, written over `out`
+    /// (cleared first; its storage is kept, see [`BackwardStorage`]), resetting the cells and
+    /// flags for the next tile. `span(k, (start, end))` is called for every slot `k` in order:
+    /// the texels of slot `k` are `out[start..end]`.
     #[inline(always)]
-    pub(crate) fn finish(&mut self, slots: usize) -> (Vec<u32>, Vec<(u32, [f32; 4])>) {
+    pub(crate) fn finish(
+        &mut self,
+        slots: usize,
+        out: &mut Vec<(u32, [f32; 4])>,
+        mut span: impl FnMut(usize, (u32, u32)),
+    ) {
         let texels = self.texels;
-        let mut offsets = Vec::with_capacity(slots + 1);
-        offsets.push(0u32);
-        // The list's length first (a count of the flags of the marked slots), so that it is
-        // allocated once.
-        let touched: usize = (0..slots)
-            .filter(|&slot| self.slot_touched[slot])
-            .map(|slot| {
-                let flags = &self.touched[slot * texels..(slot + 1) * texels];
-                flags.iter().map(|&f| usize::from(f)).sum::<usize>()
-            })
-            .sum();
-        let mut out = Vec::with_capacity(touched);
+        out.clear();
         for slot in 0..slots {
+            let start = out.len() as u32;
             if std::mem::take(&mut self.slot_touched[slot]) {
                 let flags = &mut self.touched[slot * texels..(slot + 1) * texels];
                 let sums = &mut self.sums[slot * texels..(slot + 1) * texels];
@@ -478,16 +471,35 @@ impl TexelSums {
                     }
                 }
             }
-            offsets.push(out.len() as u32);
+            span(slot, (start, out.len() as u32));
         }
-        (offsets, out)
     }
+}
+
+/// The large arrays of one [`render_backward`] call, kept for the next call on the same
+/// thread (see [`BACKWARD_STORAGE`]) so that their pages are faulted in and zeroed by the
+/// kernel once, not per call (they are several megabytes: freed, they go back to the system
+/// and come back as fresh pages). Every value is written before it is read.
+#[derive(Default)]
+struct BackwardStorage {
+    /// Per tile entry: its record.
+    records: Vec<EntryRecord>,
+    /// Per tile entry, only with a normal or distortion gradient: `∂L/∂normal_view`.
+    normal_records: Vec<Vec3>,
+    /// Per tile: its [`TileTexels`].
+    tile_texels: Vec<TileTexels>,
 }
 
 thread_local! {
     /// Each thread's [`TexelSums`], kept across tiles and calls so that its pages are zeroed
     /// by the kernel once, not per call.
     static TEXEL_SUMS: std::cell::RefCell<TexelSums> = std::cell::RefCell::default();
+
+    /// The [`BackwardStorage`] of the last [`render_backward`] call made on this thread. A call
+    /// takes it and puts it back when done, so a call nested in another on the same thread
+    /// (a rayon worker that steals a second view while the first waits) starts from empty
+    /// storage instead of sharing it.
+    static BACKWARD_STORAGE: std::cell::RefCell<BackwardStorage> = std::cell::RefCell::default();
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -501,7 +513,8 @@ fn backward_tile(
     first_rows: &FirstEntryRows,
     scratch: &mut Scratch,
     sums: &mut TexelSums,
-) -> TileGrads {
+    texels: &mut TileTexels,
+) -> Vec3 {
     let state = &out.state;
     let bins = &state.bins;
     let range = bins.tile_range(tile);
@@ -700,11 +713,8 @@ fn backward_tile(
         first = end;
     }
     // The texel sums of the other entries go to the reduction.
-    let (tex_offsets, texels) = sums.finish(list.len());
-    for (rec, span) in records.iter_mut().zip(tex_offsets.windows(2)) {
-        rec.texels = (span[0], span[1]);
-    }
-    TileGrads { texels, background }
+    sums.finish(list.len(), texels, |k, span| records[k].texels = span);
+    background
 }
 
 /// Back-propagates image gradients to every billboard parameter and the background, adding
@@ -749,13 +759,16 @@ pub fn render_backward(
     let state = &out.state;
     let bins = &state.bins;
     let n_tiles = bins.tile_count();
-    // Every tile task resets its own records; this only allocates them (in parallel, as the
-    // records are several megabytes).
-    let mut records = Vec::new();
-    (0..bins.entries.len())
-        .into_par_iter()
-        .map(|_| EMPTY_RECORD)
-        .collect_into_vec(&mut records);
+    // The records and texel lists of the last call on this thread, reused (every tile task
+    // resets its own records and texel list).
+    let mut storage = BACKWARD_STORAGE.take();
+    let BackwardStorage {
+        records,
+        normal_records,
+        tile_texels,
+    } = &mut storage;
+    crate::memory::resize_for_overwrite(records, bins.entries.len(), EMPTY_RECORD);
+    tile_texels.resize_with(n_tiles, Vec::new);
     let texels = set.texels();
     assert_eq!(
         grads.textures.len(),
@@ -779,24 +792,36 @@ pub fn render_backward(
     // Per-entry normal gradients, only when a normal or distortion gradient is given (each tile
     // fills its own range; without them every tile gets an empty range).
     let aux = image_grads.has_aux();
-    let mut normal_records = vec![Vec3::ZERO; if aux { bins.entries.len() } else { 0 }];
+    crate::memory::resize_for_overwrite(normal_records, if aux { bins.entries.len() } else { 0 }, Vec3::ZERO);
     let normal_lengths = (0..n_tiles).map(|t| if aux { bins.tile_range(t).len() } else { 0 });
     // Each tile's work is estimated by its blended pairs and entries; the heaviest tiles go
     // first.
-    let tile_work: Vec<_> = split_by_lengths(&mut records, (0..n_tiles).map(|t| bins.tile_range(t).len()))
+    let tile_work: Vec<_> = split_by_lengths(records, (0..n_tiles).map(|t| bins.tile_range(t).len()))
         .into_iter()
-        .zip(split_by_lengths(&mut normal_records, normal_lengths))
+        .zip(split_by_lengths(normal_records, normal_lengths))
+        .zip(tile_texels.iter_mut())
         .collect();
-    let tiles: Vec<TileGrads> = map_heaviest_first(
+    let backgrounds: Vec<Vec3> = map_heaviest_first(
         tile_work,
         |t| (state.tiles[t].len() + bins.tile_range(t).len()) as u64,
         Scratch::default,
-        |scratch, t, (records, normals)| {
+        |scratch, t, ((records, normals), texels)| {
             TEXEL_SUMS.with_borrow_mut(|sums| {
                 // Each tile is walked as its forward walked it (the grouping of its pairs), and
                 // pixel by pixel for the normal and distortion maps; the same bits either way.
                 if aux || state.tiles[t].order == PairOrder::ByPixel {
-                    backward_tile(set, out, image_grads, t, records, normals, &first_rows, scratch, sums)
+                    backward_tile(
+                        set,
+                        out,
+                        image_grads,
+                        t,
+                        records,
+                        normals,
+                        &first_rows,
+                        scratch,
+                        sums,
+                        texels,
+                    )
                 } else {
                     backward_tile_by_entry(
                         set,
@@ -807,14 +832,16 @@ pub fn render_backward(
                         &first_rows,
                         &mut scratch.by_entry,
                         sums,
+                        texels,
                     )
                 }
             })
         },
     );
-    for tg in &tiles {
-        grads.background += tg.background;
+    for &background in &backgrounds {
+        grads.background += background;
     }
+    let (records, normal_records, tile_texels) = (&storage.records, &storage.normal_records, &storage.tile_texels);
     let camera = &state.camera;
     let centre = camera.centre_f64();
     let degree = state.settings.sh_degree;
@@ -834,7 +861,7 @@ pub fn render_backward(
             .iter()
             .fold(Vec3::ZERO, |acc, &e| acc + normal_records[e as usize])
     };
-    let texels_of = |rec: &EntryRecord| &tiles[rec.tile as usize].texels[rec.texels.0 as usize..rec.texels.1 as usize];
+    let texels_of = |rec: &EntryRecord| &tile_texels[rec.tile as usize][rec.texels.0 as usize..rec.texels.1 as usize];
     // Billboards are reduced in chunks, each chunk in index order by one task. The entry records
     // and gradient rows a billboard reads are scattered (billboards are not in screen order), so
     // each step prefetches them a few billboards ahead: the entry records 12 ahead, the texel
@@ -960,6 +987,7 @@ pub fn render_backward(
             (touched, d_camera)
         })
         .collect();
+    BACKWARD_STORAGE.set(storage);
     let mut touched = Vec::new();
     for (t, d_camera) in &chunks {
         touched.extend_from_slice(t);

@@ -16,7 +16,7 @@
 //! pixel-by-pixel walk (`backward_tile`, which still serves the normal and distortion maps), so
 //! the gradients are the same bits (checksums of `raster_stats`; the raster tests).
 
-use super::backward::{EMPTY_RECORD, EntryRecord, FirstEntryRows, TexelSums, TileGrads, add_transform};
+use super::backward::{EMPTY_RECORD, EntryRecord, FirstEntryRows, TexelSums, TileTexels, add_transform};
 use super::forward::{EntryPair, PairOrder, RenderOutput, prefetch_record, tile_pixels};
 use super::preprocess::Prepared;
 #[cfg(target_arch = "x86_64")]
@@ -47,9 +47,10 @@ pub(super) struct EntryScratch {
 }
 
 /// The backward pass of tile `tile` without the normal and distortion maps: fills `records`
-/// (the tile's entries) and returns the texel sums of the entries that are not their
-/// billboard's first and the tile's background gradient; texel gradients of first entries go
-/// straight to their rows through `first_rows`. Bit for bit what the pixel-by-pixel walk gives.
+/// (the tile's entries) and `texels` (the texel sums of the entries that are not their
+/// billboard's first) and returns the tile's background gradient; texel gradients of first
+/// entries go straight to their rows through `first_rows`. Bit for bit what the
+/// pixel-by-pixel walk gives.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn backward_tile_by_entry(
     set: &ActivatedRef<'_>,
@@ -60,13 +61,14 @@ pub(super) fn backward_tile_by_entry(
     first_rows: &FirstEntryRows,
     scratch: &mut EntryScratch,
     sums: &mut TexelSums,
-) -> TileGrads {
+    texels: &mut TileTexels,
+) -> Vec3 {
     #[cfg(target_arch = "x86_64")]
     if super::lanes::wide_lanes() {
         // SAFETY: the CPU has AVX2 and FMA (checked at run time by `wide_lanes`).
-        return unsafe { by_entry_avx2(set, out, grads_in, tile, records, first_rows, scratch, sums) };
+        return unsafe { by_entry_avx2(set, out, grads_in, tile, records, first_rows, scratch, sums, texels) };
     }
-    by_entry_body::<false>(set, out, grads_in, tile, records, first_rows, scratch, sums)
+    by_entry_body::<false>(set, out, grads_in, tile, records, first_rows, scratch, sums, texels)
 }
 
 /// [`by_entry_body`] compiled for AVX2 and FMA, with each chunk's compositing backward in
@@ -86,8 +88,9 @@ unsafe fn by_entry_avx2(
     first_rows: &FirstEntryRows,
     scratch: &mut EntryScratch,
     sums: &mut TexelSums,
-) -> TileGrads {
-    by_entry_body::<true>(set, out, grads_in, tile, records, first_rows, scratch, sums)
+    texels: &mut TileTexels,
+) -> Vec3 {
+    by_entry_body::<true>(set, out, grads_in, tile, records, first_rows, scratch, sums, texels)
 }
 
 /// The body of [`backward_tile_by_entry`], inlined into each instruction-set variant; with
@@ -105,7 +108,8 @@ fn by_entry_body<const WIDE: bool>(
     first_rows: &FirstEntryRows,
     scratch: &mut EntryScratch,
     sums: &mut TexelSums,
-) -> TileGrads {
+    texels: &mut TileTexels,
+) -> Vec3 {
     let state = &out.state;
     let bins = &state.bins;
     let range = bins.tile_range(tile);
@@ -316,9 +320,6 @@ fn by_entry_body<const WIDE: bool>(
         }
     }
     // The texel sums of the other entries go to the reduction.
-    let (tex_offsets, texels) = sums.finish(list.len());
-    for (rec, span) in records.iter_mut().zip(tex_offsets.windows(2)) {
-        rec.texels = (span[0], span[1]);
-    }
-    TileGrads { texels, background }
+    sums.finish(list.len(), texels, |k, span| records[k].texels = span);
+    background
 }

@@ -172,6 +172,56 @@ fn every_build_and_walk_agree_bit_for_bit_on_the_benchmark_scene() {
     assert_all_equal(&all_variants(&scene, &cam, &RenderSettings::default(), false));
 }
 
+/// `render_backward` keeps its entry records, per-entry normal gradients and per-tile texel
+/// lists for the next call on the same thread; what an earlier, larger call left there changes
+/// no bit. A small scene's bits (with and without the auxiliary maps, which size the normal
+/// records) after larger scenes on one thread equal its bits on a fresh thread, whose storage
+/// starts empty. (Leaving out the tile's reset of its records fails this test: tried. A texel
+/// list left uncleared keeps correct spans and only grows; `texel_sums_match_the_sorting_reference`
+/// catches that.)
+#[test]
+fn reused_backward_storage_changes_no_bit() {
+    let _guard = SWITCH.lock().unwrap_or_else(|e| e.into_inner());
+    let distortion = RenderSettings {
+        distortion: true,
+        ..RenderSettings::default()
+    };
+    let small = move |aux: bool| {
+        let cam = random_scene_camera(96, 80);
+        let settings = if aux { distortion } else { RenderSettings::default() };
+        everything(
+            &trained_like_scene(&TrainedLikeConfig::object(800, 96, 80)),
+            &cam,
+            &settings,
+            aux,
+        )
+    };
+    let large = move |aux: bool| {
+        let cam = random_scene_camera(160, 128);
+        let settings = if aux { distortion } else { RenderSettings::default() };
+        everything(
+            &trained_like_scene(&TrainedLikeConfig::capture(3000, 160, 128)),
+            &cam,
+            &settings,
+            aux,
+        )
+    };
+    let fresh = std::thread::spawn(move || [small(true), small(false)])
+        .join()
+        .expect("the fresh thread renders");
+    let reused = std::thread::spawn(move || {
+        large(true);
+        let with_aux = small(true);
+        large(false);
+        [with_aux, small(false)]
+    })
+    .join()
+    .expect("the reusing thread renders");
+    assert!(fresh[0].len() > 10_000);
+    assert!(fresh[0] == reused[0], "with the auxiliary maps");
+    assert!(fresh[1] == reused[1], "without them");
+}
+
 /// The AVX2 forward's explicit code is used: the CPU has AVX2 and FMA and the baseline is not
 /// forced (callers hold [`SWITCH`]). On a CPU without them the two tests below check only that
 /// the AVX2 entry points refuse to run, and say so.
