@@ -20,7 +20,7 @@ use super::backward::{EMPTY_RECORD, EntryRecord, FirstEntryRows, TexelSums, Tile
 use super::forward::{EntryPair, PairOrder, RenderOutput, prefetch_record, tile_pixels};
 use super::preprocess::Prepared;
 #[cfg(target_arch = "x86_64")]
-use super::tile_backward_avx2::chunk_backward;
+use super::tile_backward_avx2::{add_lanes_in_order, chunk_backward};
 use super::tile_forward::{prefetch_texel_rect, texel_footprint};
 use super::{ActivatedRef, backward::ImageGradients};
 use crate::stages::bilinear::RowTaps;
@@ -258,9 +258,8 @@ fn by_entry_body<const WIDE: bool>(
                 };
                 record.blended |= g.blended.iter().any(|&b| b);
                 let d_t = intersect_vjp_lanes(&pr.transform, &hits, (&px, &py), (&g.d_u, &g.d_v, &g.d_depth));
-                for lane in 0..chunk.len() {
-                    add_transform(&mut record.transform, &d_t.lane(lane));
-                }
+                // SAFETY: as above.
+                unsafe { add_lanes_in_order(&mut record.transform, &d_t, chunk.len()) };
                 continue;
             }
             // Per pair in pixel order: the compositing backward, then the texel gradients; then

@@ -25,7 +25,8 @@ use super::tile_backward::{CHANNELS, PixelBack};
 use super::tile_forward_avx2::{Thresholds, decide, sample_lanes_with_texels, transpose_four};
 use crate::stages::bilinear::RowTaps;
 use crate::stages::composite::{ClampGradient, CompositeParams};
-use crate::stages::ray_plane::{LANES, RowHits};
+use crate::stages::ray_plane::{LANES, LaneTransforms, RowHits};
+use crate::stages::splat_transform::SplatTransform;
 use glam::Vec3;
 use std::arch::x86_64::*;
 
@@ -240,5 +241,82 @@ pub(super) unsafe fn chunk_backward(
             }
         }
         grads
+    }
+}
+
+/// `acc += d.lane(l)` for the lanes `l = 0..n` in order ([`super::backward::add_transform`]
+/// lane after lane, the same bits): the first eight of the nine components of every lane are
+/// turned from one vector per component into one vector per lane by an 8×8 transpose (24
+/// shuffles, where reading each lane's components one by one took 56 inserts) and added to
+/// the running sum one lane after another; the ninth is added as a scalar.
+///
+/// # Safety
+/// The CPU must support AVX2 (the caller is compiled with it).
+#[inline(always)]
+pub(super) unsafe fn add_lanes_in_order(acc: &mut SplatTransform, d: &LaneTransforms, n: usize) {
+    debug_assert!(n <= LANES);
+    // SAFETY: every array read holds LANES floats; the rest are register operations of AVX.
+    unsafe {
+        let row = |r: &[f32; LANES]| _mm256_loadu_ps(r.as_ptr());
+        let rows = [
+            row(&d.tu[0]),
+            row(&d.tu[1]),
+            row(&d.tu[2]),
+            row(&d.tv[0]),
+            row(&d.tv[1]),
+            row(&d.tv[2]),
+            row(&d.tw[0]),
+            row(&d.tw[1]),
+        ];
+        let lanes = transpose_eight(rows);
+        let mut sum = _mm256_setr_ps(
+            acc.tu.x, acc.tu.y, acc.tu.z, acc.tv.x, acc.tv.y, acc.tv.z, acc.tw.x, acc.tw.y,
+        );
+        let mut last = acc.tw.z;
+        for (lane, v) in lanes.iter().enumerate().take(n) {
+            sum = _mm256_add_ps(sum, *v);
+            last += d.tw[2][lane];
+        }
+        let s = store(sum);
+        acc.tu = Vec3::new(s[0], s[1], s[2]);
+        acc.tv = Vec3::new(s[3], s[4], s[5]);
+        acc.tw = Vec3::new(s[6], s[7], last);
+    }
+}
+
+/// The 8×8 transpose: element `l` of `rows[c]` becomes element `c` of the result's vector `l`.
+#[inline(always)]
+unsafe fn transpose_eight(rows: [__m256; 8]) -> [__m256; 8] {
+    // SAFETY: register operations of AVX, enabled by every caller.
+    unsafe {
+        let [r0, r1, r2, r3, r4, r5, r6, r7] = rows;
+        // Pairs of rows interleaved, then quadruples, within each 128-bit half.
+        let t0 = _mm256_unpacklo_ps(r0, r1);
+        let t1 = _mm256_unpackhi_ps(r0, r1);
+        let t2 = _mm256_unpacklo_ps(r2, r3);
+        let t3 = _mm256_unpackhi_ps(r2, r3);
+        let t4 = _mm256_unpacklo_ps(r4, r5);
+        let t5 = _mm256_unpackhi_ps(r4, r5);
+        let t6 = _mm256_unpacklo_ps(r6, r7);
+        let t7 = _mm256_unpackhi_ps(r6, r7);
+        let q0 = _mm256_shuffle_ps::<0x44>(t0, t2);
+        let q1 = _mm256_shuffle_ps::<0xEE>(t0, t2);
+        let q2 = _mm256_shuffle_ps::<0x44>(t1, t3);
+        let q3 = _mm256_shuffle_ps::<0xEE>(t1, t3);
+        let q4 = _mm256_shuffle_ps::<0x44>(t4, t6);
+        let q5 = _mm256_shuffle_ps::<0xEE>(t4, t6);
+        let q6 = _mm256_shuffle_ps::<0x44>(t5, t7);
+        let q7 = _mm256_shuffle_ps::<0xEE>(t5, t7);
+        // Lanes 0-3 from the low halves, 4-7 from the high halves.
+        [
+            _mm256_permute2f128_ps::<0x20>(q0, q4),
+            _mm256_permute2f128_ps::<0x20>(q1, q5),
+            _mm256_permute2f128_ps::<0x20>(q2, q6),
+            _mm256_permute2f128_ps::<0x20>(q3, q7),
+            _mm256_permute2f128_ps::<0x31>(q0, q4),
+            _mm256_permute2f128_ps::<0x31>(q1, q5),
+            _mm256_permute2f128_ps::<0x31>(q2, q6),
+            _mm256_permute2f128_ps::<0x31>(q3, q7),
+        ]
     }
 }
