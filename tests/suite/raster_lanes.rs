@@ -182,30 +182,17 @@ fn every_build_and_walk_agree_bit_for_bit_on_the_benchmark_scene() {
 #[test]
 fn reused_backward_storage_changes_no_bit() {
     let _guard = SWITCH.lock().unwrap_or_else(|e| e.into_inner());
-    let distortion = RenderSettings {
-        distortion: true,
-        ..RenderSettings::default()
+    // Every output bit of a trained-like scene, with or without the auxiliary maps.
+    let bits = |config: TrainedLikeConfig, aux: bool| {
+        let settings = RenderSettings {
+            distortion: aux,
+            ..RenderSettings::default()
+        };
+        let cam = random_scene_camera(config.width, config.height);
+        everything(&trained_like_scene(&config), &cam, &settings, aux)
     };
-    let small = move |aux: bool| {
-        let cam = random_scene_camera(96, 80);
-        let settings = if aux { distortion } else { RenderSettings::default() };
-        everything(
-            &trained_like_scene(&TrainedLikeConfig::object(800, 96, 80)),
-            &cam,
-            &settings,
-            aux,
-        )
-    };
-    let large = move |aux: bool| {
-        let cam = random_scene_camera(160, 128);
-        let settings = if aux { distortion } else { RenderSettings::default() };
-        everything(
-            &trained_like_scene(&TrainedLikeConfig::capture(3000, 160, 128)),
-            &cam,
-            &settings,
-            aux,
-        )
-    };
+    let small = move |aux: bool| bits(TrainedLikeConfig::object(800, 96, 80), aux);
+    let large = move |aux: bool| bits(TrainedLikeConfig::capture(3000, 160, 128), aux);
     let fresh = std::thread::spawn(move || [small(true), small(false)])
         .join()
         .expect("the fresh thread renders");
