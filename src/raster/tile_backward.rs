@@ -214,6 +214,19 @@ fn by_entry_body<const WIDE: bool>(
         if !direct[k] {
             sums.mark(k as u32);
         }
+        // Where the entry's texel gradients go: its billboard's gradient row when the entry is
+        // the billboard's first, else its slot's cells of the tile's sums (the same branch for
+        // every add of the entry).
+        let is_direct = direct[k];
+        let mut emit = |texel: u32, g: [f32; 4]| {
+            if is_direct {
+                // SAFETY: `owns` holds for entry `range.start + k`, and this task is the only
+                // one processing it.
+                unsafe { first_rows.add(b, texel, g) }
+            } else {
+                sums.add(k as u32, texel, g)
+            }
+        };
         for chunk in of.chunks(LANES) {
             // Hits and taps lane-wise (unused lanes repeat the last pair), then the pairs one by
             // one in pixel order.
@@ -227,34 +240,11 @@ fn by_entry_body<const WIDE: bool>(
                 let rgb = &mut record.rgb;
                 let add_rgb = |d: Vec3| *rgb += d;
                 // SAFETY: `WIDE` is only set by `by_entry_avx2`, whose caller checked AVX2 and
-                // FMA; for the direct adds, `owns` holds for entry `range.start + k`, and this
-                // task is the only one processing it.
+                // FMA.
                 let g = unsafe {
-                    if direct[k] {
-                        chunk_backward(
-                            chunk,
-                            &lane_taps,
-                            &hits,
-                            texture,
-                            pr.rgb,
-                            params,
-                            pixels,
-                            add_rgb,
-                            |t, g| first_rows.add(b, t, g),
-                        )
-                    } else {
-                        chunk_backward(
-                            chunk,
-                            &lane_taps,
-                            &hits,
-                            texture,
-                            pr.rgb,
-                            params,
-                            pixels,
-                            add_rgb,
-                            |t, g| sums.add(k as u32, t, g),
-                        )
-                    }
+                    chunk_backward(
+                        chunk, &lane_taps, &hits, texture, pr.rgb, params, pixels, add_rgb, &mut emit,
+                    )
                 };
                 record.blended |= g.blended.iter().any(|&b| b);
                 let d_t = intersect_vjp_lanes(&pr.transform, &hits, (&px, &py), (&g.d_u, &g.d_v, &g.d_depth));
@@ -303,15 +293,7 @@ fn by_entry_body<const WIDE: bool>(
                 record.rgb += Vec3::new(dr, dg, db);
                 record.blended = true;
             }
-            let (d_u, d_v) = if direct[k] {
-                // SAFETY: `owns` holds for entry `range.start + k`, and this task is the only
-                // one processing it.
-                lane_taps.vjp_rgba_lanes(texture, &d_rgba, &has_grad, |texel, g| unsafe {
-                    first_rows.add(b, texel, g)
-                })
-            } else {
-                lane_taps.vjp_rgba_lanes(texture, &d_rgba, &has_grad, |texel, g| sums.add(k as u32, texel, g))
-            };
+            let (d_u, d_v) = lane_taps.vjp_rgba_lanes(texture, &d_rgba, &has_grad, &mut emit);
             let d_t = intersect_vjp_lanes(&pr.transform, &hits, (&px, &py), (&d_u, &d_v, &d_depth));
             for lane in 0..chunk.len() {
                 add_transform(&mut record.transform, &d_t.lane(lane));
