@@ -22,7 +22,7 @@
 
 use super::forward::EntryPair;
 use super::tile_backward::{CHANNELS, PixelBack};
-use super::tile_forward_avx2::{Thresholds, decide, sample_lanes_with_texels, transpose_four};
+use super::tile_forward_avx2::{Thresholds, decide, sample_lanes_with_texels, store, transpose_four};
 use crate::stages::bilinear::RowTaps;
 use crate::stages::composite::{ClampGradient, CompositeParams};
 use crate::stages::ray_plane::{LANES, LaneTransforms, RowHits};
@@ -56,15 +56,6 @@ unsafe fn lanes4(v: &[__m128; LANES]) -> [__m256; 4] {
             _mm256_set_m128(v[7], v[3]),
         )
     }
-}
-
-/// The eight lanes of `v`.
-#[inline(always)]
-unsafe fn store(v: __m256) -> [f32; LANES] {
-    let mut out = [0.0f32; LANES];
-    // SAFETY: `out` holds eight floats; AVX is enabled by every caller.
-    unsafe { _mm256_storeu_ps(out.as_mut_ptr(), v) };
-    out
 }
 
 /// The first four floats of `v` as one vector, and `v[4]`.

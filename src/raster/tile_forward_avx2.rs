@@ -106,6 +106,15 @@ unsafe fn store_si(v: &mut [u32], q: usize, x: __m256i) {
     unsafe { _mm256_storeu_si256(lanes.as_mut_ptr().cast(), x) }
 }
 
+/// The eight lanes of `v`.
+#[inline(always)]
+pub(super) unsafe fn store(v: __m256) -> [f32; LANES] {
+    let mut out = [0.0f32; LANES];
+    // SAFETY: `out` holds eight floats; AVX is enabled by every caller.
+    unsafe { _mm256_storeu_ps(out.as_mut_ptr(), v) };
+    out
+}
+
 /// A lane mask (all bits set or 0) of eight `bool`s.
 #[inline(always)]
 unsafe fn bool_mask(b: &[bool; LANES]) -> __m256i {
@@ -268,12 +277,8 @@ unsafe fn classify_lanes_avx2(
     a: &[f32; LANES],
     params: &CompositeParams,
 ) -> [Step; LANES] {
-    let lanes = |v: __m256| {
-        let mut out = [0.0f32; LANES];
-        // SAFETY: `out` holds LANES floats.
-        unsafe { _mm256_storeu_ps(out.as_mut_ptr(), v) };
-        out
-    };
+    // SAFETY: AVX2 is enabled.
+    let lanes = |v: __m256| unsafe { store(v) };
     // SAFETY: the arrays hold LANES floats; AVX2 is enabled.
     let d = unsafe {
         decide(
@@ -323,11 +328,8 @@ pub(crate) fn sample_rgba_lanes(taps: &RowTaps, texture: &[[f32; 4]]) -> Option<
 unsafe fn sample_rgba_lanes_avx2(taps: &RowTaps, texture: &[[f32; 4]]) -> [[f32; 4]; LANES] {
     // SAFETY: AVX2 is enabled; `sample_lanes` checks the texture's size.
     let channels = unsafe { sample_lanes(taps, texture) };
-    let mut out = [[0.0f32; LANES]; 4];
-    for (o, c) in out.iter_mut().zip(channels) {
-        // SAFETY: `o` holds LANES floats.
-        unsafe { _mm256_storeu_ps(o.as_mut_ptr(), c) };
-    }
+    // SAFETY: AVX2 is enabled.
+    let out = channels.map(|c| unsafe { store(c) });
     std::array::from_fn(|l| std::array::from_fn(|c| out[c][l]))
 }
 
@@ -461,10 +463,7 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
                     let median = load_ps(&states.median, q0);
                     store_ps(&mut states.median, q0, _mm256_blendv_ps(median, depth, rule));
                     // The blended lanes one by one, in pixel order.
-                    let mut weights = [0.0f32; LANES];
-                    let mut fronts = [0.0f32; LANES];
-                    _mm256_storeu_ps(weights.as_mut_ptr(), weight);
-                    _mm256_storeu_ps(fronts.as_mut_ptr(), transmittance);
+                    let (weights, fronts) = (store(weight), store(transmittance));
                     let mut bits = blend_bits;
                     while bits != 0 {
                         let l = bits.trailing_zeros() as usize;
