@@ -51,14 +51,25 @@ pub enum PairOrder {
 
 /// One blended pair of a tile walked entry by entry: the tile-local pixel (its index, column
 /// and row, so that the backward divides nothing) and the transmittance in front of the entry
-/// there.
+/// there. Laid out as C lays it out (pixel, column, row and transmittance at bytes 0, 2, 3 and
+/// 4), so that the AVX2 forward writes the pairs of a run of lanes as two vectors
+/// (`tile_forward_avx2::push_pairs`).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(C)]
 pub(crate) struct EntryPair {
     pub(crate) pixel: u16,
     pub(crate) x: u8,
     pub(crate) y: u8,
     pub(crate) transmittance: f32,
 }
+
+const _: () = {
+    assert!(size_of::<EntryPair>() == 8);
+    assert!(std::mem::offset_of!(EntryPair, pixel) == 0);
+    assert!(std::mem::offset_of!(EntryPair, x) == 2);
+    assert!(std::mem::offset_of!(EntryPair, y) == 3);
+    assert!(std::mem::offset_of!(EntryPair, transmittance) == 4);
+};
 
 /// The blended (entry, pixel) pairs of one tile, grouped as [`TileBlended::order`] says, with
 /// the transmittance in front of each entry where it was blended (`Tᵢ`), which lets the

@@ -16,13 +16,15 @@
 //!   `T' < min_transmittance`; otherwise blended with weight `α·T`;
 //! - the blend (`CompositeState::blend`): `acc + f·w` per feature, `T ← T'`;
 //! - the median rule, the evaluated and NaN-alpha counts, the impact sum and the pairs, each
-//!   as the reference does them (the impact and the pairs lane by lane in pixel order).
+//!   as the reference does them: the impact lane by lane in pixel order (a lane that does not
+//!   blend adds +0, which changes no bit), the pairs packed in pixel order.
 //!
 //! `tests/suite/raster_lanes.rs` compares every output and gradient bit with the baseline
 //! build on trained-like and random scenes, and the raster tests check the rest.
 
 #![cfg(target_arch = "x86_64")]
 
+use super::TILE_SIZE;
 use super::forward::{EntryPair, PairOrder, TileBlended};
 use super::tile_forward::{FORWARD_FEATURES, PixelOut, TileInputs, prefetch_ahead};
 use crate::stages::bilinear::RowTaps;
@@ -333,6 +335,72 @@ unsafe fn sample_rgba_lanes_avx2(taps: &RowTaps, texture: &[[f32; 4]]) -> [[f32;
     std::array::from_fn(|l| std::array::from_fn(|c| out[c][l]))
 }
 
+/// Per 8-bit lane mask: the indices of its set lanes, lowest first, then zeros (the
+/// permutation that moves a run's blended lanes to the front, in order).
+static LEFT_PACK: [[u32; LANES]; 256] = left_pack_table();
+
+const fn left_pack_table() -> [[u32; LANES]; 256] {
+    let mut table = [[0u32; LANES]; 256];
+    let mut mask = 0;
+    while mask < 256 {
+        let (mut n, mut lane) = (0, 0);
+        while lane < LANES {
+            if mask >> lane & 1 == 1 {
+                table[mask][n] = lane as u32;
+                n += 1;
+            }
+            lane += 1;
+        }
+        mask += 1;
+    }
+    table
+}
+
+// A run's pixels and columns fit their fields with room for the run's lanes, so the packed
+// lanes of `push_pairs` never carry into the next field.
+const _: () = assert!((TILE_SIZE * TILE_SIZE) as usize + LANES <= 1 << 16 && TILE_SIZE as usize + LANES <= 1 << 8);
+
+/// Appends to `pairs` the [`EntryPair`] of every lane set in `bits` (below `1 << LANES`), in
+/// lane order, without a branch on `bits`: the run's first lane is tile-local pixel `q0`, column
+/// `x0` and row `y`, and `fronts` holds each lane's transmittance in front. The eight lanes'
+/// pairs are made in two vectors (pixel, column and row packed into one `u32` per lane, beside
+/// the transmittance's bits), the set lanes moved to the front in order ([`LEFT_PACK`]), and all
+/// eight stored; the length then grows by the number of set lanes. The same pairs as pushing
+/// them one by one (every pair is compared with the scalar build's in
+/// `tests/suite/raster_lanes.rs`).
+///
+/// # Safety
+/// The CPU must support AVX2 (the caller is compiled with it).
+#[inline(always)]
+unsafe fn push_pairs(pairs: &mut Vec<EntryPair>, bits: u32, (q0, x0, y): (usize, usize, u8), fronts: __m256) {
+    debug_assert!(bits < 1 << LANES && q0 < (TILE_SIZE * TILE_SIZE) as usize && x0 < TILE_SIZE as usize);
+    pairs.reserve(LANES);
+    let len = pairs.len();
+    // SAFETY: register operations of AVX2, enabled by the caller. `reserve` left room for
+    // LANES pairs after `len`, which the two 32-byte stores fill: `EntryPair` is `repr(C)`, 8
+    // bytes (checked at compile time), with the pixel in bytes 0-1, the column in byte 2, the
+    // row in byte 3 and the transmittance in bytes 4-7, as the little-endian lanes below hold
+    // them. The first `count_ones` stored pairs are the set lanes' pairs, so the new length
+    // covers initialised pairs only.
+    unsafe {
+        // Lane `l`: pixel `q0 + l` and column `x0 + l` (no carry: see the assertion above),
+        // row `y`.
+        let step = _mm256_setr_epi32(0, 0x1_0001, 0x2_0002, 0x3_0003, 0x4_0004, 0x5_0005, 0x6_0006, 0x7_0007);
+        let first = (q0 as u32 | (x0 as u32) << 16 | u32::from(y) << 24) as i32;
+        let place = _mm256_add_epi32(_mm256_set1_epi32(first), step);
+        let order = _mm256_loadu_si256(LEFT_PACK[bits as usize & 0xff].as_ptr().cast());
+        let place = _mm256_permutevar8x32_epi32(place, order);
+        let front = _mm256_permutevar8x32_epi32(_mm256_castps_si256(fronts), order);
+        // Pairs 0, 1 | 4, 5 and 2, 3 | 6, 7 of the packed lanes, then pairs 0-3 and 4-7.
+        let low = _mm256_unpacklo_epi32(place, front);
+        let high = _mm256_unpackhi_epi32(place, front);
+        let out = pairs.as_mut_ptr().add(len).cast::<__m256i>();
+        _mm256_storeu_si256(out, _mm256_permute2x128_si256::<0x20>(low, high));
+        _mm256_storeu_si256(out.add(1), _mm256_permute2x128_si256::<0x31>(low, high));
+        pairs.set_len(len + (bits & 0xff).count_ones() as usize);
+    }
+}
+
 /// [`super::tile_forward::composite_tile`] in explicit AVX2 (same outputs, bit for bit).
 ///
 /// # Safety
@@ -428,10 +496,12 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
                         q0,
                         _mm256_or_si256(done, _mm256_castps_si256(_mm256_and_ps(stepping, stop))),
                     );
+                    // No branch on the blend from here on: which lanes blend depends on the
+                    // texels just read, and a branch on it, mispredicted in about a quarter of
+                    // the runs, kept the next runs' texel reads waiting. A lane that does not
+                    // blend keeps its values (the blends below choose the old ones), adds no
+                    // pair and adds +0 to the impact.
                     let blend_bits = _mm256_movemask_ps(blend) as u32;
-                    if blend_bits == 0 {
-                        continue;
-                    }
                     let depth = _mm256_loadu_ps(hits.depth.as_ptr());
                     let features = [
                         _mm256_add_ps(r, colour[0]),
@@ -462,23 +532,22 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
                     );
                     let median = load_ps(&states.median, q0);
                     store_ps(&mut states.median, q0, _mm256_blendv_ps(median, depth, rule));
-                    // The blended lanes one by one, in pixel order.
-                    let (weights, fronts) = (store(weight), store(transmittance));
-                    let mut bits = blend_bits;
-                    while bits != 0 {
-                        let l = bits.trailing_zeros() as usize;
-                        bits &= bits - 1;
-                        let q = q0 + l;
-                        if DISTORTION {
-                            states.spread[q].add(mapped_depth(hits.depth[l]), weights[l], fronts[l]);
+                    // The blended lanes' pairs, in pixel order.
+                    push_pairs(blended, blend_bits, (q0, q0 - row, y), transmittance);
+                    if DISTORTION {
+                        let (weights, fronts) = (store(weight), store(transmittance));
+                        let mut bits = blend_bits;
+                        while bits != 0 {
+                            let l = bits.trailing_zeros() as usize;
+                            bits &= bits - 1;
+                            states.spread[q0 + l].add(mapped_depth(hits.depth[l]), weights[l], fronts[l]);
                         }
-                        entry_impact += weights[l];
-                        blended.push(EntryPair {
-                            pixel: q as u16,
-                            x: (q - row) as u8,
-                            y,
-                            transmittance: fronts[l],
-                        });
+                    }
+                    // The impact in pixel order, every lane adding its weight or +0 (which
+                    // changes no bit: the impact starts at +0 and grows by positive weights
+                    // only, so it is never −0).
+                    for w in store(_mm256_and_ps(weight, blend)) {
+                        entry_impact += w;
                     }
                 }
             }
