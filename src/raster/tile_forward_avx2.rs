@@ -544,8 +544,8 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
                         }
                     }
                     // The impact in pixel order, every lane adding its weight or +0 (which
-                    // changes no bit: the impact starts at +0 and grows by positive weights
-                    // only, so it is never −0).
+                    // changes no bit: `x + 0 = x` unless `x` is −0, and a sum that starts at +0
+                    // is never −0).
                     for w in store(_mm256_and_ps(weight, blend)) {
                         entry_impact += w;
                     }
