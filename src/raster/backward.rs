@@ -436,12 +436,7 @@ impl TexelSums {
     /// flags for the next tile. `span(k, (start, end))` is called for every slot `k` in order:
     /// the texels of slot `k` are `out[start..end]`.
     #[inline(always)]
-    pub(crate) fn finish(
-        &mut self,
-        slots: usize,
-        out: &mut Vec<(u32, [f32; 4])>,
-        mut span: impl FnMut(usize, (u32, u32)),
-    ) {
+    pub(crate) fn finish(&mut self, slots: usize, out: &mut TileTexels, mut span: impl FnMut(usize, (u32, u32))) {
         let texels = self.texels;
         out.clear();
         for slot in 0..slots {
