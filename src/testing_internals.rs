@@ -453,6 +453,20 @@ pub mod forward_avx2 {
     pub fn sample_rgba_lanes(taps: &RowTaps, texture: &[[f32; 4]]) -> Option<[[f32; 4]; LANES]> {
         crate::raster::tile_forward_avx2::sample_rgba_lanes(taps, texture)
     }
+
+    /// The AVX2 forward's packed push of a run's blended pairs: `pairs` (each as pixel, column,
+    /// row and transmittance bits) with the pairs of the lanes set in `bits` appended, the run's
+    /// first lane at tile-local pixel, column and row `first` and `fronts` the lanes'
+    /// transmittances; `None` without AVX2.
+    #[cfg(target_arch = "x86_64")]
+    pub fn push_pairs_lanes(
+        pairs: &[(u16, u8, u8, u32)],
+        bits: u32,
+        first: (usize, usize, u8),
+        fronts: &[f32; LANES],
+    ) -> Option<Vec<(u16, u8, u8, u32)>> {
+        crate::raster::tile_forward_avx2::push_pairs_lanes(pairs, bits, first, fronts)
+    }
 }
 
 /// The tile passes' scheduling (`raster::schedule`).

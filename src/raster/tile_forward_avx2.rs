@@ -366,8 +366,8 @@ const _: () = assert!((TILE_SIZE * TILE_SIZE) as usize + LANES <= 1 << 16 && TIL
 /// pairs are made in two vectors (pixel, column and row packed into one `u32` per lane, beside
 /// the transmittance's bits), the set lanes moved to the front in order ([`LEFT_PACK`]), and all
 /// eight stored; the length then grows by the number of set lanes. The same pairs as pushing
-/// them one by one (every pair is compared with the scalar build's in
-/// `tests/suite/raster_lanes.rs`).
+/// them one by one (`tests/suite/raster_lanes.rs`: for every lane mask on its own, and every
+/// pair of whole renders against the scalar build's).
 ///
 /// # Safety
 /// The CPU must support AVX2 (the caller is compiled with it).
@@ -399,6 +399,45 @@ unsafe fn push_pairs(pairs: &mut Vec<EntryPair>, bits: u32, (q0, x0, y): (usize,
         _mm256_storeu_si256(out.add(1), _mm256_permute2x128_si256::<0x31>(low, high));
         pairs.set_len(len + (bits & 0xff).count_ones() as usize);
     }
+}
+
+/// For the tests (`testing_internals`): [`push_pairs`] onto `pairs`, each pair returned as
+/// (pixel, column, row, transmittance bits), or `None` without AVX2.
+#[cfg(feature = "testing")]
+pub(crate) fn push_pairs_lanes(
+    pairs: &[(u16, u8, u8, u32)],
+    bits: u32,
+    first: (usize, usize, u8),
+    fronts: &[f32; LANES],
+) -> Option<Vec<(u16, u8, u8, u32)>> {
+    if !super::lanes::wide_lanes() {
+        return None;
+    }
+    let mut out: Vec<EntryPair> = pairs
+        .iter()
+        .map(|&(pixel, x, y, t)| EntryPair {
+            pixel,
+            x,
+            y,
+            transmittance: f32::from_bits(t),
+        })
+        .collect();
+    // Exactly as much room as the pairs need, so that the push must grow the list.
+    out.shrink_to_fit();
+    // SAFETY: the CPU has AVX2 (checked just above); the array holds LANES floats.
+    unsafe { push_pairs_avx2(&mut out, bits, first, fronts) };
+    Some(
+        out.iter()
+            .map(|p| (p.pixel, p.x, p.y, p.transmittance.to_bits()))
+            .collect(),
+    )
+}
+
+#[cfg(feature = "testing")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn push_pairs_avx2(pairs: &mut Vec<EntryPair>, bits: u32, first: (usize, usize, u8), fronts: &[f32; LANES]) {
+    // SAFETY: AVX2 is enabled; the array holds LANES floats.
+    unsafe { push_pairs(pairs, bits, first, _mm256_loadu_ps(fronts.as_ptr())) }
 }
 
 /// [`super::tile_forward::composite_tile`] in explicit AVX2 (same outputs, bit for bit).

@@ -210,7 +210,7 @@ fn reused_backward_storage_changes_no_bit() {
 }
 
 /// The AVX2 forward's explicit code is used: the CPU has AVX2 and FMA and the baseline is not
-/// forced (callers hold [`SWITCH`]). On a CPU without them the two tests below check only that
+/// forced (callers hold [`SWITCH`]). On a CPU without them the tests below check only that
 /// the AVX2 entry points refuse to run, and say so.
 fn avx2_available() -> bool {
     lanes::force_baseline(false);
@@ -291,6 +291,48 @@ fn avx2_forward_decision_equals_classify() {
         }
     }
     assert!(compared > 1000 || !wide);
+}
+
+/// The AVX2 forward's packed push of a run's blended pairs appends, for every one of the 256
+/// lane masks, exactly the pairs that pushing the set lanes one by one appends (pixel, column,
+/// row, transmittance bits), keeps the pairs already there, and grows the list when it is full:
+/// runs at the tile's first pixel and at its last row's last run, over lists of 0, 1 and 13
+/// pairs. (Dropping lane 7 from the count, or reading the mask table mirrored, fails it: tried.)
+#[test]
+fn avx2_packed_pairs_equal_pushing_lane_by_lane() {
+    use bbsplat::testing_internals::forward_avx2::push_pairs_lanes;
+    let _guard = SWITCH.lock().unwrap_or_else(|e| e.into_inner());
+    let wide = avx2_available();
+    let tile = bbsplat::raster::TILE_SIZE as usize;
+    let mut rng = Rng::new(5);
+    let mut compared = 0;
+    for existing in [0usize, 1, 13] {
+        let before: Vec<(u16, u8, u8, u32)> = (0..existing)
+            .map(|i| (i as u16, i as u8, 1, rng.uniform().to_bits()))
+            .collect();
+        // The first run of the tile, and the last run of its last row.
+        for (x0, y) in [(0usize, 0u8), (tile - 8, (tile - 1) as u8)] {
+            let q0 = usize::from(y) * tile + x0;
+            for bits in 0..256u32 {
+                let fronts: [f32; 8] = std::array::from_fn(|_| rng.uniform());
+                let got = push_pairs_lanes(&before, bits, (q0, x0, y), &fronts);
+                assert_eq!(got.is_some(), wide, "the packed push runs exactly when AVX2 is on");
+                let Some(got) = got else { continue };
+                let mut want = before.clone();
+                want.extend(
+                    (0..8)
+                        .filter(|l| bits >> l & 1 == 1)
+                        .map(|l| ((q0 + l) as u16, (x0 + l) as u8, y, fronts[l].to_bits())),
+                );
+                assert_eq!(got, want, "mask {bits:08b} at ({x0}, {y}) after {existing} pairs");
+                compared += 1;
+            }
+        }
+    }
+    println!("wide lanes: {wide}; {compared} masks compared");
+    if wide {
+        assert_eq!(compared, 3 * 2 * 256);
+    }
 }
 
 /// The AVX2 forward's sample of eight lanes is `RowTaps::sample_rgba` bit for bit on every lane
