@@ -2,7 +2,8 @@
 //! ([`super::tile_backward`]), written in explicit AVX2 instructions: the pairs' samples, their
 //! decisions, the back-to-front step of each pair's pixel and the texels seen through the
 //! upstream gradients run side by side in vector registers; the texel gradients are then emitted
-//! lane by lane as the scalar code emits them.
+//! lane by lane as the scalar code emits them, with −0.0 emitted (no bit of any sum changes) for
+//! the taps the scalar code skips, so that no branch depends on the data.
 //!
 //! A second implementation of the scalar chunk of `tile_backward.rs` (the stages' own code:
 //! [`crate::stages::composite::classify`], [`crate::stages::composite::CompositeBackState::pop`]
@@ -219,16 +220,26 @@ pub(super) unsafe fn chunk_backward(
         );
         grads.d_u = du;
         grads.d_v = dv;
-        // The texel gradients, lane by lane in pixel order, taps in order.
-        for l in 0..n {
-            if !grads.blended[l] {
-                continue;
-            }
-            let d = glam::Vec4::from_array(grads.d_rgba[l]);
+        // The texel gradients, lane by lane in pixel order, taps in order. Every one of the
+        // chunk's 32 (lane, tap) slots emits, without a branch: `weight · ∂rgba` where the lane
+        // blended and the tap is inside the texture, else −0.0 in every channel, which changes no
+        // sum it is added to (`x + (−0) = x` for every `x`, −0 and +0 included). A tap outside
+        // the texture has its index clamped into it and a lane past the chunk repeats the last
+        // pair's taps, so every index is one the chunk's taps read. (Which taps are outside
+        // depends on the data: a branch on it was mispredicted about a million times per
+        // forward + backward of the trained-like object scene, by cachegrind's branch
+        // simulation.)
+        let lane_on: [u32; LANES] = std::array::from_fn(|l| 0u32.wrapping_sub(blended_bits >> l & 1));
+        let negative_zero = _mm_set1_ps(-0.0);
+        for l in 0..LANES {
+            let d = _mm_loadu_ps(grads.d_rgba[l].as_ptr());
             for k in 0..4 {
-                if keep_masks[k][l] == u32::MAX {
-                    emit(index[k][l], (weight[k][l] * d).to_array());
-                }
+                let g = _mm_mul_ps(_mm_set1_ps(weight[k][l]), d);
+                let on = _mm_castsi128_ps(_mm_set1_epi32((keep_masks[k][l] & lane_on[l]) as i32));
+                let g = _mm_or_ps(_mm_and_ps(on, g), _mm_andnot_ps(on, negative_zero));
+                let mut out = [0.0f32; 4];
+                _mm_storeu_ps(out.as_mut_ptr(), g);
+                emit(index[k][l], out);
             }
         }
         grads
