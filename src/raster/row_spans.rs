@@ -94,8 +94,31 @@ impl BillboardRows {
     }
 }
 
-/// The rows of a wide billboard's box (`rows`, one per image row from `pixel_min[1]`).
+/// The rows of a wide billboard's box (`rows`, one per image row from `pixel_min[1]`): with
+/// AVX2 when the CPU has it (the rows' eight lanes in one vector instead of two; the same
+/// operations, so the same bits), else with the baseline instructions.
 fn fill_rows(p: &Prepared, half_side: f32, rows: &mut [[u32; 2]]) {
+    #[cfg(target_arch = "x86_64")]
+    if super::lanes::wide_lanes() {
+        // SAFETY: the CPU has AVX2 and FMA (checked at run time by `wide_lanes`).
+        return unsafe { fill_rows_avx2(p, half_side, rows) };
+    }
+    fill_rows_body(p, half_side, rows);
+}
+
+/// [`fill_rows_body`] compiled for AVX2 and FMA.
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn fill_rows_avx2(p: &Prepared, half_side: f32, rows: &mut [[u32; 2]]) {
+    fill_rows_body(p, half_side, rows);
+}
+
+/// The body of [`fill_rows`], inlined into each instruction-set variant.
+#[inline(always)]
+fn fill_rows_body(p: &Prepared, half_side: f32, rows: &mut [[u32; 2]]) {
     let n = p.pixel_max[0] + 1;
     let Some(quad) = support_quad(&p.transform, half_side) else {
         rows.fill([p.pixel_min[0], n]);
