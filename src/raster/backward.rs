@@ -269,6 +269,21 @@ impl FirstEntryRows {
         }
     }
 
+    /// Billboard `b`'s gradient row (`TS²` texels).
+    ///
+    /// # Safety
+    /// As for [`FirstEntryRows::add`]; the row must not be reached in another way (through
+    /// `add` or another `row_mut`) while the returned slice is alive.
+    #[inline]
+    // The rows are shared by the tile tasks through `&self`; each row's exclusivity is the
+    // caller's contract, as for `add`.
+    #[allow(clippy::mut_from_ref)]
+    pub(super) unsafe fn row_mut(&self, b: usize) -> &mut [[f32; 4]] {
+        assert!(b < self.len, "billboard out of range");
+        // SAFETY: in bounds (checked above); exclusive by the caller's contract.
+        unsafe { std::slice::from_raw_parts_mut(self.rows.add(b * self.texels), self.texels) }
+    }
+
     /// Start of billboard `b`'s gradient row, for prefetches only (never dereferenced through
     /// this pointer).
     #[inline]
@@ -422,6 +437,17 @@ impl TexelSums {
         let s = &mut self.sums[cell];
         *s = (Vec4::from_array(*s) + Vec4::from_array(g)).to_array();
         self.touched[cell] = 1;
+    }
+
+    /// Marks `slot` (see [`TexelSums::mark`]) and returns its cells and touched flags, for
+    /// adding to directly: an add to texel `t` adds to `cells[t]` (which holds `−0.0` in every
+    /// channel until its first add, so that the first is assigned) and sets `flags[t]` to 1,
+    /// as [`TexelSums::add`] does.
+    #[inline(always)]
+    pub(crate) fn slot_mut(&mut self, slot: u32) -> (&mut [[f32; 4]], &mut [u8]) {
+        self.mark(slot);
+        let cells = slot as usize * self.texels..(slot as usize + 1) * self.texels;
+        (&mut self.sums[cells.clone()], &mut self.touched[cells])
     }
 
     /// Marks `slot` as added to: [`TexelSums::finish`] reads out (and resets) only marked

@@ -20,13 +20,13 @@ use super::backward::{EMPTY_RECORD, EntryRecord, FirstEntryRows, TexelSums, Tile
 use super::forward::{EntryPair, PairOrder, RenderOutput, prefetch_record, tile_pixels};
 use super::preprocess::Prepared;
 #[cfg(target_arch = "x86_64")]
-use super::tile_backward_avx2::{add_lanes_in_order, chunk_backward};
+use super::tile_backward_avx2::{TexelTarget, add_lanes_in_order, chunk_backward};
 use super::tile_forward::{prefetch_texel_rect, texel_footprint};
 use super::{ActivatedRef, backward::ImageGradients};
 use crate::stages::bilinear::RowTaps;
 use crate::stages::composite::{CompositeBackState, Step, classify};
 use crate::stages::ray_plane::{LANES, intersect_lanes, intersect_vjp_lanes};
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 
 /// Channels of the back-to-front recursion: colour (3), opacity (1), depth (1).
 pub(super) const CHANNELS: usize = 5;
@@ -44,6 +44,9 @@ pub(super) struct EntryScratch {
     pixels: Vec<PixelBack>,
     /// Per slot: the tile adds the entry's texture gradients to its billboard's row itself.
     direct: Vec<bool>,
+    /// The touched flags of a gradient row's texels: set by the adds, never read (a row has
+    /// no flags; the sums' slots do).
+    row_flags: Vec<u8>,
 }
 
 /// The backward pass of tile `tile` without the normal and distortion maps: fills `records`
@@ -129,7 +132,12 @@ fn by_entry_body<const WIDE: bool>(
         ..EMPTY_RECORD
     });
     sums.start(list.len(), ts * ts);
-    let EntryScratch { pixels, direct } = scratch;
+    let EntryScratch {
+        pixels,
+        direct,
+        row_flags,
+    } = scratch;
+    row_flags.resize(ts * ts, 0);
     direct.clear();
     direct.extend(
         list.iter()
@@ -211,21 +219,14 @@ fn by_entry_body<const WIDE: bool>(
         let plane = pr.view_plane();
         let texture = set.texture_of(b);
         let record = &mut records[k];
-        if !direct[k] {
-            sums.mark(k as u32);
-        }
         // Where the entry's texel gradients go: its billboard's gradient row when the entry is
-        // the billboard's first, else its slot's cells of the tile's sums (the same branch for
-        // every add of the entry).
-        let is_direct = direct[k];
-        let mut emit = |texel: u32, g: [f32; 4]| {
-            if is_direct {
-                // SAFETY: `owns` holds for entry `range.start + k`, and this task is the only
-                // one processing it.
-                unsafe { first_rows.add(b, texel, g) }
-            } else {
-                sums.add(k as u32, texel, g)
-            }
+        // the billboard's first, else its slot's cells of the tile's sums.
+        let (cells, flags) = if direct[k] {
+            // SAFETY: `owns` holds for entry `range.start + k`, and this task is the only one
+            // processing it; the row is reached only through `cells` until the next entry.
+            (unsafe { first_rows.row_mut(b) }, &mut row_flags[..])
+        } else {
+            sums.slot_mut(k as u32)
         };
         for chunk in of.chunks(LANES) {
             // Hits and taps lane-wise (unused lanes repeat the last pair), then the pairs one by
@@ -237,16 +238,26 @@ fn by_entry_body<const WIDE: bool>(
             lane_taps.refill::<true>(&hits.u, &hits.v, ts);
             #[cfg(target_arch = "x86_64")]
             if WIDE {
-                let rgb = &mut record.rgb;
-                let add_rgb = |d: Vec3| *rgb += d;
+                let target = TexelTarget {
+                    cells: &mut *cells,
+                    flags: &mut *flags,
+                };
                 // SAFETY: `WIDE` is only set by `by_entry_avx2`, whose caller checked AVX2 and
                 // FMA.
                 let g = unsafe {
                     chunk_backward(
-                        chunk, &lane_taps, &hits, texture, pr.rgb, params, pixels, add_rgb, &mut emit,
+                        chunk,
+                        &lane_taps,
+                        &hits,
+                        texture,
+                        pr.rgb,
+                        params,
+                        pixels,
+                        &mut record.rgb,
+                        target,
                     )
                 };
-                record.blended |= g.blended.iter().any(|&b| b);
+                record.blended |= g.blended;
                 let d_t = intersect_vjp_lanes(&pr.transform, &hits, (&px, &py), (&g.d_u, &g.d_v, &g.d_depth));
                 // SAFETY: as above.
                 unsafe { add_lanes_in_order(&mut record.transform, &d_t, chunk.len()) };
@@ -293,7 +304,13 @@ fn by_entry_body<const WIDE: bool>(
                 record.rgb += Vec3::new(dr, dg, db);
                 record.blended = true;
             }
-            let (d_u, d_v) = lane_taps.vjp_rgba_lanes(texture, &d_rgba, &has_grad, &mut emit);
+            // Each texel gradient added as `TexelSums::add` and `FirstEntryRows::add` add it.
+            let emit = |texel: u32, g: [f32; 4]| {
+                let cell = &mut cells[texel as usize];
+                *cell = (Vec4::from_array(*cell) + Vec4::from_array(g)).to_array();
+                flags[texel as usize] = 1;
+            };
+            let (d_u, d_v) = lane_taps.vjp_rgba_lanes(texture, &d_rgba, &has_grad, emit);
             let d_t = intersect_vjp_lanes(&pr.transform, &hits, (&px, &py), (&d_u, &d_v, &d_depth));
             for lane in 0..chunk.len() {
                 add_transform(&mut record.transform, &d_t.lane(lane));

@@ -31,12 +31,10 @@ use crate::stages::splat_transform::SplatTransform;
 use glam::Vec3;
 use std::arch::x86_64::*;
 
-/// What the compositing backward leaves for one lane of a chunk.
+/// What the compositing backward leaves for the lanes of a chunk.
 pub(super) struct ChunkGrads {
-    /// `[∂r, ∂g, ∂b, ∂α]` of the sample (zero for lanes past the chunk).
-    pub(super) d_rgba: [[f32; 4]; LANES],
-    /// The lane is one of the chunk's blended pairs.
-    pub(super) blended: [bool; LANES],
+    /// Some lane is one of the chunk's blended pairs.
+    pub(super) blended: bool,
     /// `∂L/∂depth` of the hit.
     pub(super) d_depth: [f32; LANES],
     /// `∂L/∂u`, `∂L/∂v` of the hit (zero where not `blended`).
@@ -66,11 +64,19 @@ unsafe fn split(v: &[f32; CHANNELS]) -> (__m128, f32) {
     (unsafe { _mm_loadu_ps(v.as_ptr()) }, v[4])
 }
 
+/// Where the texel gradients of one entry are added: one cell per texel of the texture (its
+/// billboard's gradient row, or its slot of the tile's sums) and a flag per cell, set to 1 by
+/// every add (the sums read them; a gradient row's flags are scratch that nothing reads).
+pub(super) struct TexelTarget<'a> {
+    pub(super) cells: &'a mut [[f32; 4]],
+    pub(super) flags: &'a mut [u8],
+}
+
 /// The compositing backward of the chunk `chunk` (at most [`LANES`] blended pairs of one entry,
 /// in pixel order) with the taps `taps` and hits `hits` of its pairs' pixels: see the module
-/// docs. `pixel(pair)` gives the pair's pixel recursion (behind, upstream), updated in place;
-/// `rgb` is the billboard's SH colour; `add_rgb` receives each blended lane's `(∂r, ∂g, ∂b)` in
-/// pixel order; `emit(texel, g)` each texel gradient, lane by lane and tap by tap.
+/// docs. `pixels[pair.pixel]` is the pair's pixel recursion (behind, upstream), updated in
+/// place; `rgb` is the billboard's SH colour; `record_rgb` receives each blended lane's
+/// `(∂r, ∂g, ∂b)` in pixel order; `target` each texel gradient, lane by lane and tap by tap.
 ///
 /// # Safety
 /// The CPU must support AVX2 and FMA (the caller is compiled with them).
@@ -84,8 +90,8 @@ pub(super) unsafe fn chunk_backward(
     rgb: Vec3,
     params: &CompositeParams,
     pixels: &mut [PixelBack],
-    mut add_rgb: impl FnMut(Vec3),
-    mut emit: impl FnMut(u32, [f32; 4]),
+    record_rgb: &mut Vec3,
+    target: TexelTarget<'_>,
 ) -> ChunkGrads {
     let n = chunk.len();
     debug_assert!((1..=LANES).contains(&n));
@@ -163,17 +169,12 @@ pub(super) unsafe fn chunk_backward(
         let d_g = _mm256_and_ps(d_features[1], blended_mask);
         let d_b = _mm256_and_ps(d_features[2], blended_mask);
         let d_z = _mm256_and_ps(d_features[4], blended_mask);
-        // Per lane: its new colour behind (four channels, and the fifth) and its `∂rgba`,
-        // transposed back from lanes to one 4-vector per lane.
+        // Per lane: its new colour behind (four channels, and the fifth; a lane that did not
+        // blend keeps its old one), transposed back from lanes to one 4-vector per lane.
+        let next_behind: [__m256; CHANNELS] =
+            std::array::from_fn(|ch| _mm256_blendv_ps(behind[ch], next_behind[ch], blended_mask));
         let mut behind_rows = [[0.0f32; 4]; LANES];
         let behind_depth = store(next_behind[4]);
-        let mut grads = ChunkGrads {
-            d_rgba: [[0.0; 4]; LANES],
-            blended: [false; LANES],
-            d_depth: store(d_z),
-            d_u: [0.0; LANES],
-            d_v: [0.0; LANES],
-        };
         let rows = |v: [__m256; 4], out: &mut [[f32; 4]; LANES]| {
             for (l, v) in v.into_iter().enumerate() {
                 _mm_storeu_ps(out[l].as_mut_ptr(), _mm256_castps256_ps128(v));
@@ -184,17 +185,22 @@ pub(super) unsafe fn chunk_backward(
             transpose_four(next_behind[0], next_behind[1], next_behind[2], next_behind[3]),
             &mut behind_rows,
         );
-        rows(transpose_four(d_r, d_g, d_b, d_alpha), &mut grads.d_rgba);
         for l in 0..n {
-            if blended_bits >> l & 1 == 0 {
-                continue;
-            }
             let [b0, b1, b2, b3] = behind_rows[l];
             pixels[usize::from(chunk[l].pixel)].back.behind = [b0, b1, b2, b3, behind_depth[l]];
-            let [dr, dg, db, _] = grads.d_rgba[l];
-            add_rgb(Vec3::new(dr, dg, db));
-            grads.blended[l] = true;
         }
+        // The colour gradients added to the entry's in pixel order, every lane adding its own
+        // or +0 (which changes no bit: a sum that starts at +0 is never −0), as one 4-vector
+        // per lane whose fourth channel is not kept.
+        let mut d_rgba_rows = [[0.0f32; 4]; LANES];
+        rows(transpose_four(d_r, d_g, d_b, d_alpha), &mut d_rgba_rows);
+        let mut rgb_sum = _mm_setr_ps(record_rgb.x, record_rgb.y, record_rgb.z, 0.0);
+        for row in &d_rgba_rows {
+            rgb_sum = _mm_add_ps(rgb_sum, _mm_loadu_ps(row.as_ptr()));
+        }
+        let mut rgb_out = [0.0f32; 4];
+        _mm_storeu_ps(rgb_out.as_mut_ptr(), rgb_sum);
+        *record_rgb = Vec3::new(rgb_out[0], rgb_out[1], rgb_out[2]);
         // Each tap's texel seen through the upstream gradient, then ∂u and ∂v.
         let (index, weight, keep_masks, _) = taps.lane_arrays();
         let (d_weight_du, d_weight_dv) = taps.derivative_arrays();
@@ -214,35 +220,53 @@ pub(super) unsafe fn chunk_backward(
             du = _mm256_add_ps(du, _mm256_and_ps(_mm256_mul_ps(wu, seen), m));
             dv = _mm256_add_ps(dv, _mm256_and_ps(_mm256_mul_ps(wv, seen), m));
         }
-        let (du, dv) = (
-            store(_mm256_and_ps(du, blended_mask)),
-            store(_mm256_and_ps(dv, blended_mask)),
+        // The texel gradients: per tap, `weight · ∂rgba` of every lane in four channel vectors,
+        // −0.0 in every channel where the lane did not blend or the tap is outside the texture
+        // (which changes no sum it is added to: `x + (−0) = x` for every `x`, −0 and +0
+        // included), transposed to one 4-vector per lane. Then every one of the chunk's 32
+        // (lane, tap) slots is added to its cell, lane by lane in pixel order, taps in order,
+        // without a branch. A tap outside the texture has its index clamped into it and a lane
+        // past the chunk repeats the last pair's taps, so every index is one the chunk's taps
+        // read. (Which taps are outside depends on the data: a branch on it cost more than the
+        // adds of −0.0, docs/perf.md.)
+        let negative_zero = _mm256_set1_ps(-0.0);
+        let mut tap_grads = [[[0.0f32; 4]; LANES]; 4];
+        for k in 0..4 {
+            let w = _mm256_loadu_ps(weight[k].as_ptr());
+            let on = _mm256_and_ps(
+                _mm256_castsi256_ps(_mm256_loadu_si256(keep_masks[k].as_ptr().cast())),
+                blended_mask,
+            );
+            let channel = |d: __m256| _mm256_blendv_ps(negative_zero, _mm256_mul_ps(w, d), on);
+            rows(
+                transpose_four(channel(d_r), channel(d_g), channel(d_b), channel(d_alpha)),
+                &mut tap_grads[k],
+            );
+        }
+        let TexelTarget { cells, flags } = target;
+        let ts = taps.texture_side();
+        assert!(
+            cells.len() == ts * ts && flags.len() == ts * ts,
+            "a texel target holds one cell and one flag per texel"
         );
-        grads.d_u = du;
-        grads.d_v = dv;
-        // The texel gradients, lane by lane in pixel order, taps in order. Every one of the
-        // chunk's 32 (lane, tap) slots emits, without a branch: `weight · ∂rgba` where the lane
-        // blended and the tap is inside the texture, else −0.0 in every channel, which changes no
-        // sum it is added to (`x + (−0) = x` for every `x`, −0 and +0 included). A tap outside
-        // the texture has its index clamped into it and a lane past the chunk repeats the last
-        // pair's taps, so every index is one the chunk's taps read. (Which taps are outside
-        // depends on the data: a branch on it was mispredicted about a million times per
-        // forward + backward of the trained-like object scene, by cachegrind's branch
-        // simulation.)
-        let lane_on: [u32; LANES] = std::array::from_fn(|l| 0u32.wrapping_sub(blended_bits >> l & 1));
-        let negative_zero = _mm_set1_ps(-0.0);
         for l in 0..LANES {
-            let d = _mm_loadu_ps(grads.d_rgba[l].as_ptr());
             for k in 0..4 {
-                let g = _mm_mul_ps(_mm_set1_ps(weight[k][l]), d);
-                let on = _mm_castsi128_ps(_mm_set1_epi32((keep_masks[k][l] & lane_on[l]) as i32));
-                let g = _mm_or_ps(_mm_and_ps(on, g), _mm_andnot_ps(on, negative_zero));
-                let mut out = [0.0f32; 4];
-                _mm_storeu_ps(out.as_mut_ptr(), g);
-                emit(index[k][l], out);
+                let t = index[k][l] as usize;
+                debug_assert!(t < cells.len(), "tap indices are clamped into the texture");
+                // SAFETY: `RowTaps` clamps every index into the texture, whose `ts²` texels
+                // match the target's cells and flags (asserted above).
+                let (cell, flag) = (cells.get_unchecked_mut(t), flags.get_unchecked_mut(t));
+                let sum = _mm_add_ps(_mm_loadu_ps(cell.as_ptr()), _mm_loadu_ps(tap_grads[k][l].as_ptr()));
+                _mm_storeu_ps(cell.as_mut_ptr(), sum);
+                *flag = 1;
             }
         }
-        grads
+        ChunkGrads {
+            blended: blended_bits != 0,
+            d_depth: store(d_z),
+            d_u: store(_mm256_and_ps(du, blended_mask)),
+            d_v: store(_mm256_and_ps(dv, blended_mask)),
+        }
     }
 }
 
