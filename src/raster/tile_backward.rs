@@ -20,7 +20,7 @@ use super::backward::{EMPTY_RECORD, EntryRecord, FirstEntryRows, TexelSums, Tile
 use super::forward::{EntryPair, PairOrder, RenderOutput, prefetch_record, tile_pixels};
 use super::preprocess::Prepared;
 #[cfg(target_arch = "x86_64")]
-use super::tile_backward_avx2::{TexelTarget, add_lanes_in_order, chunk_backward};
+use super::tile_backward_avx2::{TexelTarget, add_lanes_in_order, chunk_backward, chunk_lanes};
 use super::tile_forward::{prefetch_texel_rect, texel_footprint};
 use super::{ActivatedRef, backward::ImageGradients};
 use crate::stages::bilinear::RowTaps;
@@ -231,13 +231,14 @@ fn by_entry_body<const WIDE: bool>(
         for chunk in of.chunks(LANES) {
             // Hits and taps lane-wise (unused lanes repeat the last pair), then the pairs one by
             // one in pixel order.
-            let pair_of = |l: usize| &chunk[l.min(chunk.len() - 1)];
-            let px: [f32; LANES] = std::array::from_fn(|l| (i0 + u32::from(pair_of(l).x)) as f32 + 0.5);
-            let py: [f32; LANES] = std::array::from_fn(|l| (j0 + u32::from(pair_of(l).y)) as f32 + 0.5);
-            let hits = intersect_lanes(&pr.transform, &plane, camera, &px, &py);
-            lane_taps.refill::<true>(&hits.u, &hits.v, ts);
             #[cfg(target_arch = "x86_64")]
             if WIDE {
+                // SAFETY: `WIDE` is only set by `by_entry_avx2`, whose caller checked AVX2 and
+                // FMA.
+                let lanes = unsafe { chunk_lanes(chunk, (i0, j0)) };
+                let (px, py) = (&lanes.px, &lanes.py);
+                let hits = intersect_lanes(&pr.transform, &plane, camera, px, py);
+                lane_taps.refill::<true>(&hits.u, &hits.v, ts);
                 let target = TexelTarget {
                     cells: &mut *cells,
                     flags: &mut *flags,
@@ -247,6 +248,7 @@ fn by_entry_body<const WIDE: bool>(
                 let g = unsafe {
                     chunk_backward(
                         chunk,
+                        &lanes,
                         &lane_taps,
                         &hits,
                         texture,
@@ -258,11 +260,16 @@ fn by_entry_body<const WIDE: bool>(
                     )
                 };
                 record.blended |= g.blended;
-                let d_t = intersect_vjp_lanes(&pr.transform, &hits, (&px, &py), (&g.d_u, &g.d_v, &g.d_depth));
+                let d_t = intersect_vjp_lanes(&pr.transform, &hits, (px, py), (&g.d_u, &g.d_v, &g.d_depth));
                 // SAFETY: as above.
                 unsafe { add_lanes_in_order(&mut record.transform, &d_t, chunk.len()) };
                 continue;
             }
+            let pair_of = |l: usize| &chunk[l.min(chunk.len() - 1)];
+            let px: [f32; LANES] = std::array::from_fn(|l| (i0 + u32::from(pair_of(l).x)) as f32 + 0.5);
+            let py: [f32; LANES] = std::array::from_fn(|l| (j0 + u32::from(pair_of(l).y)) as f32 + 0.5);
+            let hits = intersect_lanes(&pr.transform, &plane, camera, &px, &py);
+            lane_taps.refill::<true>(&hits.u, &hits.v, ts);
             // Per pair in pixel order: the compositing backward, then the texel gradients; then
             // the hits' gradients lane-wise, added to the record in pixel order.
             let mut d_depth = [0.0f32; LANES];

@@ -72,9 +72,76 @@ pub(super) struct TexelTarget<'a> {
     pub(super) flags: &'a mut [u8],
 }
 
+/// The pairs of a chunk lane by lane (lanes past the chunk repeat its last pair): their pixel
+/// centres, the transmittances in front and the tile-local pixels.
+pub(super) struct ChunkLanes {
+    /// `(i0 + x) as f32 + 0.5` and `(j0 + y) as f32 + 0.5` of each lane's pair.
+    pub(super) px: [f32; LANES],
+    pub(super) py: [f32; LANES],
+    transmittance: __m256,
+    pixel: [u32; LANES],
+}
+
+/// [`ChunkLanes`] of `chunk` (1 to [`LANES`] pairs) in the tile whose first pixel is `(i0, j0)`:
+/// the pairs read as two vectors and split into their fields (the pixel, column and row packed
+/// in one 32-bit word per pair, see [`EntryPair`]), instead of lane by lane. The centres are the
+/// scalar code's, bit for bit: the integer `i0 + x` converted to f32 (exact conversion of the same
+/// integer for `i0 + x < 2³¹`), plus 0.5.
+///
+/// # Safety
+/// The CPU must support AVX2 (the caller is compiled with it).
+#[inline(always)]
+pub(super) unsafe fn chunk_lanes(chunk: &[EntryPair], (i0, j0): (u32, u32)) -> ChunkLanes {
+    let n = chunk.len();
+    assert!((1..=LANES).contains(&n) && i0 < 1 << 31 && j0 < 1 << 31);
+    let mut padded = [EntryPair::default(); LANES];
+    let pairs: &[EntryPair; LANES] = match chunk.try_into() {
+        Ok(full) => full,
+        Err(_) => {
+            padded[..n].copy_from_slice(chunk);
+            padded[n..].fill(chunk[n - 1]);
+            &padded
+        }
+    };
+    // SAFETY: the two loads read the eight pairs (64 bytes) of `pairs`; the rest are register
+    // operations of AVX2.
+    unsafe {
+        let base = pairs.as_ptr().cast::<__m256i>();
+        // Pairs 0-3 and 4-7, each as (word, transmittance) 32-bit pairs.
+        let (first, second) = (_mm256_loadu_si256(base), _mm256_loadu_si256(base.add(1)));
+        let field = |order: __m256i| {
+            _mm256_blend_epi32::<0xF0>(
+                _mm256_permutevar8x32_epi32(first, order),
+                _mm256_permutevar8x32_epi32(second, order),
+            )
+        };
+        let words = field(_mm256_setr_epi32(0, 2, 4, 6, 0, 2, 4, 6));
+        let transmittance = _mm256_castsi256_ps(field(_mm256_setr_epi32(1, 3, 5, 7, 1, 3, 5, 7)));
+        let x = _mm256_and_si256(_mm256_srli_epi32::<16>(words), _mm256_set1_epi32(0xff));
+        let y = _mm256_srli_epi32::<24>(words);
+        let centre = |origin: u32, c: __m256i| {
+            store(_mm256_add_ps(
+                _mm256_cvtepi32_ps(_mm256_add_epi32(c, _mm256_set1_epi32(origin as i32))),
+                _mm256_set1_ps(0.5),
+            ))
+        };
+        let mut pixel = [0u32; LANES];
+        _mm256_storeu_si256(
+            pixel.as_mut_ptr().cast(),
+            _mm256_and_si256(words, _mm256_set1_epi32(0xffff)),
+        );
+        ChunkLanes {
+            px: centre(i0, x),
+            py: centre(j0, y),
+            transmittance,
+            pixel,
+        }
+    }
+}
+
 /// The compositing backward of the chunk `chunk` (at most [`LANES`] blended pairs of one entry,
-/// in pixel order) with the taps `taps` and hits `hits` of its pairs' pixels: see the module
-/// docs. `pixels[pair.pixel]` is the pair's pixel recursion (behind, upstream), updated in
+/// in pixel order, with its [`ChunkLanes`] `lanes`) with the taps `taps` and hits `hits` of its
+/// pairs' pixels: see the module docs. `pixels[pair.pixel]` is the pair's pixel recursion (behind, upstream), updated in
 /// place; `rgb` is the billboard's SH colour; `record_rgb` receives each blended lane's
 /// `(∂r, ∂g, ∂b)` in pixel order; `target` each texel gradient, lane by lane and tap by tap.
 ///
@@ -84,6 +151,7 @@ pub(super) struct TexelTarget<'a> {
 #[allow(clippy::too_many_arguments)]
 pub(super) unsafe fn chunk_backward(
     chunk: &[EntryPair],
+    lanes: &ChunkLanes,
     taps: &RowTaps,
     hits: &RowHits,
     texture: &[[f32; 4]],
@@ -99,17 +167,7 @@ pub(super) unsafe fn chunk_backward(
     // through bounds-checked slices and arrays, or a helper whose contract is met.
     unsafe {
         let ([r, g, bl, a], texels) = sample_lanes_with_texels(taps, texture);
-        let pair = |l: usize| &chunk[l.min(n - 1)];
-        let transmittance = _mm256_setr_ps(
-            pair(0).transmittance,
-            pair(1).transmittance,
-            pair(2).transmittance,
-            pair(3).transmittance,
-            pair(4).transmittance,
-            pair(5).transmittance,
-            pair(6).transmittance,
-            pair(7).transmittance,
-        );
+        let transmittance = lanes.transmittance;
         let d = decide(transmittance, a, &Thresholds::of(params));
         let in_chunk = _mm256_castsi256_ps(_mm256_cmpgt_epi32(
             _mm256_set1_epi32(n as i32),
@@ -130,7 +188,7 @@ pub(super) unsafe fn chunk_backward(
         let mut behind_depth = [0.0f32; LANES];
         let mut upstream_depth = [0.0f32; LANES];
         for l in 0..LANES {
-            let pixel = &pixels[usize::from(pair(l).pixel)];
+            let pixel = &pixels[lanes.pixel[l] as usize];
             (behind4[l], behind_depth[l]) = split(&pixel.back.behind);
             (upstream4[l], upstream_depth[l]) = split(&pixel.d_out);
         }
@@ -187,7 +245,7 @@ pub(super) unsafe fn chunk_backward(
         );
         for l in 0..n {
             let [b0, b1, b2, b3] = behind_rows[l];
-            pixels[usize::from(chunk[l].pixel)].back.behind = [b0, b1, b2, b3, behind_depth[l]];
+            pixels[lanes.pixel[l] as usize].back.behind = [b0, b1, b2, b3, behind_depth[l]];
         }
         // The colour gradients added to the entry's in pixel order, every lane adding its own
         // or +0 (which changes no bit: a sum that starts at +0 is never −0), as one 4-vector
