@@ -11,13 +11,13 @@
 //! result does not depend on how rayon schedules tiles. Texture gradients are summed per
 //! (entry, texel) as the pixels produce them, in a per-thread accumulator of dense cells with
 //! touched flags, and handed on sparse per entry (only the texels some pixel of the tile
-//! touched); see `TexelSums`. The first of a billboard's entries (in tile order) needs no sum:
-//! its tile adds each texel contribution straight to the billboard's gradient row as the pixels
-//! produce it, and the reduction adds the other entries' sums to the row after it (see
-//! `FirstEntryRows`); a billboard with a single tile entry (most billboards of a dense view)
-//! thus has no texel sums at all.
+//! touched); see `TexelSums`. The billboard's entry with the most blended pairs (its owning
+//! entry) needs no sum: its tile adds each texel contribution straight to the billboard's
+//! gradient row as the pixels produce it, and the reduction adds the other entries' sums to the
+//! row after it, in tile order (see `OwnedRows`); a billboard with a single tile entry thus has
+//! no texel sums at all.
 
-use super::binning::TileBins;
+use super::ForwardState;
 use super::forward::{
     PairOrder, RenderOutput, TileBlended, TileCandidates, prefetch, prefetch_record, prefetch_ref, prefetch_taps,
     split_by_lengths, tile_pixels,
@@ -186,7 +186,7 @@ pub(super) struct EntryRecord {
     pub(super) transform: SplatTransform,
     pub(super) rgb: Vec3,
     /// The tile; its texel gradients are `tiles[tile].texels[texels.0..texels.1]` (empty when
-    /// the tile added them to the billboard's gradient row itself, see [`FirstEntryRows`]).
+    /// the tile added them to the billboard's gradient row itself, see [`OwnedRows`]).
     pub(super) tile: u32,
     pub(super) texels: (u32, u32),
     /// Some pixel of the tile blended this entry (it has gradients to reduce).
@@ -201,60 +201,64 @@ pub(super) const EMPTY_RECORD: EntryRecord = EntryRecord {
     blended: false,
 };
 
-/// The texture-gradient rows of the billboards, written during the tile pass by the tile of
-/// each billboard's first entry (in tile order).
+/// The texture-gradient rows of the billboards, each written during the tile pass by the tile
+/// of the billboard's *owning* entry: its entry with the most blended pairs (the first of them
+/// in tile order on a tie; [`row_owners`]).
 ///
-/// A billboard's first entry is the first term of the per-billboard sum over entries in tile
-/// order, so its tile adds each texel contribution to the row the moment a pixel produces it,
-/// in pixel order, instead of summing them per (entry, texel) in [`TexelSums`] and handing the
-/// sums on; the reduction then adds the other entries' sums to the row, in tile order, after
-/// the tile pass. A billboard with a single entry (most billboards of a dense view: 0.9 entries
-/// per billboard in the benchmark) is then done in its tile; a trained scene's billboards have
-/// about 5 entries, and the first one's texels no longer go through a list (14 % of the list
-/// entries of the trained-like object scene, `docs/perf.md`). Each row has one writer during the
-/// tile pass (the tile holding the billboard's first entry), so tiles running in parallel never
+/// The owning entry is the first term of the per-billboard sum, so its tile adds each texel
+/// contribution to the row the moment a pixel produces it, in pixel order, instead of summing
+/// them per (entry, texel) in [`TexelSums`] and handing the sums on; the reduction then adds the
+/// other entries' sums to the row, in tile order, after the tile pass. A billboard with a single
+/// entry is done in its tile. Owning by the most pairs rather than by the first entry in tile
+/// order halves the pairs whose gradients go through the sums on the trained-like object scene
+/// (1.18 M → 0.55 M of 1.80 M pairs: a billboard's first tile usually holds a sliver of it),
+/// and with them the texel lists written and read back (`docs/perf.md`). Each row has one writer
+/// during the tile pass (the tile holding the owning entry), so tiles running in parallel never
 /// touch the same row.
 ///
 /// Rounding: into a zero row (a fresh [`RenderGradients`]) this gives the sums bit for bit
 /// (`((0 + g₁) + g₂) + …` equals `0 + ((g₁ + g₂) + …)` in IEEE arithmetic, signed zeros
-/// included, which is what adding the first entry's sum to the zero row gave); into a row that
-/// already holds other views' gradients, the view's first-entry contributions are added one at
-/// a time rather than as one sum. Either way the order is fixed (pixel order, then tile order),
-/// so the result does not depend on the thread count.
-pub(super) struct FirstEntryRows {
+/// included, which is what adding the owning entry's sum to the zero row gives); into a row
+/// that already holds other views' gradients, the owning entry's contributions are added one at
+/// a time rather than as one sum. Either way the order is fixed (the owning entry in pixel
+/// order, then the others in tile order, each summed in pixel order; which entry owns depends
+/// on the forward's blended pairs only), so the result does not depend on the thread count.
+pub(super) struct OwnedRows<'a> {
     /// Start of `RenderGradients::textures`.
     rows: *mut [f32; 4],
     /// Texels per billboard (`TS²`).
     texels: usize,
     /// Number of billboards.
     len: usize,
+    /// Per billboard: the global index of its owning entry ([`row_owners`]).
+    owners: &'a [u32],
 }
 
-// SAFETY: the pointer is only dereferenced through `FirstEntryRows::add`, whose callers (the
-// tile tasks) each write only rows that `owns` gives them: one entry per billboard passes, and
-// the tile ranges are disjoint, so no two tasks write the same row. The buffer outlives the tile
-// pass, during which nothing else accesses it (the reduction runs after it).
-unsafe impl Sync for FirstEntryRows {}
-// SAFETY: the struct is a pointer into a buffer that outlives the tile pass plus two sizes;
-// moving it to a worker thread moves no data, and the writes through it follow the rules above.
-unsafe impl Send for FirstEntryRows {}
+// SAFETY: the pointer is only dereferenced through `OwnedRows::add` and `OwnedRows::row_mut`,
+// whose callers (the tile tasks) each write only rows that `owns` gives them: one entry per
+// billboard passes, and the tile ranges are disjoint, so no two tasks write the same row. The
+// buffer outlives the tile pass, during which nothing else accesses it (the reduction runs after
+// it).
+unsafe impl Sync for OwnedRows<'_> {}
+// SAFETY: the struct is a pointer into a buffer that outlives the tile pass, two sizes and a
+// shared slice; moving it to a worker thread moves no data, and the writes through it follow the
+// rules above.
+unsafe impl Send for OwnedRows<'_> {}
 
-impl FirstEntryRows {
+impl OwnedRows<'_> {
     /// Whether the task processing global entry `entry` (of billboard `b`) writes `b`'s row:
-    /// `entry` is `b`'s first entry (in tile order). At most one entry passes for each
-    /// billboard (the first one `billboard_entries` names), whatever the bins hold, so with
-    /// disjoint tile ranges (checked by [`render_backward`]) at most one task writes each row.
+    /// `entry` is `b`'s owning entry. At most one entry passes for each billboard (the one
+    /// `owners` names), so with disjoint tile ranges (checked by [`render_backward`]) at most
+    /// one task writes each row.
     #[inline]
-    pub(super) fn owns(&self, bins: &TileBins, b: u32, entry: usize) -> bool {
-        let b = b as usize;
-        let (start, end) = (bins.billboard_offsets[b], bins.billboard_offsets[b + 1]);
-        end > start && bins.billboard_entries[start as usize] as usize == entry
+    pub(super) fn owns(&self, b: u32, entry: usize) -> bool {
+        self.owners[b as usize] as usize == entry
     }
 
     /// `row[texel] += value` for billboard `b`'s texture gradients.
     ///
     /// # Safety
-    /// [`FirstEntryRows::owns`] holds for `b` and an entry that the caller's task alone
+    /// [`OwnedRows::owns`] holds for `b` and an entry that the caller's task alone
     /// processes, during the tile pass.
     #[inline]
     pub(super) unsafe fn add(&self, b: usize, texel: u32, value: [f32; 4]) {
@@ -272,7 +276,7 @@ impl FirstEntryRows {
     /// Billboard `b`'s gradient row (`TS²` texels).
     ///
     /// # Safety
-    /// As for [`FirstEntryRows::add`]; the row must not be reached in another way (through
+    /// As for [`OwnedRows::add`]; the row must not be reached in another way (through
     /// `add` or another `row_mut`) while the returned slice is alive.
     #[inline]
     // The rows are shared by the tile tasks through `&self`; each row's exclusivity is the
@@ -313,7 +317,7 @@ pub(super) fn add_transform(acc: &mut SplatTransform, d: &SplatTransform) {
     acc.tw += d.tw;
 }
 
-/// One tile's texel gradients of the entries that are not their billboard's first: (texel
+/// One tile's texel gradients of the entries that do not own their billboard's row: (texel
 /// index, `[∂r, ∂g, ∂b, ∂alpha]`), grouped by entry (see [`EntryRecord::texels`]).
 pub(super) type TileTexels = Vec<(u32, [f32; 4])>;
 
@@ -323,7 +327,7 @@ struct Scratch {
     blended: Vec<Blended>,
     candidates: TileCandidates,
     /// Per tile-list slot: the tile adds the entry's texture gradients to its billboard's row
-    /// itself (see [`FirstEntryRows`]).
+    /// itself (see [`OwnedRows`]).
     direct: Vec<bool>,
     /// The scratch of the entry-by-entry tile pass.
     by_entry: EntryScratch,
@@ -509,6 +513,61 @@ struct BackwardStorage {
     normal_records: Vec<Vec3>,
     /// Per tile: its [`TileTexels`].
     tile_texels: Vec<TileTexels>,
+    /// Per tile entry: its blended pairs (see [`row_owners`]).
+    entry_pairs: Vec<u32>,
+    /// Per billboard: its owning entry ([`row_owners`]).
+    owners: Vec<u32>,
+}
+
+/// Per billboard of `state`, written over `owners` (its storage reused): the global index of
+/// the entry whose tile writes the billboard's texture-gradient row ([`OwnedRows`]), the entry
+/// with the most blended pairs, the first of them in tile order on a tie; `u32::MAX` for a
+/// billboard without entries. `entry_pairs` is scratch: each entry's blended pairs, counted
+/// from the tiles' pair lists in parallel (tile by tile, into the tiles' disjoint ranges).
+/// Depends on the forward's pairs only, so not on the thread count.
+fn row_owners(state: &ForwardState, entry_pairs: &mut Vec<u32>, owners: &mut Vec<u32>) {
+    let bins = &state.bins;
+    let n_tiles = bins.tile_count();
+    crate::memory::resize_for_overwrite(entry_pairs, bins.entries.len(), 0);
+    split_by_lengths(entry_pairs, (0..n_tiles).map(|t| bins.tile_range(t).len()))
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(t, counts)| {
+            let tile = &state.tiles[t];
+            match tile.order {
+                PairOrder::ByEntry => {
+                    debug_assert_eq!(tile.offsets.len(), counts.len() + 1, "one group per entry");
+                    for (count, w) in counts.iter_mut().zip(tile.offsets.windows(2)) {
+                        *count = w[1] - w[0];
+                    }
+                }
+                PairOrder::ByPixel => {
+                    counts.fill(0);
+                    for &slot in &tile.slots {
+                        counts[slot as usize] += 1;
+                    }
+                }
+            }
+        });
+    let n = bins.billboard_offsets.len().saturating_sub(1);
+    crate::memory::resize_for_overwrite(owners, n, u32::MAX);
+    let entry_pairs: &[u32] = entry_pairs;
+    owners
+        .par_iter_mut()
+        .enumerate()
+        .with_min_len(1024)
+        .for_each(|(b, owner)| {
+            let entries =
+                &bins.billboard_entries[bins.billboard_offsets[b] as usize..bins.billboard_offsets[b + 1] as usize];
+            let mut best: Option<(u32, u32)> = None;
+            for &e in entries {
+                let pairs = entry_pairs[e as usize];
+                if best.is_none_or(|(most, _)| pairs > most) {
+                    best = Some((pairs, e));
+                }
+            }
+            *owner = best.map_or(u32::MAX, |(_, e)| e);
+        });
 }
 
 thread_local! {
@@ -531,7 +590,7 @@ fn backward_tile(
     tile: usize,
     records: &mut [EntryRecord],
     normal_records: &mut [Vec3],
-    first_rows: &FirstEntryRows,
+    owned_rows: &OwnedRows<'_>,
     scratch: &mut Scratch,
     sums: &mut TexelSums,
     texels: &mut TileTexels,
@@ -558,23 +617,23 @@ fn backward_tile(
     let mut background = Vec3::ZERO;
     sums.start(list.len(), ts * ts);
     let bg = settings.background;
-    // The entries that are their billboard's first: their texel gradients go straight to the
+    // The entries that own their billboard's row: their texel gradients go straight to the
     // billboard's gradient row, which is prefetched with the texels of each candidate.
     let direct = &mut scratch.direct;
     direct.clear();
     direct.extend(
         list.iter()
             .enumerate()
-            .map(|(k, &b)| first_rows.owns(bins, b, range.start + k)),
+            .map(|(k, &b)| owned_rows.owns(b, range.start + k)),
     );
     let direct: &[bool] = direct;
     // Where each candidate's texel gradients will go is prefetched with its texels: the
-    // billboard's gradient row for a billboard's first entry, else the (slot, texel) cells of
+    // billboard's gradient row for an owning entry, else the (slot, texel) cells of
     // the sums (a `slots × TS²` array, a random cache line per candidate otherwise).
     let cell_sums = sums.cell_sums();
     let prefetch_gradient_cells = |k: u32, taps: &BilinearTaps| {
         if direct[k as usize] {
-            first_rows.prefetch(list[k as usize] as usize, taps);
+            owned_rows.prefetch(list[k as usize] as usize, taps);
         } else {
             prefetch_taps(cell_sums.wrapping_add(k as usize * ts * ts), taps.indices());
         }
@@ -661,7 +720,7 @@ fn backward_tile(
                     // SAFETY: `owns` holds for entry `range.start + slot`, and this task is the
                     // only one processing it.
                     taps.vjp_rgba(set.texture_of(b), d_rgba, |texel, g| unsafe {
-                        first_rows.add(b, texel, g)
+                        owned_rows.add(b, texel, g)
                     })
                 } else {
                     sums.mark(slot);
@@ -787,6 +846,8 @@ pub fn render_backward(
         records,
         normal_records,
         tile_texels,
+        entry_pairs,
+        owners,
     } = &mut storage;
     crate::memory::resize_for_overwrite(records, bins.entries.len(), EMPTY_RECORD);
     tile_texels.resize_with(n_tiles, Vec::new);
@@ -796,8 +857,8 @@ pub fn render_backward(
         set.len() * texels,
         "gradient buffers must match the billboard set"
     );
-    // The tile tasks write the rows of their billboards' first entries themselves; that each
-    // row has one writer rests on the tiles' entry ranges being disjoint (`FirstEntryRows::owns`).
+    // The tile tasks write the rows of the entries that own them themselves; that each row has
+    // one writer rests on the tiles' entry ranges being disjoint (`OwnedRows::owns`).
     assert!(
         bins.tile_offsets.len() == n_tiles + 1
             && bins.tile_offsets[0] == 0
@@ -805,10 +866,13 @@ pub fn render_backward(
             && bins.tile_offsets[n_tiles] as usize == bins.entries.len(),
         "the tiles' entry ranges must partition the entries in order"
     );
-    let first_rows = FirstEntryRows {
+    row_owners(state, entry_pairs, owners);
+    assert_eq!(owners.len(), set.len(), "one owner per billboard");
+    let owned_rows = OwnedRows {
         rows: grads.textures.as_mut_ptr(),
         texels,
         len: set.len(),
+        owners,
     };
     // Per-entry normal gradients, only when a normal or distortion gradient is given (each tile
     // fills its own range; without them every tile gets an empty range).
@@ -838,7 +902,7 @@ pub fn render_backward(
                         t,
                         records,
                         normals,
-                        &first_rows,
+                        &owned_rows,
                         scratch,
                         sums,
                         texels,
@@ -850,7 +914,7 @@ pub fn render_backward(
                         image_grads,
                         t,
                         records,
-                        &first_rows,
+                        &owned_rows,
                         &mut scratch.by_entry,
                         sums,
                         texels,
@@ -921,7 +985,7 @@ pub fn render_backward(
                 if lb + 4 < len {
                     let la = lb + 4;
                     // The billboard will be reduced when one of its entries was blended (its
-                    // texel lists may be empty: its first entry's texel gradients are already
+                    // texel lists may be empty: its owning entry's texel gradients are already
                     // in the row).
                     let mut blended = false;
                     for rec in entry_records(b0 + la) {

@@ -12,11 +12,11 @@
 //! record bit for bit.
 //!
 //! Every sum keeps its order: an entry's geometric gradients, its texel sums and the texel rows
-//! of billboards' first entries receive their pixels' contributions in pixel order, as in the
+//! of billboards' owning entries receive their pixels' contributions in pixel order, as in the
 //! pixel-by-pixel walk (`backward_tile`, which still serves the normal and distortion maps), so
 //! the gradients are the same bits (checksums of `raster_stats`; the raster tests).
 
-use super::backward::{EMPTY_RECORD, EntryRecord, FirstEntryRows, TexelSums, TileTexels, add_transform};
+use super::backward::{EMPTY_RECORD, EntryRecord, OwnedRows, TexelSums, TileTexels, add_transform};
 use super::forward::{EntryPair, PairOrder, RenderOutput, prefetch_record, tile_pixels};
 use super::preprocess::Prepared;
 #[cfg(target_arch = "x86_64")]
@@ -50,9 +50,9 @@ pub(super) struct EntryScratch {
 }
 
 /// The backward pass of tile `tile` without the normal and distortion maps: fills `records`
-/// (the tile's entries) and `texels` (the texel sums of the entries that are not their
-/// billboard's first) and returns the tile's background gradient; texel gradients of first
-/// entries go straight to their rows through `first_rows`. Bit for bit what the
+/// (the tile's entries) and `texels` (the texel sums of the entries that do not own their
+/// billboard's row) and returns the tile's background gradient; texel gradients of owning
+/// entries go straight to their rows through `owned_rows`. Bit for bit what the
 /// pixel-by-pixel walk gives.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn backward_tile_by_entry(
@@ -61,7 +61,7 @@ pub(super) fn backward_tile_by_entry(
     grads_in: &ImageGradients<'_>,
     tile: usize,
     records: &mut [EntryRecord],
-    first_rows: &FirstEntryRows,
+    owned_rows: &OwnedRows<'_>,
     scratch: &mut EntryScratch,
     sums: &mut TexelSums,
     texels: &mut TileTexels,
@@ -69,9 +69,9 @@ pub(super) fn backward_tile_by_entry(
     #[cfg(target_arch = "x86_64")]
     if super::lanes::wide_lanes() {
         // SAFETY: the CPU has AVX2 and FMA (checked at run time by `wide_lanes`).
-        return unsafe { by_entry_avx2(set, out, grads_in, tile, records, first_rows, scratch, sums, texels) };
+        return unsafe { by_entry_avx2(set, out, grads_in, tile, records, owned_rows, scratch, sums, texels) };
     }
-    by_entry_body::<false>(set, out, grads_in, tile, records, first_rows, scratch, sums, texels)
+    by_entry_body::<false>(set, out, grads_in, tile, records, owned_rows, scratch, sums, texels)
 }
 
 /// [`by_entry_body`] compiled for AVX2 and FMA, with each chunk's compositing backward in
@@ -88,12 +88,12 @@ unsafe fn by_entry_avx2(
     grads_in: &ImageGradients<'_>,
     tile: usize,
     records: &mut [EntryRecord],
-    first_rows: &FirstEntryRows,
+    owned_rows: &OwnedRows<'_>,
     scratch: &mut EntryScratch,
     sums: &mut TexelSums,
     texels: &mut TileTexels,
 ) -> Vec3 {
-    by_entry_body::<true>(set, out, grads_in, tile, records, first_rows, scratch, sums, texels)
+    by_entry_body::<true>(set, out, grads_in, tile, records, owned_rows, scratch, sums, texels)
 }
 
 /// The body of [`backward_tile_by_entry`], inlined into each instruction-set variant; with
@@ -108,7 +108,7 @@ fn by_entry_body<const WIDE: bool>(
     grads_in: &ImageGradients<'_>,
     tile: usize,
     records: &mut [EntryRecord],
-    first_rows: &FirstEntryRows,
+    owned_rows: &OwnedRows<'_>,
     scratch: &mut EntryScratch,
     sums: &mut TexelSums,
     texels: &mut TileTexels,
@@ -142,7 +142,7 @@ fn by_entry_body<const WIDE: bool>(
     direct.extend(
         list.iter()
             .enumerate()
-            .map(|(k, &b)| first_rows.owns(bins, b, range.start + k)),
+            .map(|(k, &b)| owned_rows.owns(b, range.start + k)),
     );
     // Per pixel: the upstream gradients, the state behind the last blended entry (the
     // background), and the background's gradient `Σ g·T_final` in pixel order.
@@ -204,7 +204,7 @@ fn by_entry_body<const WIDE: bool>(
             {
                 prefetch_texel_rect(set.texture_of(b).as_ptr(), ts, rect);
                 if direct[ahead] {
-                    prefetch_texel_rect(first_rows.row_start(b), ts, rect);
+                    prefetch_texel_rect(owned_rows.row_start(b), ts, rect);
                 } else {
                     prefetch_texel_rect(sums.cell_sums().wrapping_add(ahead * ts * ts), ts, rect);
                 }
@@ -219,12 +219,12 @@ fn by_entry_body<const WIDE: bool>(
         let plane = pr.view_plane();
         let texture = set.texture_of(b);
         let record = &mut records[k];
-        // Where the entry's texel gradients go: its billboard's gradient row when the entry is
-        // the billboard's first, else its slot's cells of the tile's sums.
+        // Where the entry's texel gradients go: its billboard's gradient row when the entry
+        // owns it, else its slot's cells of the tile's sums.
         let (cells, flags) = if direct[k] {
             // SAFETY: `owns` holds for entry `range.start + k`, and this task is the only one
             // processing it; the row is reached only through `cells` until the next entry.
-            (unsafe { first_rows.row_mut(b) }, &mut row_flags[..])
+            (unsafe { owned_rows.row_mut(b) }, &mut row_flags[..])
         } else {
             sums.slot_mut(k as u32)
         };
@@ -311,7 +311,7 @@ fn by_entry_body<const WIDE: bool>(
                 record.rgb += Vec3::new(dr, dg, db);
                 record.blended = true;
             }
-            // Each texel gradient added as `TexelSums::add` and `FirstEntryRows::add` add it.
+            // Each texel gradient added as `TexelSums::add` and `OwnedRows::add` add it.
             let emit = |texel: u32, g: [f32; 4]| {
                 let cell = &mut cells[texel as usize];
                 *cell = (Vec4::from_array(*cell) + Vec4::from_array(g)).to_array();
