@@ -1,9 +1,10 @@
 //! The compositing backward of a chunk of up to eight blended pairs of one entry
 //! ([`super::tile_backward`]), written in explicit AVX2 instructions: the pairs' samples, their
 //! decisions, the back-to-front step of each pair's pixel and the texels seen through the
-//! upstream gradients run side by side in vector registers; the texel gradients are then emitted
-//! lane by lane as the scalar code emits them, with −0.0 emitted (no bit of any sum changes) for
-//! the taps the scalar code skips, so that no branch depends on the data.
+//! upstream gradients run side by side in vector registers; the texel gradients are then made
+//! tap by tap as channel vectors and added lane by lane in the scalar code's order, with −0.0
+//! added (no bit of any sum changes) for the taps the scalar code skips, so that no branch
+//! depends on the data.
 //!
 //! A second implementation of the scalar chunk of `tile_backward.rs` (the stages' own code:
 //! [`crate::stages::composite::classify`], [`crate::stages::composite::CompositeBackState::pop`]
@@ -93,7 +94,10 @@ pub(super) struct ChunkLanes {
 #[inline(always)]
 pub(super) unsafe fn chunk_lanes(chunk: &[EntryPair], (i0, j0): (u32, u32)) -> ChunkLanes {
     let n = chunk.len();
-    assert!((1..=LANES).contains(&n) && i0 < 1 << 31 && j0 < 1 << 31);
+    assert!(
+        (1..=LANES).contains(&n) && i0 < 1 << 31 && j0 < 1 << 31,
+        "a chunk holds 1 to 8 pairs of a tile inside the i32 range"
+    );
     let mut padded = [EntryPair::default(); LANES];
     let pairs: &[EntryPair; LANES] = match chunk.try_into() {
         Ok(full) => full,
@@ -141,9 +145,10 @@ pub(super) unsafe fn chunk_lanes(chunk: &[EntryPair], (i0, j0): (u32, u32)) -> C
 
 /// The compositing backward of the chunk `chunk` (at most [`LANES`] blended pairs of one entry,
 /// in pixel order, with its [`ChunkLanes`] `lanes`) with the taps `taps` and hits `hits` of its
-/// pairs' pixels: see the module docs. `pixels[pair.pixel]` is the pair's pixel recursion (behind, upstream), updated in
-/// place; `rgb` is the billboard's SH colour; `record_rgb` receives each blended lane's
-/// `(∂r, ∂g, ∂b)` in pixel order; `target` each texel gradient, lane by lane and tap by tap.
+/// pairs' pixels: see the module docs. `pixels[pair.pixel]` is the pair's pixel recursion
+/// (behind, upstream), updated in place; `rgb` is the billboard's SH colour; `record_rgb`
+/// receives each blended lane's `(∂r, ∂g, ∂b)` in pixel order; `target` each texel gradient,
+/// lane by lane and tap by tap.
 ///
 /// # Safety
 /// The CPU must support AVX2 and FMA (the caller is compiled with them).
