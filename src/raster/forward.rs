@@ -437,6 +437,11 @@ pub(crate) fn local_spans(
         if let Some(&ahead) = list.get(k + 8) {
             prefetch_record(&prepared[ahead as usize]);
         }
+        // Likewise each billboard's rows (written by another pass, likely by the other thread),
+        // further ahead: every line of them.
+        if let Some(&ahead) = list.get(k + 16) {
+            rows.prefetch(ahead as usize);
+        }
         let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
         if !is_wide(p) {
             return box_spans(p, (i0, j0));

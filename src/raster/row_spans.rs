@@ -87,6 +87,18 @@ impl BillboardRows {
             });
     }
 
+    /// Hints the CPU to fetch every cache line of billboard `b`'s rows (no effect on values).
+    #[inline]
+    pub(crate) fn prefetch(&self, b: usize) {
+        let (start, end) = (self.offsets[b], self.offsets[b + 1]);
+        let rows = self.cols[start..end].as_ptr_range();
+        let mut line = rows.start.cast::<u8>();
+        while line < rows.end.cast::<u8>() {
+            super::forward::prefetch_ptr(line);
+            line = line.wrapping_add(64);
+        }
+    }
+
     /// The rows of billboard `b`, from its box's first row (empty when its spans are its box).
     #[inline]
     pub(crate) fn of(&self, b: usize) -> &[[u32; 2]] {
