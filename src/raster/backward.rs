@@ -267,10 +267,7 @@ impl OwnedRows<'_> {
             "texel gradient out of range"
         );
         // SAFETY: in bounds (checked above); exclusive by the caller's contract.
-        let d = unsafe { &mut *self.rows.add(b * self.texels + texel as usize) };
-        for c in 0..4 {
-            d[c] += value[c];
-        }
+        add_texel(unsafe { &mut *self.rows.add(b * self.texels + texel as usize) }, value);
     }
 
     /// Billboard `b`'s gradient row (`TS²` texels).
@@ -375,6 +372,14 @@ impl PixelSlots {
     }
 }
 
+/// `cell += g` channel by channel, one f32 add each: the add of every texture-gradient sum (the
+/// tile sums' cells and the gradient rows alike; the AVX2 backward makes the same four adds as
+/// one `_mm_add_ps`).
+#[inline(always)]
+pub(super) fn add_texel(cell: &mut [f32; 4], g: [f32; 4]) {
+    *cell = (Vec4::from_array(*cell) + Vec4::from_array(g)).to_array();
+}
+
 /// What an untouched cell of [`TexelSums`] holds: `−0.0` in every channel, so that adding the
 /// first contribution `g` gives `g` bit for bit.
 pub(crate) const UNTOUCHED: [f32; 4] = [-0.0; 4];
@@ -438,8 +443,7 @@ impl TexelSums {
         let cell = slot as usize * self.texels + texel as usize;
         // An untouched cell holds −0.0 (`finish` resets what it reads out), and `−0.0 + g` is
         // `g` bit for bit (`−0.0` included): the first contribution is assigned.
-        let s = &mut self.sums[cell];
-        *s = (Vec4::from_array(*s) + Vec4::from_array(g)).to_array();
+        add_texel(&mut self.sums[cell], g);
         self.touched[cell] = 1;
     }
 

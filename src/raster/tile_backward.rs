@@ -16,17 +16,17 @@
 //! pixel-by-pixel walk (`backward_tile`, which still serves the normal and distortion maps), so
 //! the gradients are the same bits (checksums of `raster_stats`; the raster tests).
 
-use super::backward::{EMPTY_RECORD, EntryRecord, OwnedRows, TexelSums, TileTexels, add_transform};
+use super::backward::{EMPTY_RECORD, EntryRecord, OwnedRows, TexelSums, TileTexels, add_texel, add_transform};
 use super::forward::{EntryPair, PairOrder, RenderOutput, prefetch_record, tile_pixels};
 use super::preprocess::Prepared;
 #[cfg(target_arch = "x86_64")]
-use super::tile_backward_avx2::{TexelTarget, add_lanes_in_order, chunk_backward, chunk_lanes};
+use super::tile_backward_avx2::{add_lanes_in_order, chunk_backward, chunk_lanes};
 use super::tile_forward::{prefetch_texel_rect, texel_footprint};
 use super::{ActivatedRef, backward::ImageGradients};
 use crate::stages::bilinear::RowTaps;
 use crate::stages::composite::{CompositeBackState, Step, classify};
 use crate::stages::ray_plane::{LANES, intersect_lanes, intersect_vjp_lanes};
-use glam::{Vec3, Vec4};
+use glam::Vec3;
 
 /// Channels of the back-to-front recursion: colour (3), opacity (1), depth (1).
 pub(super) const CHANNELS: usize = 5;
@@ -36,6 +36,23 @@ pub(super) const CHANNELS: usize = 5;
 pub(super) struct PixelBack {
     pub(super) back: CompositeBackState<CHANNELS>,
     pub(super) d_out: [f32; CHANNELS],
+}
+
+/// Where the texel gradients of one entry are added: one cell per texel of the texture (its
+/// billboard's gradient row, or its slot of the tile's sums) and a flag per cell, set to 1 by
+/// every add (the sums read them; a gradient row's flags are scratch that nothing reads).
+pub(super) struct TexelTarget<'a> {
+    pub(super) cells: &'a mut [[f32; 4]],
+    pub(super) flags: &'a mut [u8],
+}
+
+impl TexelTarget<'_> {
+    /// Adds `g` to texel `texel`'s cell ([`add_texel`]) and flags it.
+    #[inline(always)]
+    fn add(&mut self, texel: u32, g: [f32; 4]) {
+        add_texel(&mut self.cells[texel as usize], g);
+        self.flags[texel as usize] = 1;
+    }
 }
 
 /// Reusable per-task scratch of [`backward_tile_by_entry`] (rebuilt per tile).
@@ -228,6 +245,7 @@ fn by_entry_body<const WIDE: bool>(
         } else {
             sums.slot_mut(k as u32)
         };
+        let mut target = TexelTarget { cells, flags };
         for chunk in of.chunks(LANES) {
             // Hits and taps lane-wise (unused lanes repeat the last pair), then the pairs one by
             // one in pixel order.
@@ -239,10 +257,6 @@ fn by_entry_body<const WIDE: bool>(
                 let (px, py) = (&lanes.px, &lanes.py);
                 let hits = intersect_lanes(&pr.transform, &plane, camera, px, py);
                 lane_taps.refill::<true>(&hits.u, &hits.v, ts);
-                let target = TexelTarget {
-                    cells: &mut *cells,
-                    flags: &mut *flags,
-                };
                 // SAFETY: `WIDE` is only set by `by_entry_avx2`, whose caller checked AVX2 and
                 // FMA.
                 let g = unsafe {
@@ -256,7 +270,7 @@ fn by_entry_body<const WIDE: bool>(
                         params,
                         pixels,
                         &mut record.rgb,
-                        target,
+                        &mut target,
                     )
                 };
                 record.blended |= g.blended;
@@ -311,13 +325,7 @@ fn by_entry_body<const WIDE: bool>(
                 record.rgb += Vec3::new(dr, dg, db);
                 record.blended = true;
             }
-            // Each texel gradient added as `TexelSums::add` and `OwnedRows::add` add it.
-            let emit = |texel: u32, g: [f32; 4]| {
-                let cell = &mut cells[texel as usize];
-                *cell = (Vec4::from_array(*cell) + Vec4::from_array(g)).to_array();
-                flags[texel as usize] = 1;
-            };
-            let (d_u, d_v) = lane_taps.vjp_rgba_lanes(texture, &d_rgba, &has_grad, emit);
+            let (d_u, d_v) = lane_taps.vjp_rgba_lanes(texture, &d_rgba, &has_grad, |texel, g| target.add(texel, g));
             let d_t = intersect_vjp_lanes(&pr.transform, &hits, (&px, &py), (&d_u, &d_v, &d_depth));
             for lane in 0..chunk.len() {
                 add_transform(&mut record.transform, &d_t.lane(lane));

@@ -23,7 +23,7 @@
 #![cfg(target_arch = "x86_64")]
 
 use super::forward::EntryPair;
-use super::tile_backward::{CHANNELS, PixelBack};
+use super::tile_backward::{CHANNELS, PixelBack, TexelTarget};
 use super::tile_forward_avx2::{Thresholds, decide, sample_lanes_with_texels, store, transpose_four};
 use crate::stages::bilinear::RowTaps;
 use crate::stages::composite::{ClampGradient, CompositeParams};
@@ -63,14 +63,6 @@ unsafe fn lanes4(v: &[__m128; LANES]) -> [__m256; 4] {
 unsafe fn split(v: &[f32; CHANNELS]) -> (__m128, f32) {
     // SAFETY: `v` holds five floats; the load reads the first four.
     (unsafe { _mm_loadu_ps(v.as_ptr()) }, v[4])
-}
-
-/// Where the texel gradients of one entry are added: one cell per texel of the texture (its
-/// billboard's gradient row, or its slot of the tile's sums) and a flag per cell, set to 1 by
-/// every add (the sums read them; a gradient row's flags are scratch that nothing reads).
-pub(super) struct TexelTarget<'a> {
-    pub(super) cells: &'a mut [[f32; 4]],
-    pub(super) flags: &'a mut [u8],
 }
 
 /// The pairs of a chunk lane by lane (lanes past the chunk repeat its last pair): their pixel
@@ -164,7 +156,7 @@ pub(super) unsafe fn chunk_backward(
     params: &CompositeParams,
     pixels: &mut [PixelBack],
     record_rgb: &mut Vec3,
-    target: TexelTarget<'_>,
+    target: &mut TexelTarget<'_>,
 ) -> ChunkGrads {
     let n = chunk.len();
     debug_assert!((1..=LANES).contains(&n));
@@ -307,6 +299,7 @@ pub(super) unsafe fn chunk_backward(
             );
         }
         let TexelTarget { cells, flags } = target;
+        let (cells, flags): (&mut [[f32; 4]], &mut [u8]) = (cells, flags);
         let ts = taps.texture_side();
         assert!(
             cells.len() == ts * ts && flags.len() == ts * ts,
