@@ -90,12 +90,13 @@ pub(super) unsafe fn chunk_lanes(chunk: &[EntryPair], (i0, j0): (u32, u32)) -> C
         (1..=LANES).contains(&n) && i0 < 1 << 31 && j0 < 1 << 31,
         "a chunk holds 1 to 8 pairs of a tile inside the i32 range"
     );
-    let mut padded = [EntryPair::default(); LANES];
+    // A short chunk (an entry's last) padded with its last pair, copied pair by pair (a slice
+    // copy here was a call to `memcpy`).
+    let padded: [EntryPair; LANES];
     let pairs: &[EntryPair; LANES] = match chunk.try_into() {
         Ok(full) => full,
         Err(_) => {
-            padded[..n].copy_from_slice(chunk);
-            padded[n..].fill(chunk[n - 1]);
+            padded = std::array::from_fn(|l| chunk[l.min(n - 1)]);
             &padded
         }
     };
