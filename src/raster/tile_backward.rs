@@ -38,24 +38,20 @@ pub(super) struct PixelBack {
     pub(super) d_out: [f32; CHANNELS],
 }
 
-/// Where the texel gradients of one entry are added: one cell per texel of the texture, either
-/// its billboard's gradient row (no flags: nothing asks which texels were added to) or its slot
-/// of the tile's sums, with a touched flag per cell that every add sets to 1 (the sums' read-out
-/// lists the flagged cells).
+/// Where the texel gradients of one entry are added: one cell per texel of the texture (its
+/// billboard's gradient row, or its slot of the tile's sums) and a flag per cell, set to 1 by
+/// every add (the sums read them; a gradient row's flags are scratch that nothing reads).
 pub(super) struct TexelTarget<'a> {
     pub(super) cells: &'a mut [[f32; 4]],
-    /// One flag per cell for a slot of the sums; `None` for a gradient row.
-    pub(super) flags: Option<&'a mut [u8]>,
+    pub(super) flags: &'a mut [u8],
 }
 
 impl TexelTarget<'_> {
-    /// Adds `g` to texel `texel`'s cell ([`add_texel`]) and flags it, if the target has flags.
+    /// Adds `g` to texel `texel`'s cell ([`add_texel`]) and flags it.
     #[inline(always)]
     fn add(&mut self, texel: u32, g: [f32; 4]) {
         add_texel(&mut self.cells[texel as usize], g);
-        if let Some(flags) = &mut self.flags {
-            flags[texel as usize] = 1;
-        }
+        self.flags[texel as usize] = 1;
     }
 }
 
@@ -65,6 +61,9 @@ pub(super) struct EntryScratch {
     pixels: Vec<PixelBack>,
     /// Per slot: the tile adds the entry's texture gradients to its billboard's row itself.
     direct: Vec<bool>,
+    /// The touched flags of a gradient row's texels: set by the adds, never read (a row has
+    /// no flags; the sums' slots do).
+    row_flags: Vec<u8>,
 }
 
 /// The backward pass of tile `tile` without the normal and distortion maps: fills `records`
@@ -150,7 +149,12 @@ fn by_entry_body<const WIDE: bool>(
         ..EMPTY_RECORD
     });
     sums.start(list.len(), ts * ts);
-    let EntryScratch { pixels, direct } = scratch;
+    let EntryScratch {
+        pixels,
+        direct,
+        row_flags,
+    } = scratch;
+    row_flags.resize(ts * ts, 0);
     direct.clear();
     direct.extend(
         list.iter()
@@ -237,10 +241,9 @@ fn by_entry_body<const WIDE: bool>(
         let (cells, flags) = if direct[k] {
             // SAFETY: `owns` holds for entry `range.start + k`, and this task is the only one
             // processing it; the row is reached only through `cells` until the next entry.
-            (unsafe { owned_rows.row_mut(b) }, None)
+            (unsafe { owned_rows.row_mut(b) }, &mut row_flags[..])
         } else {
-            let (cells, flags) = sums.slot_mut(k as u32);
-            (cells, Some(flags))
+            sums.slot_mut(k as u32)
         };
         let mut target = TexelTarget { cells, flags };
         for chunk in of.chunks(LANES) {

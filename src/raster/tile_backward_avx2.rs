@@ -90,13 +90,12 @@ pub(super) unsafe fn chunk_lanes(chunk: &[EntryPair], (i0, j0): (u32, u32)) -> C
         (1..=LANES).contains(&n) && i0 < 1 << 31 && j0 < 1 << 31,
         "a chunk holds 1 to 8 pairs of a tile inside the i32 range"
     );
-    // A short chunk (an entry's last) padded with its last pair, copied pair by pair (a slice
-    // copy here was a call to `memcpy`).
-    let padded: [EntryPair; LANES];
+    let mut padded = [EntryPair::default(); LANES];
     let pairs: &[EntryPair; LANES] = match chunk.try_into() {
         Ok(full) => full,
         Err(_) => {
-            padded = std::array::from_fn(|l| chunk[l.min(n - 1)]);
+            padded[..n].copy_from_slice(chunk);
+            padded[n..].fill(chunk[n - 1]);
             &padded
         }
     };
@@ -299,57 +298,30 @@ pub(super) unsafe fn chunk_backward(
                 &mut tap_grads[k],
             );
         }
-        // One branch per chunk on the target's kind (the same for all of an entry's chunks).
         let TexelTarget { cells, flags } = target;
+        let (cells, flags): (&mut [[f32; 4]], &mut [u8]) = (cells, flags);
         let ts = taps.texture_side();
-        assert!(cells.len() == ts * ts, "a texel target holds one cell per texel");
-        match flags {
-            Some(flags) => add_tap_grads::<true>(cells, flags, index, &tap_grads),
-            None => add_tap_grads::<false>(cells, &mut [], index, &tap_grads),
+        assert!(
+            cells.len() == ts * ts && flags.len() == ts * ts,
+            "a texel target holds one cell and one flag per texel"
+        );
+        for l in 0..LANES {
+            for k in 0..4 {
+                let t = index[k][l] as usize;
+                debug_assert!(t < cells.len(), "tap indices are clamped into the texture");
+                // SAFETY: `RowTaps` clamps every index into the texture, whose `ts²` texels
+                // match the target's cells and flags (asserted above).
+                let (cell, flag) = (cells.get_unchecked_mut(t), flags.get_unchecked_mut(t));
+                let sum = _mm_add_ps(_mm_loadu_ps(cell.as_ptr()), _mm_loadu_ps(tap_grads[k][l].as_ptr()));
+                _mm_storeu_ps(cell.as_mut_ptr(), sum);
+                *flag = 1;
+            }
         }
         ChunkGrads {
             blended: blended_bits != 0,
             d_depth: store(d_z),
             d_u: store(_mm256_and_ps(du, blended_mask)),
             d_v: store(_mm256_and_ps(dv, blended_mask)),
-        }
-    }
-}
-
-/// Adds every one of a chunk's 32 (lane, tap) texel gradients `tap_grads[tap][lane]` to the
-/// cell `cells[index[tap][lane]]`, lane by lane in pixel order, taps in order, with no branch;
-/// with `FLAGGED`, also sets the cell's flag in `flags` to 1.
-///
-/// # Safety
-/// The CPU must support AVX2 (the caller is compiled with it).
-#[inline(always)]
-unsafe fn add_tap_grads<const FLAGGED: bool>(
-    cells: &mut [[f32; 4]],
-    flags: &mut [u8],
-    index: &[[u32; LANES]; 4],
-    tap_grads: &[[[f32; 4]; LANES]; 4],
-) {
-    let texels = cells.len();
-    assert!(
-        !FLAGGED || flags.len() == texels,
-        "a flagged texel target holds one flag per cell"
-    );
-    for l in 0..LANES {
-        for k in 0..4 {
-            let t = index[k][l] as usize;
-            // Every index is below the cell count: `RowTaps` clamps the indices into the
-            // texture, whose texels match the cells (`chunk_backward` asserts it).
-            debug_assert!(t < texels, "tap indices are clamped into the texture");
-            // SAFETY: `t < cells.len()` (above), and `t < flags.len()` when flagged (asserted
-            // above); AVX is enabled by the caller.
-            unsafe {
-                let cell = cells.get_unchecked_mut(t);
-                let sum = _mm_add_ps(_mm_loadu_ps(cell.as_ptr()), _mm_loadu_ps(tap_grads[k][l].as_ptr()));
-                _mm_storeu_ps(cell.as_mut_ptr(), sum);
-                if FLAGGED {
-                    *flags.get_unchecked_mut(t) = 1;
-                }
-            }
         }
     }
 }
