@@ -261,7 +261,6 @@ fn by_entry_body<const WIDE: bool>(
                 // FMA.
                 let g = unsafe {
                     chunk_backward(
-                        chunk,
                         &lanes,
                         &lane_taps,
                         &hits,

@@ -66,13 +66,16 @@ unsafe fn split(v: &[f32; CHANNELS]) -> (__m128, f32) {
 }
 
 /// The pairs of a chunk lane by lane (lanes past the chunk repeat its last pair): their pixel
-/// centres, the transmittances in front and the tile-local pixels.
+/// centres, the transmittances in front and the tile-local pixels, and how many lanes hold the
+/// chunk's own pairs.
 pub(super) struct ChunkLanes {
     /// `(i0 + x) as f32 + 0.5` and `(j0 + y) as f32 + 0.5` of each lane's pair.
     pub(super) px: [f32; LANES],
     pub(super) py: [f32; LANES],
     transmittance: __m256,
     pixel: [u32; LANES],
+    /// The chunk's pairs (1 to [`LANES`]): lanes `0..len`.
+    len: usize,
 }
 
 /// [`ChunkLanes`] of `chunk` (1 to [`LANES`] pairs) in the tile whose first pixel is `(i0, j0)`:
@@ -131,12 +134,13 @@ pub(super) unsafe fn chunk_lanes(chunk: &[EntryPair], (i0, j0): (u32, u32)) -> C
             py: centre(j0, y),
             transmittance,
             pixel,
+            len: n,
         }
     }
 }
 
-/// The compositing backward of the chunk `chunk` (at most [`LANES`] blended pairs of one entry,
-/// in pixel order, with its [`ChunkLanes`] `lanes`) with the taps `taps` and hits `hits` of its
+/// The compositing backward of a chunk of at most [`LANES`] blended pairs of one entry, in pixel
+/// order, given as its [`ChunkLanes`] `lanes`, with the taps `taps` and hits `hits` of its
 /// pairs' pixels: see the module docs. `pixels[pair.pixel]` is the pair's pixel recursion
 /// (behind, upstream), updated in place; `rgb` is the billboard's SH colour; `record_rgb`
 /// receives each blended lane's `(∂r, ∂g, ∂b)` in pixel order; `target` each texel gradient,
@@ -147,7 +151,6 @@ pub(super) unsafe fn chunk_lanes(chunk: &[EntryPair], (i0, j0): (u32, u32)) -> C
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 pub(super) unsafe fn chunk_backward(
-    chunk: &[EntryPair],
     lanes: &ChunkLanes,
     taps: &RowTaps,
     hits: &RowHits,
@@ -158,7 +161,7 @@ pub(super) unsafe fn chunk_backward(
     record_rgb: &mut Vec3,
     target: &mut TexelTarget<'_>,
 ) -> ChunkGrads {
-    let n = chunk.len();
+    let n = lanes.len;
     debug_assert!((1..=LANES).contains(&n));
     // SAFETY: AVX2 and FMA are enabled (the caller's contract); every memory access below is
     // through bounds-checked slices and arrays, or a helper whose contract is met.
@@ -298,8 +301,7 @@ pub(super) unsafe fn chunk_backward(
                 &mut tap_grads[k],
             );
         }
-        let TexelTarget { cells, flags } = target;
-        let (cells, flags): (&mut [[f32; 4]], &mut [u8]) = (cells, flags);
+        let (cells, flags) = (&mut *target.cells, &mut *target.flags);
         let ts = taps.texture_side();
         assert!(
             cells.len() == ts * ts && flags.len() == ts * ts,
