@@ -175,7 +175,8 @@ fn main() {
     let px = (size * size) as f64;
     let s = out.stats;
     println!(
-        "{size}x{size}, N = {n}, TS = 16, {} threads",
+        "{size}x{size}, N = {n}, tiles of {} px, {} threads",
+        bbsplat::raster::TILE_SIZE,
         rayon::current_num_threads()
     );
     println!(

@@ -241,7 +241,7 @@ pub mod model_file {
 pub mod raster {
     use crate::camera::Camera;
     use crate::raster::binning::{BinScratch, TileBins, bin_into};
-    use crate::raster::forward::{box_meets_tile, entry_spans_direct, local_spans, tile_pixels};
+    use crate::raster::forward::{TileSpans, box_meets_tile, entry_spans_direct, local_spans, tile_pixels};
     use crate::raster::preprocess::Prepared;
     use crate::raster::preprocess::preprocess_into;
     use crate::raster::row_spans::BillboardRows;
@@ -270,7 +270,7 @@ pub mod raster {
     }
 
     /// One tile entry's spans: its first and last tile row and, per tile row, its first and
-    /// last column (empty when the first exceeds the last).
+    /// last column (empty when the first exceeds the last; `[1, 0]` outside the entry's rows).
     pub type Spans = ([u8; 2], [[u8; 2]; crate::raster::TILE_SIZE as usize]);
 
     /// One tile entry's spans computed both ways ([`entry_spans_both_ways`]).
@@ -309,7 +309,7 @@ pub mod raster {
         let all: Vec<u32> = (0..prepared.len() as u32)
             .filter(|&b| prepared[b as usize].is_some())
             .collect();
-        let mut spans = Vec::new();
+        let (mut spans, mut reference) = (TileSpans::default(), TileSpans::default());
         let mut out = Vec::new();
         for t in 0..bins.tile_count() {
             let list = if every_billboard {
@@ -319,12 +319,25 @@ pub mod raster {
             };
             let (i0, j0, _, _) = tile_pixels(&bins, t, camera.width, camera.height);
             local_spans(&prepared, &rows, list, (i0, j0), half_side, &mut spans);
-            for (fast, &b) in spans.iter().zip(list) {
+            reference.clear();
+            for &b in list {
                 let p = prepared[b as usize].as_ref().expect("listed billboards are prepared");
-                let reference = entry_spans_direct(p, (i0, j0), half_side);
+                entry_spans_direct(p, (i0, j0), half_side, &mut reference);
+            }
+            // Both as full tile rows (rows outside an entry's range left empty).
+            let full = |spans: &TileSpans, k: usize| {
+                let e = &spans.entries[k];
+                let mut cols = [[1, 0]; crate::raster::TILE_SIZE as usize];
+                for (y, &c) in (e.rows[0]..).zip(spans.row_cols(e)) {
+                    cols[usize::from(y)] = c;
+                }
+                (e.rows, cols)
+            };
+            for (k, (fast, &b)) in spans.entries.iter().zip(list).enumerate() {
+                let p = prepared[b as usize].as_ref().expect("listed billboards are prepared");
                 out.push(SpansBothWays {
-                    fast: (fast.rows, fast.cols),
-                    reference: (reference.rows, reference.cols),
+                    fast: full(&spans, k),
+                    reference: full(&reference, k),
                     pixels: fast.pixels,
                     columns: fast.columns,
                     box_meets_tile: box_meets_tile(p, (i0, j0)),

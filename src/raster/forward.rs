@@ -373,37 +373,86 @@ impl TileCandidates {
     }
 }
 
-/// Where one entry of a tile can contribute, in tile-local pixels: rows `rows[0]..=rows[1]` and,
-/// for each tile row `y`, the columns `cols[y][0]..=cols[y][1]` (empty when the first exceeds the
-/// second).
-#[derive(Clone, Copy)]
+/// Where one entry of a tile can contribute, in tile-local pixels: rows `rows[0]..=rows[1]`
+/// (none when the first exceeds the second) and, for each of them, its first and last column
+/// (an empty row when the first exceeds the last), kept in the [`TileSpans`] that holds the
+/// entry ([`TileSpans::row_cols`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct EntrySpans {
     pub(crate) rows: [u8; 2],
-    pub(crate) cols: [[u8; 2]; TILE_SIZE as usize],
-    /// The number of pixels of the rows' spans (from the rows by [`EntrySpans::summed`], or in
-    /// closed form for a box).
+    /// The number of pixels of the rows' spans.
     pub(crate) pixels: u16,
     /// The first and last column of any row's span (the first exceeds the last when every row
-    /// is empty; as `pixels`).
+    /// is empty).
     pub(crate) columns: [u8; 2],
+    /// Where the rows' columns start in [`TileSpans`]'s row list.
+    first_row: u32,
 }
 
 impl EntrySpans {
-    /// The spans with their pixel count and column range filled in from the rows.
+    /// The number of rows, `rows[1] + 1 - rows[0]` (0 when the first exceeds the last).
     #[inline]
-    fn summed(mut self) -> Self {
+    pub(crate) fn row_count(&self) -> usize {
+        (usize::from(self.rows[1]) + 1).saturating_sub(usize::from(self.rows[0]))
+    }
+}
+
+/// The [`EntrySpans`] of one tile's entries, in tile-list order, with their rows' columns in
+/// one list (only the rows each entry has: a billboard of a few pixels takes a few bytes, where
+/// a column pair for every row of the tile took a hundred and filled the cache with them).
+#[derive(Clone, Debug, Default)]
+pub(crate) struct TileSpans {
+    pub(crate) entries: Vec<EntrySpans>,
+    /// The columns `[first, last]` of the rows of every entry, entry after entry.
+    row_columns: Vec<[u8; 2]>,
+}
+
+impl TileSpans {
+    /// Empties both lists (keeping their storage).
+    pub(crate) fn clear(&mut self) {
+        self.entries.clear();
+        self.row_columns.clear();
+    }
+
+    /// The columns `[first, last]` of each row of `span` (an entry of this list), row
+    /// `span.rows[0]` first.
+    #[inline]
+    pub(crate) fn row_cols(&self, span: &EntrySpans) -> &[[u8; 2]] {
+        let first = span.first_row as usize;
+        &self.row_columns[first..first + span.row_count()]
+    }
+
+    /// Appends an entry with rows `rows[0]..=rows[1]` whose columns are `cols` (one per row,
+    /// in order), counting its pixels and column range from them.
+    #[inline]
+    fn push(&mut self, rows: [u8; 2], cols: impl Iterator<Item = [u8; 2]>) {
+        let first_row = self.row_columns.len() as u32;
         let (mut pixels, mut x0, mut x1) = (0u16, u8::MAX, 0u8);
-        for y in self.rows[0]..=self.rows[1] {
-            let [a, b] = self.cols[usize::from(y)];
+        for [a, b] in cols {
             if a <= b {
                 pixels += u16::from(b - a) + 1;
                 x0 = x0.min(a);
                 x1 = x1.max(b);
             }
+            self.row_columns.push([a, b]);
         }
-        self.pixels = pixels;
-        self.columns = [x0, x1];
-        self
+        let span = EntrySpans {
+            rows,
+            pixels,
+            columns: [x0, x1],
+            first_row,
+        };
+        debug_assert_eq!(self.row_columns.len() - first_row as usize, span.row_count());
+        self.entries.push(span);
+    }
+
+    /// Appends the box of `p` clamped to the tile at `(i0, j0)`: every row of the box with the
+    /// box's columns.
+    #[inline]
+    fn push_box(&mut self, p: &Prepared, tile: (u32, u32)) {
+        let ([x0, x1], rows) = box_in_tile(p, tile);
+        let count = (usize::from(rows[1]) + 1).saturating_sub(usize::from(rows[0]));
+        self.push(rows, std::iter::repeat_n([x0, x1], count));
     }
 }
 
@@ -429,10 +478,10 @@ pub(crate) fn local_spans(
     list: &[u32],
     (i0, j0): (u32, u32),
     half_side: f32,
-    spans: &mut Vec<EntrySpans>,
+    spans: &mut TileSpans,
 ) {
     spans.clear();
-    spans.extend(list.iter().enumerate().map(|(k, &b)| {
+    for (k, &b) in list.iter().enumerate() {
         // The records are scattered over the prepared array: fetch a few entries ahead.
         if let Some(&ahead) = list.get(k + 8) {
             prefetch_record(&prepared[ahead as usize]);
@@ -442,29 +491,31 @@ pub(crate) fn local_spans(
         if let Some(&ahead) = list.get(k + 16) {
             rows.prefetch(ahead as usize);
         }
+        if let Some(&ahead) = list.get(k + 24) {
+            rows.prefetch_offsets(ahead as usize);
+        }
         let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
         if !is_wide(p) {
-            return box_spans(p, (i0, j0));
+            spans.push_box(p, (i0, j0));
+        } else if !box_meets_tile(p, (i0, j0)) {
+            entry_spans_direct(p, (i0, j0), half_side, spans);
+        } else {
+            let box_rows = rows.of(b as usize);
+            let ([x0, x1], [y0, y1]) = box_in_tile(p, (i0, j0));
+            // The tile's columns end at `n`; the box's rows are cut to them (see `row_spans`).
+            let (n, start) = (i0 + u32::from(x1) + 1, i0 + u32::from(x0));
+            let cols = (y0..=y1).map(|y| {
+                let [first, end] = box_rows[(j0 + u32::from(y) - p.pixel_min[1]) as usize];
+                let (first, end) = (first.min(n).max(start), end.min(n));
+                if first < end {
+                    [(first - i0) as u8, (end - 1 - i0) as u8]
+                } else {
+                    [1, 0]
+                }
+            });
+            spans.push([y0, y1], cols);
         }
-        if !box_meets_tile(p, (i0, j0)) {
-            return entry_spans_direct(p, (i0, j0), half_side);
-        }
-        let box_rows = rows.of(b as usize);
-        let mut spans = box_spans(p, (i0, j0));
-        let [x0, x1] = spans.cols[0];
-        // The tile's columns end at `n`; the box's rows are cut to them (see `row_spans`).
-        let (n, start) = (i0 + u32::from(x1) + 1, i0 + u32::from(x0));
-        for y in spans.rows[0]..=spans.rows[1] {
-            let [first, end] = box_rows[(j0 + u32::from(y) - p.pixel_min[1]) as usize];
-            let (first, end) = (first.min(n).max(start), end.min(n));
-            spans.cols[y as usize] = if first < end {
-                [(first - i0) as u8, (end - 1 - i0) as u8]
-            } else {
-                [1, 0]
-            };
-        }
-        spans.summed()
-    }));
+    }
 }
 
 /// Whether a billboard's pixel box meets the tile at `(i0, j0)` (always, for a billboard the
@@ -474,71 +525,62 @@ pub(crate) fn box_meets_tile(p: &Prepared, (i0, j0): (u32, u32)) -> bool {
     p.pixel_min[0] <= i0 + last && p.pixel_max[0] >= i0 && p.pixel_min[1] <= j0 + last && p.pixel_max[1] >= j0
 }
 
-/// The [`EntrySpans`] of a billboard's pixel box clamped to the tile at `(i0, j0)`: every row
-/// of the box with the box's columns.
-fn box_spans(p: &Prepared, (i0, j0): (u32, u32)) -> EntrySpans {
+/// A billboard's pixel box clamped to the tile at `(i0, j0)`, in tile-local pixels: its columns
+/// `[x0, x1]` and rows `[y0, y1]` (inclusive; a box that misses the tile, never binned there,
+/// comes out with the first of one of them beyond its last, or clamped to the tile's edge).
+fn box_in_tile(p: &Prepared, (i0, j0): (u32, u32)) -> ([u8; 2], [u8; 2]) {
     let last = TILE_SIZE - 1;
     let lo = |v: u32, o: u32| v.saturating_sub(o).min(last) as u8;
     let hi = |v: u32, o: u32| if v < o { 0 } else { (v - o).min(last) as u8 };
-    // A box entirely left of / above the tile cannot be binned here; keep it exact anyway.
-    let (x0, y0) = (lo(p.pixel_min[0], i0), lo(p.pixel_min[1], j0));
-    let (x1, y1) = (hi(p.pixel_max[0], i0), hi(p.pixel_max[1], j0));
-    // Every row of the box has the box's columns (a box that misses the tile, kept exact above,
-    // may have an empty row range or empty columns: no pixel).
-    let filled = x0 <= x1 && y0 <= y1;
-    EntrySpans {
-        rows: [y0, y1],
-        cols: [[x0, x1]; TILE_SIZE as usize],
-        pixels: if filled {
-            (u16::from(x1 - x0) + 1) * (u16::from(y1 - y0) + 1)
-        } else {
-            0
-        },
-        columns: if filled { [x0, x1] } else { [1, 0] },
-    }
+    (
+        [lo(p.pixel_min[0], i0), hi(p.pixel_max[0], i0)],
+        [lo(p.pixel_min[1], j0), hi(p.pixel_max[1], j0)],
+    )
 }
 
-/// The [`EntrySpans`] of one tile entry computed for the tile alone: the support quad projected
-/// and each of the tile's rows found on it (computed [`ROW_LANES`] rows at a time by
+/// Appends to `spans` the [`EntrySpans`] of one tile entry computed for the tile alone: its
+/// box clamped to the tile, and when it is wide enough, the support quad projected and each of
+/// the tile's rows found on it (computed [`ROW_LANES`] rows at a time by
 /// [`SupportQuad::row_spans`], the same bits as `row_span`). The reference of [`local_spans`].
 ///
 /// [`SupportQuad::row_spans`]: crate::stages::splat_transform::SupportQuad::row_spans
-pub(crate) fn entry_spans_direct(p: &Prepared, (i0, j0): (u32, u32), half_side: f32) -> EntrySpans {
-    let mut spans = box_spans(p, (i0, j0));
-    let [y0, y1] = spans.rows;
-    let [x0, x1] = spans.cols[0];
-    if let Some(quad) = is_wide(p).then(|| support_quad(&p.transform, half_side)).flatten() {
-        // The rows' spans `ROW_LANES` at a time (rows past `y1` repeat it and are unused).
-        for first_row in (y0..=y1).step_by(ROW_LANES) {
-            let py: [f32; ROW_LANES] = std::array::from_fn(|l| {
-                let y = (usize::from(first_row) + l).min(usize::from(y1));
-                (j0 + y as u32) as f32 + 0.5
-            });
-            let row_spans = quad.row_spans(&py);
-            for (y, span) in (first_row..=y1).zip(row_spans) {
-                spans.cols[y as usize] = match span {
-                    // Columns whose centres lie in [lo, hi], within the box.
-                    Some((lo, hi)) => {
-                        let (first, end) = pixel_range(lo, hi, i0 + u32::from(x1) + 1);
-                        let first = first.max(i0 + u32::from(x0));
-                        if first < end {
-                            [(first - i0) as u8, (end - 1 - i0) as u8]
-                        } else {
-                            [1, 0]
-                        }
+pub(crate) fn entry_spans_direct(p: &Prepared, (i0, j0): (u32, u32), half_side: f32, spans: &mut TileSpans) {
+    let Some(quad) = is_wide(p).then(|| support_quad(&p.transform, half_side)).flatten() else {
+        spans.push_box(p, (i0, j0));
+        return;
+    };
+    let ([x0, x1], [y0, y1]) = box_in_tile(p, (i0, j0));
+    let mut cols = [[1u8, 0u8]; TILE_SIZE as usize];
+    // The rows' spans `ROW_LANES` at a time (rows past `y1` repeat it and are unused).
+    for first_row in (y0..=y1).step_by(ROW_LANES) {
+        let py: [f32; ROW_LANES] = std::array::from_fn(|l| {
+            let y = (usize::from(first_row) + l).min(usize::from(y1));
+            (j0 + y as u32) as f32 + 0.5
+        });
+        let row_spans = quad.row_spans(&py);
+        for (y, span) in (first_row..=y1).zip(row_spans) {
+            cols[y as usize] = match span {
+                // Columns whose centres lie in [lo, hi], within the box.
+                Some((lo, hi)) => {
+                    let (first, end) = pixel_range(lo, hi, i0 + u32::from(x1) + 1);
+                    let first = first.max(i0 + u32::from(x0));
+                    if first < end {
+                        [(first - i0) as u8, (end - 1 - i0) as u8]
+                    } else {
+                        [1, 0]
                     }
-                    None => [1, 0],
-                };
-            }
+                }
+                None => [1, 0],
+            };
         }
     }
-    spans.summed()
+    spans.push([y0, y1], (y0..=y1).map(|y| cols[usize::from(y)]));
 }
 
 /// Reusable per-task scratch of the forward tile pass (every field is rebuilt per tile).
 #[derive(Default)]
 struct TileScratch {
-    spans: Vec<EntrySpans>,
+    spans: TileSpans,
     composite: TileComposite,
     walk: PixelWalk,
 }
@@ -714,11 +756,14 @@ pub fn render_with(
             let rect @ (i0, j0, _, _) = tile_pixels(&bins, t, w, h);
             let TileScratch { spans, composite, walk } = scratch;
             local_spans(&prepared, billboard_rows, list, (i0, j0), half_side, spans);
-            let tile = (camera, set, settings, &*prepared, list, rect, &spans[..]);
+            let tile = (camera, set, settings, &*prepared, list, rect, &*spans);
             let blended = &mut *blended_pairs;
             // Tiles of small billboards go pixel by pixel (the same bits; see
             // `tile_forward_pixels`).
-            let by_pixel = super::lanes::walk_by_pixel(spans.iter().map(|s| usize::from(s.pixels)).sum(), spans.len());
+            let by_pixel = super::lanes::walk_by_pixel(
+                spans.entries.iter().map(|s| usize::from(s.pixels)).sum(),
+                spans.entries.len(),
+            );
             match (with_distortion, by_pixel) {
                 (true, true) => composite_tile_by_pixel::<true>(walk, tile, impact, pixels, blended),
                 (true, false) => composite_tile::<true>(composite, tile, impact, pixels, blended),

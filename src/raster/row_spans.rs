@@ -38,6 +38,9 @@ pub(crate) struct BillboardRows {
     /// `n = pixel_max[0] + 1`, the box's columns when the billboard has no quad, and `[0, 0]`
     /// when the row misses the quad.
     cols: Vec<[u32; 2]>,
+    /// Scratch of [`BillboardRows::build`]: the rows of each block of [`BUILD_BLOCK`]
+    /// billboards.
+    block_rows: Vec<usize>,
 }
 
 /// Whether a billboard's spans are narrowed by its support quad: boxes at least
@@ -60,31 +63,41 @@ impl BillboardRows {
     /// on its record only). `half_side` is the support's half side
     /// ([`support_half_side`](crate::stages::splat_transform::support_half_side)).
     pub(crate) fn build(&mut self, prepared: &[Option<Prepared>], half_side: f32) {
-        self.offsets.clear();
-        self.offsets.push(0);
-        let mut total = 0;
-        for p in prepared {
-            total += row_count(p);
-            self.offsets.push(total);
-        }
-        // Every row is written below.
+        // Rows per block of billboards, counted in parallel (the records are megabytes: one
+        // serial pass over them took as long as the rest of the build).
+        self.block_rows.clear();
+        prepared
+            .par_chunks(BUILD_BLOCK)
+            .map(|block| block.iter().map(row_count).sum::<usize>())
+            .collect_into_vec(&mut self.block_rows);
+        let total = self.block_rows.iter().sum();
+        // Every offset and row is written below.
+        resize_for_overwrite(&mut self.offsets, prepared.len() + 1, 0);
+        self.offsets[0] = 0;
         resize_for_overwrite(&mut self.cols, total, [0, 0]);
-        let offsets = &self.offsets;
-        let block_rows = (0..prepared.len())
-            .step_by(BUILD_BLOCK)
-            .map(|start| offsets[(start + BUILD_BLOCK).min(prepared.len())] - offsets[start]);
-        split_by_lengths(&mut self.cols, block_rows)
-            .into_par_iter()
-            .zip(prepared.par_chunks(BUILD_BLOCK))
-            .for_each(|(mut out, block)| {
-                for p in block {
+        let block_starts = self.block_rows.iter().scan(0, |start, &rows| {
+            let first = *start;
+            *start += rows;
+            Some(first)
+        });
+        let blocks: Vec<_> = split_by_lengths(&mut self.cols, self.block_rows.iter().copied())
+            .into_iter()
+            .zip(self.offsets[1..].chunks_mut(BUILD_BLOCK))
+            .zip(block_starts)
+            .collect();
+        blocks.into_par_iter().zip(prepared.par_chunks(BUILD_BLOCK)).for_each(
+            |(((mut out, offsets), mut end), block)| {
+                for (p, offset) in block.iter().zip(offsets) {
                     let (rows, rest) = std::mem::take(&mut out).split_at_mut(row_count(p));
                     if let Some(p) = p.as_ref().filter(|_| !rows.is_empty()) {
                         fill_rows(p, half_side, rows);
                     }
+                    end += rows.len();
+                    *offset = end;
                     out = rest;
                 }
-            });
+            },
+        );
     }
 
     /// Hints the CPU to fetch billboard `b`'s rows (no effect on values): one prefetch per 64
@@ -101,6 +114,13 @@ impl BillboardRows {
             super::forward::prefetch_ptr(line);
             line = line.wrapping_add(64);
         }
+    }
+
+    /// Hints the CPU to fetch where billboard `b`'s rows are (no effect on values), so that
+    /// [`BillboardRows::prefetch`] of it later finds them without a wait.
+    #[inline]
+    pub(crate) fn prefetch_offsets(&self, b: usize) {
+        super::forward::prefetch_ptr(self.offsets[b..].as_ptr().cast());
     }
 
     /// The rows of billboard `b`, from its box's first row (empty when its spans are its box).

@@ -13,7 +13,7 @@
 //! Per (entry, pixel) pair, work stops as soon as the pixel has stopped compositing
 //! (transmittance threshold), which the pixel-by-pixel walk also did.
 
-use super::forward::{EntryPair, EntrySpans, PairOrder, TileBlended, prefetch_ptr, prefetch_record};
+use super::forward::{EntryPair, EntrySpans, PairOrder, TileBlended, TileSpans, prefetch_ptr, prefetch_record};
 use super::preprocess::Prepared;
 use super::{ActivatedRef, RenderSettings};
 use crate::camera::Camera;
@@ -108,7 +108,7 @@ pub(crate) type TileInputs<'a, 's> = (
     &'a [Option<Prepared>],
     &'a [u32],
     (u32, u32, u32, u32),
-    &'a [EntrySpans],
+    &'a TileSpans,
 );
 
 /// Reusable per-task scratch of [`composite_tile`] (rebuilt per tile).
@@ -179,15 +179,14 @@ fn composite_tile_body<const DISTORTION: bool>(
     } = out;
     // The taps of a chunk of lanes, refilled in place (for sampling only: no derivatives).
     let mut taps = RowTaps::default();
-    for (k, (span, &b)) in spans.iter().zip(list).enumerate() {
+    for (k, (span, &b)) in spans.entries.iter().zip(list).enumerate() {
         offsets.push(blended.len() as u32);
-        prefetch_ahead(set, prepared, list, spans, k, (i0, j0));
+        prefetch_ahead(set, prepared, list, &spans.entries, k, (i0, j0));
         let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
         let plane = p.view_plane();
         let texture = set.texture_of(b as usize);
         let mut entry_impact = impact[k];
-        for y in span.rows[0]..=span.rows[1] {
-            let [x0, x1] = span.cols[y as usize];
+        for (y, &[x0, x1]) in (span.rows[0]..).zip(spans.row_cols(span)) {
             let (x0, x1) = (usize::from(x0), usize::from(x1));
             let py = (j0 + u32::from(y)) as f32 + 0.5;
             let row = y as usize * tw;

@@ -467,9 +467,9 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
     let thresholds = Thresholds::of(params);
     let (one, half, median_alpha) = (_mm256_set1_ps(1.0), _mm256_set1_ps(0.5), _mm256_set1_ps(0.05));
     let mut taps = RowTaps::default();
-    for (k, (span, &b)) in spans.iter().zip(list).enumerate() {
+    for (k, (span, &b)) in spans.entries.iter().zip(list).enumerate() {
         offsets.push(blended.len() as u32);
-        prefetch_ahead(set, prepared, list, spans, k, (i0, j0));
+        prefetch_ahead(set, prepared, list, &spans.entries, k, (i0, j0));
         let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
         let plane = p.view_plane();
         let texture = set.texture_of(b as usize);
@@ -484,8 +484,7 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
             _mm256_set1_ps(p.normal.z),
         ];
         let mut entry_impact = impact[k];
-        for y in span.rows[0]..=span.rows[1] {
-            let [x0, x1] = span.cols[y as usize];
+        for (y, &[x0, x1]) in (span.rows[0]..).zip(spans.row_cols(span)) {
             let (x0, x1) = (usize::from(x0), usize::from(x1));
             let py = (j0 + u32::from(y)) as f32 + 0.5;
             let row = y as usize * tw;

@@ -10,7 +10,7 @@
 //! the same); the choice is made per tile ([`composite_tile`](super::tile_forward::composite_tile))
 //! and tested in `tests/suite/raster_lanes.rs`.
 
-use super::forward::{CANDIDATE_CHUNK, EntrySpans, PairOrder, TileBlended, prefetch_record, prefetch_taps};
+use super::forward::{CANDIDATE_CHUNK, PairOrder, TileBlended, TileSpans, prefetch_record, prefetch_taps};
 use super::preprocess::Prepared;
 use super::tile_forward::{FORWARD_FEATURES, PixelOut, TileInputs};
 use super::{ActivatedRef, RenderSettings};
@@ -56,8 +56,7 @@ pub(crate) fn composite_tile_by_pixel<const DISTORTION: bool>(
     for q in 0..n_q {
         pixels.push(shade_pixel::<DISTORTION>(
             settings,
-            prepared,
-            list,
+            &samples.entry_features,
             lists.of(q),
             samples.of(lists, q),
             impact,
@@ -70,7 +69,8 @@ pub(crate) fn composite_tile_by_pixel<const DISTORTION: bool>(
 /// Composites one pixel of a tile over its sampled candidates (see [`TileSamples`]) with the
 /// compositing stage ([`CompositeState`]: the clamp, skip and stop decisions and the weighted
 /// sums are the stage's own code, the code its property tests prove); adds `α·T` of each
-/// blended entry to `impact` and appends its slot to `blended_slots`. `own` is the pixel's
+/// blended entry to `impact` and appends its slot to `blended_slots`. `entry_features` holds
+/// each tile entry's colour and normal ([`TileSamples::entry_features`]); `own` is the pixel's
 /// entry list (for the work counters). With `DISTORTION` the pixel's depth distortion
 /// ([`DistortionState`]) is accumulated too; without it (the default render) that code is not
 /// compiled in.
@@ -78,8 +78,7 @@ pub(crate) fn composite_tile_by_pixel<const DISTORTION: bool>(
 #[allow(clippy::too_many_arguments)]
 fn shade_pixel<const DISTORTION: bool>(
     settings: &RenderSettings,
-    prepared: &[Option<Prepared>],
-    list: &[u32],
+    entry_features: &[[Vec3; 2]],
     own: &[u32],
     candidates: &[SampledCandidate],
     impact: &mut [f32],
@@ -93,7 +92,6 @@ fn shade_pixel<const DISTORTION: bool>(
     let mut nan_alpha = 0;
     for cand in candidates {
         let k = cand.slot as usize;
-        let b = list[k] as usize;
         let [r, g, bl, a] = cand.rgba;
         let blend = match state.step(a, params) {
             Step::Skip => {
@@ -108,9 +106,8 @@ fn shade_pixel<const DISTORTION: bool>(
             }
             Step::Blend(blend) => blend,
         };
-        let p = prepared[b].as_ref().expect("binned billboards are prepared");
-        let c = Vec3::new(r, g, bl) + p.rgb;
-        let n = p.normal;
+        let [rgb, n] = entry_features[k];
+        let c = Vec3::new(r, g, bl) + rgb;
         state.blend(&blend, &[c.x, c.y, c.z, 1.0, cand.depth, n.x, n.y, n.z]);
         if blend.transmittance > 0.5 && blend.alpha > 0.05 {
             median = cand.depth;
@@ -146,6 +143,11 @@ pub(crate) struct SampledCandidate {
 pub(crate) struct TileSamples {
     rays: Vec<Vec3>,
     ends: Vec<u32>,
+    /// Per tile entry (its slot): its record's SH colour and normal, `[rgb, normal]`, copied
+    /// while the record is at hand, so that compositing reads them from one small table rather
+    /// than from records scattered over the prepared array (a 48-px tile of small billboards
+    /// lists a thousand of them, more than the L1 cache holds).
+    entry_features: Vec<[Vec3; 2]>,
     items: Vec<SampledCandidate>,
     /// Candidates whose texels are being prefetched: (item, billboard, taps), sampled in runs of
     /// [`CANDIDATE_CHUNK`] (see [`TileCandidates`](super::forward::TileCandidates) for why the reads are issued ahead).
@@ -163,7 +165,7 @@ impl TileSamples {
         prepared: &[Option<Prepared>],
         list: &[u32],
         (i0, j0, i1, j1): (u32, u32, u32, u32),
-        spans: &[EntrySpans],
+        spans: &TileSpans,
         lists: &PixelLists,
     ) {
         let ts = set.texture_size;
@@ -187,17 +189,20 @@ impl TileSamples {
                 rgba: [0.0; 4],
             },
         );
-        for (k, (span, &b)) in spans.iter().zip(list).enumerate() {
+        self.entry_features.clear();
+        for (k, (span, &b)) in spans.entries.iter().zip(list).enumerate() {
             if let Some(&ahead) = list.get(k + 4) {
                 prefetch_record(&prepared[ahead as usize]);
             }
             let Some(p) = prepared[b as usize].as_ref() else {
+                // Never read (an entry without a record has no candidate).
+                self.entry_features.push([Vec3::ZERO; 2]);
                 continue;
             };
+            self.entry_features.push([p.rgb, p.normal]);
             let plane = p.view_plane();
             let texture = set.texture_of(b as usize);
-            for y in span.rows[0]..=span.rows[1] {
-                let [x0, x1] = span.cols[y as usize];
+            for (y, &[x0, x1]) in (span.rows[0]..).zip(spans.row_cols(span)) {
                 let py = (j0 + u32::from(y)) as f32 + 0.5;
                 for x in x0..=x1 {
                     let q = y as usize * tw + x as usize;
@@ -259,13 +264,12 @@ pub(crate) struct PixelLists {
 impl PixelLists {
     /// The lists of a tile `width × height` pixels whose entries have the given spans (every
     /// span inside the tile: the pixel boxes are clipped to the image).
-    pub(crate) fn build(&mut self, spans: &[EntrySpans], width: usize, height: usize) {
+    pub(crate) fn build(&mut self, spans: &TileSpans, width: usize, height: usize) {
         let pixels = width * height;
         self.offsets.clear();
         self.offsets.resize(pixels + 1, 0);
-        for e in spans {
-            for y in e.rows[0]..=e.rows[1] {
-                let [x0, x1] = e.cols[y as usize];
+        for e in &spans.entries {
+            for (y, &[x0, x1]) in (e.rows[0]..).zip(spans.row_cols(e)) {
                 debug_assert!((y as usize) < height && (x1 < x0 || (x1 as usize) < width));
                 for x in x0..=x1 {
                     self.offsets[y as usize * width + x as usize + 1] += 1;
@@ -280,9 +284,8 @@ impl PixelLists {
         let cursor = &mut self.cursor;
         cursor.clear();
         cursor.extend_from_slice(&self.offsets[..pixels]);
-        for (k, e) in spans.iter().enumerate() {
-            for y in e.rows[0]..=e.rows[1] {
-                let [x0, x1] = e.cols[y as usize];
+        for (k, e) in spans.entries.iter().enumerate() {
+            for (y, &[x0, x1]) in (e.rows[0]..).zip(spans.row_cols(e)) {
                 for x in x0..=x1 {
                     let p = y as usize * width + x as usize;
                     self.items[cursor[p] as usize] = k as u32;
