@@ -390,11 +390,18 @@ pub(crate) struct EntrySpans {
 }
 
 impl EntrySpans {
-    /// The number of rows, `rows[1] + 1 - rows[0]` (0 when the first exceeds the last).
+    /// The number of its rows ([`row_count`]).
     #[inline]
     pub(crate) fn row_count(&self) -> usize {
-        (usize::from(self.rows[1]) + 1).saturating_sub(usize::from(self.rows[0]))
+        row_count(self.rows)
     }
+}
+
+/// The number of rows `rows[0]..=rows[1]`: `rows[1] + 1 - rows[0]`, 0 when the first exceeds
+/// the last.
+#[inline]
+fn row_count([first, last]: [u8; 2]) -> usize {
+    (usize::from(last) + 1).saturating_sub(usize::from(first))
 }
 
 /// The [`EntrySpans`] of one tile's entries, in tile-list order, with their rows' columns in
@@ -450,9 +457,8 @@ impl TileSpans {
     /// box's columns.
     #[inline]
     fn push_box(&mut self, p: &Prepared, tile: (u32, u32)) {
-        let ([x0, x1], rows) = box_in_tile(p, tile);
-        let count = (usize::from(rows[1]) + 1).saturating_sub(usize::from(rows[0]));
-        self.push(rows, std::iter::repeat_n([x0, x1], count));
+        let (columns, rows) = box_in_tile(p, tile);
+        self.push(rows, std::iter::repeat_n(columns, row_count(rows)));
     }
 }
 
