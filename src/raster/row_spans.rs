@@ -17,7 +17,7 @@
 //! columns end at `n₁ ≤ pixel_max + 1 = n₂` whenever the box overlaps the tile; a tile whose
 //! rectangle the box misses (not binned there, kept exact anyway) takes the per-entry path.
 
-use super::forward::{QUAD_MIN_COLUMNS, split_by_lengths};
+use super::forward::QUAD_MIN_COLUMNS;
 use super::preprocess::Prepared;
 use crate::memory::resize_for_overwrite;
 use crate::stages::splat_transform::{ROW_LANES, pixel_range, support_quad};
@@ -30,17 +30,16 @@ const BUILD_BLOCK: usize = 256;
 /// reach (see the module documentation). Rebuilt per view; its storage is reused.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct BillboardRows {
-    /// The rows of billboard `b` are `cols[offsets[b]..offsets[b + 1]]`, one per image row of its
-    /// box from `pixel_min[1]`; none when the billboard is culled or its box is narrower than
-    /// [`QUAD_MIN_COLUMNS`] (its spans are its box).
-    offsets: Vec<usize>,
+    /// The rows of billboard `b` are `blocks[b / BUILD_BLOCK][ranges[b][0]..ranges[b][1]]`, one
+    /// per image row of its box from `pixel_min[1]`; none when the billboard is culled or its
+    /// box is narrower than [`QUAD_MIN_COLUMNS`] (its spans are its box).
+    ranges: Vec<[u32; 2]>,
+    /// Per block of [`BUILD_BLOCK`] billboards, the rows of its billboards one after another.
     /// Per row: image columns `first..end`, [`pixel_range`] of the row's quad span with
     /// `n = pixel_max[0] + 1`, the box's columns when the billboard has no quad, and `[0, 0]`
-    /// when the row misses the quad.
-    cols: Vec<[u32; 2]>,
-    /// Scratch of [`BillboardRows::build`]: the rows of each block of [`BUILD_BLOCK`]
-    /// billboards.
-    block_rows: Vec<usize>,
+    /// when the row misses the quad. (One list per block lets each block's task write its rows
+    /// without a first pass over the records to count them.)
+    blocks: Vec<Vec<[u32; 2]>>,
 }
 
 /// Whether a billboard's spans are narrowed by its support quad: boxes at least
@@ -63,41 +62,25 @@ impl BillboardRows {
     /// on its record only). `half_side` is the support's half side
     /// ([`support_half_side`](crate::stages::splat_transform::support_half_side)).
     pub(crate) fn build(&mut self, prepared: &[Option<Prepared>], half_side: f32) {
-        // Rows per block of billboards, counted in parallel (the records are megabytes: one
-        // serial pass over them took as long as the rest of the build).
-        self.block_rows.clear();
-        prepared
-            .par_chunks(BUILD_BLOCK)
-            .map(|block| block.iter().map(row_count).sum::<usize>())
-            .collect_into_vec(&mut self.block_rows);
-        let total = self.block_rows.iter().sum();
-        // Every offset and row is written below.
-        resize_for_overwrite(&mut self.offsets, prepared.len() + 1, 0);
-        self.offsets[0] = 0;
-        resize_for_overwrite(&mut self.cols, total, [0, 0]);
-        let block_starts = self.block_rows.iter().scan(0, |start, &rows| {
-            let first = *start;
-            *start += rows;
-            Some(first)
-        });
-        let blocks: Vec<_> = split_by_lengths(&mut self.cols, self.block_rows.iter().copied())
-            .into_iter()
-            .zip(self.offsets[1..].chunks_mut(BUILD_BLOCK))
-            .zip(block_starts)
-            .collect();
-        blocks.into_par_iter().zip(prepared.par_chunks(BUILD_BLOCK)).for_each(
-            |(((mut out, offsets), mut end), block)| {
-                for (p, offset) in block.iter().zip(offsets) {
-                    let (rows, rest) = std::mem::take(&mut out).split_at_mut(row_count(p));
-                    if let Some(p) = p.as_ref().filter(|_| !rows.is_empty()) {
-                        fill_rows(p, half_side, rows);
+        // Every range is written below.
+        resize_for_overwrite(&mut self.ranges, prepared.len(), [0, 0]);
+        self.blocks.resize_with(prepared.len().div_ceil(BUILD_BLOCK), Vec::new);
+        self.blocks
+            .par_iter_mut()
+            .zip(self.ranges.par_chunks_mut(BUILD_BLOCK))
+            .zip(prepared.par_chunks(BUILD_BLOCK))
+            .for_each(|((rows, ranges), block)| {
+                rows.clear();
+                for (p, range) in block.iter().zip(ranges) {
+                    let (start, count) = (rows.len(), row_count(p));
+                    if let Some(p) = p.as_ref().filter(|_| count > 0) {
+                        // Every row is written by `fill_rows`.
+                        rows.resize(start + count, [0, 0]);
+                        fill_rows(p, half_side, &mut rows[start..]);
                     }
-                    end += rows.len();
-                    *offset = end;
-                    out = rest;
+                    *range = [start as u32, rows.len() as u32];
                 }
-            },
-        );
+            });
     }
 
     /// Hints the CPU to fetch billboard `b`'s rows (no effect on values): one prefetch per 64
@@ -107,8 +90,7 @@ impl BillboardRows {
     /// 2026-11-28: one more prefetch per billboard.)
     #[inline]
     pub(crate) fn prefetch(&self, b: usize) {
-        let (start, end) = (self.offsets[b], self.offsets[b + 1]);
-        let rows = self.cols[start..end].as_ptr_range();
+        let rows = self.of(b).as_ptr_range();
         let mut line = rows.start.cast::<u8>();
         while line < rows.end.cast::<u8>() {
             super::forward::prefetch_ptr(line);
@@ -120,13 +102,14 @@ impl BillboardRows {
     /// [`BillboardRows::prefetch`] of it later finds them without a wait.
     #[inline]
     pub(crate) fn prefetch_offsets(&self, b: usize) {
-        super::forward::prefetch_ptr(self.offsets[b..].as_ptr().cast());
+        super::forward::prefetch_ptr(self.ranges[b..].as_ptr().cast());
     }
 
     /// The rows of billboard `b`, from its box's first row (empty when its spans are its box).
     #[inline]
     pub(crate) fn of(&self, b: usize) -> &[[u32; 2]] {
-        &self.cols[self.offsets[b]..self.offsets[b + 1]]
+        let [start, end] = self.ranges[b];
+        &self.blocks[b / BUILD_BLOCK][start as usize..end as usize]
     }
 }
 
