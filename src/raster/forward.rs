@@ -497,8 +497,9 @@ pub(crate) fn local_spans(
         if let Some(&ahead) = list.get(k + 16) {
             rows.prefetch(ahead as usize);
         }
+        // And further still, where those rows are, which that prefetch reads.
         if let Some(&ahead) = list.get(k + 24) {
-            rows.prefetch_offsets(ahead as usize);
+            rows.prefetch_range(ahead as usize);
         }
         let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
         if !is_wide(p) {

@@ -101,7 +101,7 @@ impl BillboardRows {
     /// Hints the CPU to fetch where billboard `b`'s rows are (no effect on values), so that
     /// [`BillboardRows::prefetch`] of it later finds them without a wait.
     #[inline]
-    pub(crate) fn prefetch_offsets(&self, b: usize) {
+    pub(crate) fn prefetch_range(&self, b: usize) {
         super::forward::prefetch_ptr(self.ranges[b..].as_ptr().cast());
     }
 
