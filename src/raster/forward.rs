@@ -513,15 +513,21 @@ pub(crate) fn local_spans(
             let (n, start) = (i0 + u32::from(x1) + 1, i0 + u32::from(x0));
             let cols = (y0..=y1).map(|y| {
                 let [first, end] = box_rows[(j0 + u32::from(y) - p.pixel_min[1]) as usize];
-                let (first, end) = (first.min(n).max(start), end.min(n));
-                if first < end {
-                    [(first - i0) as u8, (end - 1 - i0) as u8]
-                } else {
-                    [1, 0]
-                }
+                tile_columns(first.min(n).max(start), end.min(n), i0)
             });
             spans.push([y0, y1], cols);
         }
+    }
+}
+
+/// The image columns `first..end` (exclusive end, within the tile whose first column is `i0`)
+/// as tile-local `[first, last]`, or the empty row `[1, 0]` when there is none.
+#[inline]
+fn tile_columns(first: u32, end: u32, i0: u32) -> [u8; 2] {
+    if first < end {
+        [(first - i0) as u8, (end - 1 - i0) as u8]
+    } else {
+        [1, 0]
     }
 }
 
@@ -570,12 +576,7 @@ pub(crate) fn entry_spans_direct(p: &Prepared, (i0, j0): (u32, u32), half_side: 
                 // Columns whose centres lie in [lo, hi], within the box.
                 Some((lo, hi)) => {
                     let (first, end) = pixel_range(lo, hi, i0 + u32::from(x1) + 1);
-                    let first = first.max(i0 + u32::from(x0));
-                    if first < end {
-                        [(first - i0) as u8, (end - 1 - i0) as u8]
-                    } else {
-                        [1, 0]
-                    }
+                    tile_columns(first.max(i0 + u32::from(x0)), end, i0)
                 }
                 None => [1, 0],
             };
