@@ -19,8 +19,8 @@
 
 use super::ForwardState;
 use super::forward::{
-    PairOrder, RenderOutput, TileBlended, TileCandidates, prefetch, prefetch_record, prefetch_ref, prefetch_taps,
-    split_by_lengths, tile_pixels,
+    PairOrder, RenderOutput, TileBlended, TileCandidates, prefetch, prefetch_lines, prefetch_record, prefetch_ref,
+    prefetch_taps, split_by_lengths, tile_pixels,
 };
 use super::preprocess::Prepared;
 use super::schedule::map_heaviest_first;
@@ -954,8 +954,12 @@ pub fn render_backward(
     // Billboards are reduced in chunks, each chunk in index order by one task. The entry records
     // and gradient rows a billboard reads are scattered (billboards are not in screen order), so
     // each step prefetches them a few billboards ahead: the entry records 12 ahead, the texel
-    // lists 8 ahead, the gradient rows and SH coefficients 4 ahead. Prefetches change no value.
+    // lists 8 ahead, the texture-gradient cells of the texel lists 4 ahead. The SH coefficients
+    // and gradients are read in order but are most of the bytes: all their lines `SH_AHEAD`
+    // ahead. Prefetches change no value.
     const CHUNK: usize = 256;
+    const SH_AHEAD: usize = 8;
+    let has_entries = |b: usize| bins.billboard_offsets[b + 1] > bins.billboard_offsets[b];
     let rotation_cw = camera.rotation;
     let chunks: Vec<(Vec<u32>, CameraGradient)> = (
         grads.positions.par_chunks_mut(CHUNK),
@@ -986,24 +990,20 @@ pub fn render_backward(
                         }
                     }
                 }
+                // The SH coefficients and their gradient row, every line of both (192 bytes
+                // each, over three or four lines), of a billboard with tile entries: read in
+                // order, but their stream is the reduction's main memory traffic.
+                if lb + SH_AHEAD < len && has_entries(b0 + lb + SH_AHEAD) {
+                    let la = lb + SH_AHEAD;
+                    prefetch_lines(set.sh_of(b0 + la));
+                    prefetch_lines(&d_sh[la * SH_FLOATS..(la + 1) * SH_FLOATS]);
+                }
                 if lb + 4 < len {
                     let la = lb + 4;
-                    // The billboard will be reduced when one of its entries was blended (its
-                    // texel lists may be empty: its owning entry's texel gradients are already
-                    // in the row).
-                    let mut blended = false;
                     for rec in entry_records(b0 + la) {
-                        blended |= rec.blended;
                         for &(idx, _) in texels_of(rec) {
                             prefetch(d_tex, la * texels + idx as usize);
                         }
-                    }
-                    if blended {
-                        let sh = set.sh_of(b0 + la);
-                        prefetch(sh, 0);
-                        prefetch(sh, SH_FLOATS - 1);
-                        prefetch(d_sh, la * SH_FLOATS);
-                        prefetch(d_sh, (la + 1) * SH_FLOATS - 1);
                     }
                 }
                 let b = b0 + lb;

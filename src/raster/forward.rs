@@ -234,6 +234,22 @@ pub(crate) fn prefetch_record<T>(r: &T) {
     );
 }
 
+/// Hints the CPU to fetch every cache line holding part of `data` (no effect on results).
+#[inline(always)]
+pub(crate) fn prefetch_lines<T>(data: &[T]) {
+    let bytes = size_of_val(data);
+    let start = data.as_ptr().cast::<u8>();
+    if bytes == 0 {
+        return;
+    }
+    // One address per line: the first byte, then each 64 bytes on, then the last byte (whose line
+    // the steps miss when the slice does not start on a line boundary).
+    for offset in (0..bytes).step_by(64) {
+        prefetch_ptr(start.wrapping_add(offset));
+    }
+    prefetch_ptr(start.wrapping_add(bytes - 1));
+}
+
 /// Hints the CPU to fetch the cache line holding `*r` (no effect on results).
 #[inline(always)]
 pub(crate) fn prefetch_ref<T>(r: &T) {
