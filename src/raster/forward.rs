@@ -223,15 +223,12 @@ pub(crate) fn prefetch<T>(data: &[T], i: usize) {
     prefetch_ref(&data[i]);
 }
 
-/// Hints the CPU to fetch the cache lines holding the first and the last byte of `*r`.
+/// Hints the CPU to fetch every cache line holding part of `*r` ([`prefetch_lines`]): an
+/// 88-byte [`Prepared`] record spans three lines when it starts in the last 24 bytes of one,
+/// and its first and last bytes alone would leave the middle line to a demand miss.
 #[inline(always)]
 pub(crate) fn prefetch_record<T>(r: &T) {
-    prefetch_ptr(std::ptr::from_ref(r).cast::<u8>());
-    prefetch_ptr(
-        std::ptr::from_ref(r)
-            .cast::<u8>()
-            .wrapping_add(size_of::<T>().saturating_sub(1)),
-    );
+    prefetch_lines(std::slice::from_ref(r));
 }
 
 /// Hints the CPU to fetch every cache line holding part of `data` (no effect on results).
