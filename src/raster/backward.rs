@@ -586,6 +586,53 @@ thread_local! {
     static BACKWARD_STORAGE: std::cell::RefCell<BackwardStorage> = std::cell::RefCell::default();
 }
 
+/// Where the gradients of a by-pixel tile's blended pairs go ([`PairSinks::apply`]).
+struct PairSinks<'a, 'b> {
+    set: &'a ActivatedRef<'b>,
+    prepared: &'a [Option<Prepared>],
+    /// Per tile-list slot: the entry owns its billboard's gradient row ([`OwnedRows`]).
+    direct: &'a [bool],
+    owned_rows: &'a OwnedRows<'a>,
+}
+
+impl PairSinks<'_, '_> {
+    /// The gradients of one blended pair `bl` at pixel `(px, py)` (its `ray`), given its alpha,
+    /// colour and depth gradients (`d_tex_alpha`, `d_colour`, `d_depth`) and its taps: into the
+    /// texture gradients (the billboard's row when its entry owns it, else the tile's `sums`),
+    /// the transform (through the hit) and the entry's record in `records`. A function inlined
+    /// at both of its calls (a closure called twice was compiled out of line, a call per pair).
+    #[inline(always)]
+    fn apply(
+        &self,
+        sums: &mut TexelSums,
+        records: &mut [EntryRecord],
+        taps: &BilinearTaps,
+        bl: &Blended,
+        (px, py, ray): (f32, f32, Vec3),
+        (d_tex_alpha, d_colour, d_depth): (f32, Vec3, f32),
+    ) {
+        let b = bl.billboard as usize;
+        let slot = bl.slot;
+        let d_rgba = [d_colour.x, d_colour.y, d_colour.z, d_tex_alpha];
+        let texture = self.set.texture_of(b);
+        let (du, dv) = if self.direct[slot as usize] {
+            // SAFETY: `owns` holds for entry `range.start + slot` of the tile, and this task is
+            // the only one processing it.
+            taps.vjp_rgba(texture, d_rgba, |texel, g| unsafe { self.owned_rows.add(b, texel, g) })
+        } else {
+            sums.mark(slot);
+            taps.vjp_rgba(texture, d_rgba, |texel, g| sums.add(slot, texel, g))
+        };
+        let pr = self.prepared[b].as_ref().expect("blended entries are prepared");
+        let plane = pr.view_plane();
+        let d_t = intersect_vjp_with(&pr.transform, px, py, |_, _| plane.depth(ray), du, dv, d_depth);
+        let rec = &mut records[slot as usize];
+        add_transform(&mut rec.transform, &d_t);
+        rec.rgb += d_colour;
+        rec.blended = true;
+    }
+}
+
 #[allow(clippy::too_many_arguments)]
 fn backward_tile(
     set: &ActivatedRef<'_>,
@@ -653,6 +700,12 @@ fn backward_tile(
     for &slot in pixel_slots {
         prefetch_record(&prepared[list[slot as usize] as usize]);
     }
+    let sinks = PairSinks {
+        set,
+        prepared,
+        direct,
+        owned_rows,
+    };
     let mut first = 0;
     while first < n_q {
         // Hits and taps of the blended entries of a run of pixels, their texels prefetched.
@@ -713,31 +766,7 @@ fn backward_tile(
                 });
                 t = blend.next_transmittance;
             }
-            // The gradients of one blended entry, given its alpha, colour and depth gradients:
-            // into the textures, the transform (through the hit) and the entry's record.
-            let mut apply = |bl: &Blended, d_tex_alpha: f32, d_colour: Vec3, d_depth: f32| {
-                let b = bl.billboard as usize;
-                let slot = bl.slot;
-                let d_rgba = [d_colour.x, d_colour.y, d_colour.z, d_tex_alpha];
-                let taps = &candidates[bl.candidate as usize].taps;
-                let (du, dv) = if direct[slot as usize] {
-                    // SAFETY: `owns` holds for entry `range.start + slot`, and this task is the
-                    // only one processing it.
-                    taps.vjp_rgba(set.texture_of(b), d_rgba, |texel, g| unsafe {
-                        owned_rows.add(b, texel, g)
-                    })
-                } else {
-                    sums.mark(slot);
-                    taps.vjp_rgba(set.texture_of(b), d_rgba, |texel, g| sums.add(slot, texel, g))
-                };
-                let pr = prepared[b].as_ref().expect("blended entries are prepared");
-                let plane = pr.view_plane();
-                let d_t = intersect_vjp_with(&pr.transform, px, py, |_, _| plane.depth(ray), du, dv, d_depth);
-                let rec = &mut records[bl.slot as usize];
-                add_transform(&mut rec.transform, &d_t);
-                rec.rgb += d_colour;
-                rec.blended = true;
-            };
+            let pixel = (px, py, ray);
             if !aux {
                 // Back to front with the stage's [`CompositeBackState`]: features (r, g, b, 1,
                 // depth), the colour behind starting at the background (its opacity and depth
@@ -749,7 +778,9 @@ fn backward_tile(
                     let c = bl.colour;
                     let grad = back.pop(&bl.blend, &[c.x, c.y, c.z, 1.0, bl.depth], &d_out, params);
                     let [dr, dg, db, _, d_depth] = grad.d_features;
-                    apply(&bl, grad.d_alpha, Vec3::new(dr, dg, db), d_depth);
+                    let taps = &candidates[bl.candidate as usize].taps;
+                    let d_colour = Vec3::new(dr, dg, db);
+                    sinks.apply(sums, records, taps, &bl, pixel, (grad.d_alpha, d_colour, d_depth));
                 }
                 continue;
             }
@@ -790,7 +821,9 @@ fn backward_tile(
                 let grad = back.pop(&bl.blend, &features, &d_out, params);
                 let [dr, dg, db, _, d_depth, dnx, dny, dnz, _] = grad.d_features;
                 let d_depth = d_depth + depth_gradient(bl.depth, m, bl.blend.weight, &totals, g_distortion);
-                apply(&bl, grad.d_alpha, Vec3::new(dr, dg, db), d_depth);
+                let taps = &candidates[bl.candidate as usize].taps;
+                let d_colour = Vec3::new(dr, dg, db);
+                sinks.apply(sums, records, taps, &bl, pixel, (grad.d_alpha, d_colour, d_depth));
                 normal_records[bl.slot as usize] += Vec3::new(dnx, dny, dnz);
             }
         }
