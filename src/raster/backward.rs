@@ -590,7 +590,8 @@ thread_local! {
 struct PairSinks<'a, 'b> {
     set: &'a ActivatedRef<'b>,
     prepared: &'a [Option<Prepared>],
-    /// Per tile-list slot: the entry owns its billboard's gradient row ([`OwnedRows`]).
+    /// Per tile-list slot: [`OwnedRows::owns`] holds for the entry (its tile writes the
+    /// billboard's gradient row).
     direct: &'a [bool],
     owned_rows: &'a OwnedRows<'a>,
 }
@@ -616,8 +617,8 @@ impl PairSinks<'_, '_> {
         let d_rgba = [d_colour.x, d_colour.y, d_colour.z, d_tex_alpha];
         let texture = self.set.texture_of(b);
         let (du, dv) = if self.direct[slot as usize] {
-            // SAFETY: `owns` holds for entry `range.start + slot` of the tile, and this task is
-            // the only one processing it.
+            // SAFETY: `direct[slot]` is set only where `owns` holds for the tile's entry at
+            // `slot` (`backward_tile` builds it), and this task is the only one processing it.
             taps.vjp_rgba(texture, d_rgba, |texel, g| unsafe { self.owned_rows.add(b, texel, g) })
         } else {
             sums.mark(slot);
