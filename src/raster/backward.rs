@@ -19,8 +19,8 @@
 
 use super::ForwardState;
 use super::forward::{
-    PairOrder, RenderOutput, TileBlended, TileCandidates, prefetch, prefetch_lines, prefetch_record, prefetch_ref,
-    prefetch_taps, split_by_lengths, tile_pixels,
+    Candidate, PairOrder, RenderOutput, TileBlended, TileCandidates, prefetch, prefetch_lines, prefetch_record,
+    prefetch_ref, prefetch_taps, split_by_lengths, tile_pixels,
 };
 use super::preprocess::Prepared;
 use super::schedule::map_heaviest_first;
@@ -598,7 +598,8 @@ struct PairSinks<'a, 'b> {
 
 impl PairSinks<'_, '_> {
     /// The gradients of one blended pair `bl` at pixel `(px, py)` (its `ray`), given its alpha,
-    /// colour and depth gradients (`d_tex_alpha`, `d_colour`, `d_depth`) and its taps: into the
+    /// colour and depth gradients (`d_tex_alpha`, `d_colour`, `d_depth`) and its pixel's
+    /// `candidates` (which hold its taps, [`Blended::candidate`]): into the
     /// texture gradients (the billboard's row when its entry owns it, else the tile's `sums`),
     /// the transform (through the hit) and the entry's record in `records`. A function inlined
     /// at both of its calls (a closure called twice was compiled out of line, a call per pair).
@@ -607,7 +608,7 @@ impl PairSinks<'_, '_> {
         &self,
         sums: &mut TexelSums,
         records: &mut [EntryRecord],
-        taps: &BilinearTaps,
+        candidates: &[Candidate],
         bl: &Blended,
         (px, py, ray): (f32, f32, Vec3),
         (d_tex_alpha, d_colour, d_depth): (f32, Vec3, f32),
@@ -615,6 +616,7 @@ impl PairSinks<'_, '_> {
         let b = bl.billboard as usize;
         let slot = bl.slot;
         let d_rgba = [d_colour.x, d_colour.y, d_colour.z, d_tex_alpha];
+        let taps = &candidates[bl.candidate as usize].taps;
         let texture = self.set.texture_of(b);
         let (du, dv) = if self.direct[slot as usize] {
             // SAFETY: `direct[slot]` is set only where `owns` holds for the tile's entry at
@@ -779,9 +781,8 @@ fn backward_tile(
                     let c = bl.colour;
                     let grad = back.pop(&bl.blend, &[c.x, c.y, c.z, 1.0, bl.depth], &d_out, params);
                     let [dr, dg, db, _, d_depth] = grad.d_features;
-                    let taps = &candidates[bl.candidate as usize].taps;
                     let d_colour = Vec3::new(dr, dg, db);
-                    sinks.apply(sums, records, taps, &bl, pixel, (grad.d_alpha, d_colour, d_depth));
+                    sinks.apply(sums, records, candidates, &bl, pixel, (grad.d_alpha, d_colour, d_depth));
                 }
                 continue;
             }
@@ -822,9 +823,8 @@ fn backward_tile(
                 let grad = back.pop(&bl.blend, &features, &d_out, params);
                 let [dr, dg, db, _, d_depth, dnx, dny, dnz, _] = grad.d_features;
                 let d_depth = d_depth + depth_gradient(bl.depth, m, bl.blend.weight, &totals, g_distortion);
-                let taps = &candidates[bl.candidate as usize].taps;
                 let d_colour = Vec3::new(dr, dg, db);
-                sinks.apply(sums, records, taps, &bl, pixel, (grad.d_alpha, d_colour, d_depth));
+                sinks.apply(sums, records, candidates, &bl, pixel, (grad.d_alpha, d_colour, d_depth));
                 normal_records[bl.slot as usize] += Vec3::new(dnx, dny, dnz);
             }
         }

@@ -234,17 +234,24 @@ pub(crate) fn prefetch_record<T>(r: &T) {
 /// Hints the CPU to fetch every cache line holding part of `data` (no effect on results).
 #[inline(always)]
 pub(crate) fn prefetch_lines<T>(data: &[T]) {
-    let bytes = size_of_val(data);
-    let start = data.as_ptr().cast::<u8>();
-    if bytes == 0 {
+    let Some(last) = size_of_val(data).checked_sub(1) else {
         return;
-    }
-    // One address per line: the first byte, then each 64 bytes on, then the last byte (whose line
-    // the steps miss when the slice does not start on a line boundary).
-    for offset in (0..bytes).step_by(64) {
+    };
+    let start = data.as_ptr().cast::<u8>();
+    prefetch_steps(data);
+    // The last byte, whose line the steps miss when `data` does not start on a line boundary.
+    prefetch_ptr(start.wrapping_add(last));
+}
+
+/// Hints the CPU to fetch the cache lines of `data`'s first byte and of every 64th byte after
+/// it (no effect on results): every line when `data` starts on a line boundary, else all but
+/// possibly the last ([`prefetch_lines`] adds it).
+#[inline(always)]
+pub(crate) fn prefetch_steps<T>(data: &[T]) {
+    let start = data.as_ptr().cast::<u8>();
+    for offset in (0..size_of_val(data)).step_by(64) {
         prefetch_ptr(start.wrapping_add(offset));
     }
-    prefetch_ptr(start.wrapping_add(bytes - 1));
 }
 
 /// Hints the CPU to fetch the cache line holding `*r` (no effect on results).

@@ -90,12 +90,7 @@ impl BillboardRows {
     /// 2026-11-28: one more prefetch per billboard.)
     #[inline]
     pub(crate) fn prefetch(&self, b: usize) {
-        let rows = self.of(b).as_ptr_range();
-        let mut line = rows.start.cast::<u8>();
-        while line < rows.end.cast::<u8>() {
-            super::forward::prefetch_ptr(line);
-            line = line.wrapping_add(64);
-        }
+        super::forward::prefetch_steps(self.of(b));
     }
 
     /// Hints the CPU to fetch where billboard `b`'s rows are (no effect on values), so that
