@@ -53,16 +53,7 @@ pub fn prepare_one(set: &ActivatedRef<'_>, i: usize, camera: &Camera, settings: 
 /// [`prepare_one`] without the SH colour (`rgb` zero, no channel clamped).
 fn prepare_geometry(set: &ActivatedRef<'_>, i: usize, camera: &Camera) -> Option<Prepared> {
     let projected = splat_frame(set.positions[i], set.log_scales[i], set.quaternions[i], camera)?;
-    let record = geometry_record(&projected, support_half_side(set.texture_size), camera)?;
-    Some(with_plane(record, set, i, camera))
-}
-
-/// `record` with its [`Prepared::plane_offset`] (billboard `i` of `set`).
-#[inline]
-fn with_plane(mut record: Prepared, set: &ActivatedRef<'_>, i: usize, camera: &Camera) -> Prepared {
-    let sign = if record.normal_flipped { -1.0 } else { 1.0 };
-    (record.normal, record.plane_offset) = view_plane(set.positions[i], set.quaternions[i], camera, sign);
-    record
+    geometry_record(&projected, support_half_side(set.texture_size), set, i, camera)
 }
 
 impl Prepared {
@@ -76,20 +67,35 @@ impl Prepared {
     }
 }
 
-/// The record of a billboard with frame `projected` (SH colour unset), or `None` when the
-/// tight box of its texture support square (half side `half_side`, clipped by the near plane)
-/// holds no pixel centre of the image.
-#[inline]
-fn geometry_record(projected: &SplatFrame, half_side: f32, camera: &Camera) -> Option<Prepared> {
+/// The record of billboard `i` of `set`, whose frame is `projected` (SH colour unset), or
+/// `None` when the tight box of its texture support square (half side `half_side`, clipped by
+/// the near plane) holds no pixel centre of the image. The plane ([`view_plane`]) replaces the
+/// frame's normal.
+///
+/// Every field is computed before the record is made, so that the caller can write it straight
+/// into its slot: built in steps and passed by value, the 88-byte record was copied through the
+/// stack with loads that overlapped the halves of earlier stores, each a stall of the store
+/// forwarding (about a fifth of the preprocess on the 256²/50k scene, `docs/perf.md`).
+#[inline(always)]
+fn geometry_record(
+    projected: &SplatFrame,
+    half_side: f32,
+    set: &ActivatedRef<'_>,
+    i: usize,
+    camera: &Camera,
+) -> Option<Prepared> {
     let rect = square_screen_bounds(&projected.transform, half_side)?.pixel_rect(camera.width, camera.height)?;
+    let normal_flipped = projected.normal_sign < 0.0;
+    let sign = if normal_flipped { -1.0 } else { 1.0 };
+    let (normal, plane_offset) = view_plane(set.positions[i], set.quaternions[i], camera, sign);
     Some(Prepared {
         transform: projected.transform,
-        normal: projected.normal_view,
-        plane_offset: 0.0,
+        normal,
+        plane_offset,
         depth: projected.view_depth,
         rgb: Vec3::ZERO,
         sh_clamped: [false; 3],
-        normal_flipped: projected.normal_sign < 0.0,
+        normal_flipped,
         pixel_min: [rect.x_min, rect.y_min],
         pixel_max: [rect.x_max - 1, rect.y_max - 1],
     })
@@ -155,8 +161,7 @@ pub fn preprocess_into(
                 for (l, (slot, frame)) in group.iter_mut().zip(&frames).enumerate() {
                     *slot = frame
                         .as_ref()
-                        .and_then(|f| geometry_record(f, half_side, camera))
-                        .map(|r| with_plane(r, set, i0 + l, camera));
+                        .and_then(|f| geometry_record(f, half_side, set, i0 + l, camera));
                     if slot.is_some() {
                         live.push(4 * g + l);
                     } else {

@@ -170,7 +170,11 @@ fn view_point(camera: &Camera, position: Vec3) -> Vec3 {
 /// through the billboard's centre (normal and offset describe the same plane, so the offset
 /// does not cancel against a slightly different normal), and the normal carries half an ulp of
 /// error instead of the few ulps of the f32 rotation chain.
-#[inline]
+///
+/// Always inlined: called out of line by the rasterizer's preprocess, its pair came back through
+/// the stack and was read with wider loads than the stores that wrote it, a stall of the store
+/// forwarding per billboard (`docs/perf.md`).
+#[inline(always)]
 pub fn view_plane(position: Vec3, quaternion: [f32; 4], camera: &Camera, normal_sign: f32) -> (Vec3, f32) {
     let rcw = camera.rotation.as_dmat3();
     let normal = (f64::from(normal_sign) * (rcw * crate::stages::rotation::quat_normal_f64(quaternion))).as_vec3();
