@@ -10,17 +10,21 @@
 # their paths, e.g. target/release/deps/raster-<hash>); copy each build's aside before building
 # the next one. Example, the working tree against a commit:
 #
+#   executable() { cargo bench --features bench --bench raster --no-run 2>&1 |
+#       sed -n 's/.*Executable .*(\(.*\))$/\1/p'; }
 #   git worktree add --detach /tmp/base COMMIT
-#   (cd /tmp/base && cargo bench --features bench --bench raster --no-run)
-#   cargo bench --features bench --bench raster --no-run
-#   tools/ab_bench.sh 4 'raster/fwd_bwd/256/50000$' 5 /tmp/base/target/release/deps/raster-* \
-#       target/release/deps/raster-*
+#   base=/tmp/base/$(cd /tmp/base && executable)
+#   new=$(executable)
+#   tools/ab_bench.sh 4 'raster/fwd_bwd/256/50000$' 5 "$base" "$new"
+#
+# (A build of the same crate keeps the executable's name, so a build in the same directory
+# replaces the previous one: a worktree per commit, or a copy, keeps both.)
 #
 # Run it from the repository root (some benches read files relative to it), on an otherwise
 # idle machine: anything else running shows up in every figure.
 set -euo pipefail
 if [ "$#" -lt 5 ]; then
-    sed -n '2,10p' "$0" | sed 's/^# \{0,1\}//' >&2
+    sed -n '2,24p' "$0" | sed 's/^# \{0,1\}//' >&2
     exit 2
 fi
 rounds=$1 filter=$2 seconds=$3
