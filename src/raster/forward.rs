@@ -613,15 +613,16 @@ struct TileScratch {
     walk: PixelWalk,
 }
 
-/// A tile whose entries cover fewer pixels than this on average is composited pixel by pixel
-/// (`composite_tile_by_pixel`), others billboard by billboard (`composite_tile`), and its
-/// backward walks it the same way. Each walk forced on every tile of random scenes of 2 to 34
-/// evaluated pixels per entry and 0.8 to 7.6 per pixel, and of the trained-like scenes (63 to
-/// 223 per entry, 16 to 23 per pixel): the pixel walk takes 12-45 % less time up to 9-11
-/// pixels per entry (one scene at 9.6 excepted, 12 % more), the entry walk 2-38 % less from 16
-/// on, whatever the depth; the trained-like scenes take 2.1-3.2 times as long by pixel. The threshold was 4 until `docs/perf.md`'s
-/// 2026-11-28 seventh session, which left random scenes of 4-11 pixels per entry on the slower
-/// walk (400²/50k forward + backward 1.6 times as long as by pixel).
+/// A tile whose entries cover fewer pixels than this on average (their span pixels, a little
+/// more than the pixels they are evaluated at) is composited pixel by pixel
+/// (`composite_tile_by_pixel`), others billboard by billboard (`composite_tile`); its backward
+/// walks it the same way. With each walk forced on every tile of random scenes of 2 to 34
+/// evaluated pixels per entry (0.8 to 7.6 per pixel) and of the trained-like scenes (63 to 223
+/// per entry, 16 to 23 per pixel), the pixel walk took 12-45 % less time up to 9-11 pixels per
+/// entry (one scene at 9.6 excepted: 12 % more) and the entry walk 2-38 % less from 16 on,
+/// whatever the depth; the trained-like scenes took 2.1-3.2 times as long by pixel
+/// (`docs/perf.md`, 2026-11-28 seventh session). The threshold had been 4, which left random
+/// scenes of 4-11 pixels per entry on the slower walk (400²/50k 1.6 times as long).
 pub const SMALL_ENTRY_PIXELS: usize = 12;
 
 /// Splits `data` into consecutive mutable chunks of the given lengths.
