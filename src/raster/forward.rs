@@ -224,7 +224,8 @@ pub(crate) fn prefetch<T>(data: &[T], i: usize) {
 }
 
 /// Hints the CPU to fetch every cache line holding part of `*r` ([`prefetch_lines`]): an
-/// 88-byte [`Prepared`] record spans three lines when it starts in the last 24 bytes of one,
+/// 88-byte `Option<`[`Prepared`]`>` spans three lines when it starts past byte 40 of one (a
+/// quarter of them in their array, whose records start at multiples of 8 bytes within a line),
 /// and its first and last bytes alone would leave the middle line to a demand miss.
 #[inline(always)]
 pub(crate) fn prefetch_record<T>(r: &T) {
