@@ -385,7 +385,11 @@ pub(super) fn add_texel(cell: &mut [f32; 4], g: [f32; 4]) {
 pub(crate) const UNTOUCHED: [f32; 4] = [-0.0; 4];
 
 /// Per-tile texture-gradient sums over (entry slot, texel) cells, reused by every tile a
-/// thread processes (see [`TEXEL_SUMS`]).
+/// thread processes (see [`TEXEL_SUMS`]). The pixel-by-pixel walk interleaves its entries'
+/// contributions, so it keeps one slot per entry of the tile and reads them all out at the end
+/// ([`TexelSums::finish`]); the entry-by-entry walk finishes one entry before the next, so it
+/// uses a single slot and reads it out after each entry ([`TexelSums::read_out`]), while its
+/// cells are still in cache (the tile's slots were 1 MB per 250 entries, more than L2).
 ///
 /// Each contribution is added to its cell the moment the pixel pass produces it, so every cell
 /// is the sum of its contributions in pixel order, starting from the first one (assigned, not
@@ -471,37 +475,45 @@ impl TexelSums {
     /// the texels of slot `k` are `out[start..end]`.
     #[inline(always)]
     pub(crate) fn finish(&mut self, slots: usize, out: &mut TileTexels, mut span: impl FnMut(usize, (u32, u32))) {
-        let texels = self.texels;
         out.clear();
         for slot in 0..slots {
-            let start = out.len() as u32;
-            if std::mem::take(&mut self.slot_touched[slot]) {
-                let flags = &mut self.touched[slot * texels..(slot + 1) * texels];
-                let sums = &mut self.sums[slot * texels..(slot + 1) * texels];
-                let mut chunks = flags.chunks_exact_mut(8);
-                let mut base = 0usize;
-                for chunk in &mut chunks {
-                    let word = u64::from_le_bytes(chunk.try_into().expect("eight flags"));
-                    if word != 0 {
-                        // One set bit per touched flag (each flag is 0 or 1), lowest first.
-                        let mut bits = word;
-                        while bits != 0 {
-                            let t = base + bits.trailing_zeros() as usize / 8;
-                            out.push((t as u32, std::mem::replace(&mut sums[t], UNTOUCHED)));
-                            bits &= bits - 1;
-                        }
-                        chunk.fill(0);
+            span(slot, self.read_out(slot, out));
+        }
+    }
+
+    /// Appends the touched cells of `slot` to `out` in texel order as `(texel, sum)`, resets
+    /// them and their flags (so that the slot can take the next entry's contributions), and
+    /// returns where they went: `out[start..end]` (empty when the slot was not marked).
+    #[inline(always)]
+    pub(crate) fn read_out(&mut self, slot: usize, out: &mut TileTexels) -> (u32, u32) {
+        let texels = self.texels;
+        let start = out.len() as u32;
+        if std::mem::take(&mut self.slot_touched[slot]) {
+            let flags = &mut self.touched[slot * texels..(slot + 1) * texels];
+            let sums = &mut self.sums[slot * texels..(slot + 1) * texels];
+            let mut chunks = flags.chunks_exact_mut(8);
+            let mut base = 0usize;
+            for chunk in &mut chunks {
+                let word = u64::from_le_bytes(chunk.try_into().expect("eight flags"));
+                if word != 0 {
+                    // One set bit per touched flag (each flag is 0 or 1), lowest first.
+                    let mut bits = word;
+                    while bits != 0 {
+                        let t = base + bits.trailing_zeros() as usize / 8;
+                        out.push((t as u32, std::mem::replace(&mut sums[t], UNTOUCHED)));
+                        bits &= bits - 1;
                     }
-                    base += 8;
+                    chunk.fill(0);
                 }
-                for (t, flag) in chunks.into_remainder().iter_mut().enumerate() {
-                    if std::mem::take(flag) != 0 {
-                        out.push(((base + t) as u32, std::mem::replace(&mut sums[base + t], UNTOUCHED)));
-                    }
+                base += 8;
+            }
+            for (t, flag) in chunks.into_remainder().iter_mut().enumerate() {
+                if std::mem::take(flag) != 0 {
+                    out.push(((base + t) as u32, std::mem::replace(&mut sums[base + t], UNTOUCHED)));
                 }
             }
-            span(slot, (start, out.len() as u32));
         }
+        (start, out.len() as u32)
     }
 }
 

@@ -39,7 +39,8 @@ pub(super) struct PixelBack {
 }
 
 /// Where the texel gradients of one entry are added: one cell per texel of the texture (its
-/// billboard's gradient row, or its slot of the tile's sums) and a flag per cell, set to 1 by
+/// billboard's gradient row, or the one slot of sums the tile's other entries share, read out
+/// after each of them) and a flag per cell, set to 1 by
 /// every add (the sums read them; a gradient row's flags are scratch that nothing reads).
 pub(super) struct TexelTarget<'a> {
     pub(super) cells: &'a mut [[f32; 4]],
@@ -148,7 +149,11 @@ fn by_entry_body<const WIDE: bool>(
         tile: tile as u32,
         ..EMPTY_RECORD
     });
-    sums.start(list.len(), ts * ts);
+    // One slot of sums for every entry that does not own its gradient row: each entry's
+    // contributions are complete once its pairs are done, so they are read out then, while
+    // their cells are still in cache, and the slot is reset for the next entry.
+    sums.start(1, ts * ts);
+    texels.clear();
     let EntryScratch {
         pixels,
         direct,
@@ -209,8 +214,8 @@ fn by_entry_body<const WIDE: bool>(
         if let Some(ahead) = k.checked_sub(RECORD_AHEAD) {
             prefetch_record(&prepared[list[ahead] as usize]);
         }
-        // The texels of an entry a few ahead, with where its texel gradients will go: its
-        // billboard's gradient row, or the cells of the sums' index.
+        // The texels of an entry a few ahead, with where its texel gradients will go when that
+        // is its billboard's gradient row (the shared slot of sums stays in cache).
         if let Some(ahead) = k.checked_sub(AHEAD) {
             let b = list[ahead] as usize;
             if let Some(pa) = prepared[b].as_ref()
@@ -222,8 +227,6 @@ fn by_entry_body<const WIDE: bool>(
                 prefetch_texel_rect(set.texture_of(b).as_ptr(), ts, rect);
                 if direct[ahead] {
                     prefetch_texel_rect(owned_rows.row_start(b), ts, rect);
-                } else {
-                    prefetch_texel_rect(sums.cell_sums().wrapping_add(ahead * ts * ts), ts, rect);
                 }
             }
         }
@@ -237,13 +240,13 @@ fn by_entry_body<const WIDE: bool>(
         let texture = set.texture_of(b);
         let record = &mut records[k];
         // Where the entry's texel gradients go: its billboard's gradient row when the entry
-        // owns it, else its slot's cells of the tile's sums.
+        // owns it, else the shared slot of sums (read out below).
         let (cells, flags) = if direct[k] {
             // SAFETY: `owns` holds for entry `range.start + k`, and this task is the only one
             // processing it; the row is reached only through `cells` until the next entry.
             (unsafe { owned_rows.row_mut(b) }, &mut row_flags[..])
         } else {
-            sums.slot_mut(k as u32)
+            sums.slot_mut(0)
         };
         let mut target = TexelTarget { cells, flags };
         for chunk in of.chunks(LANES) {
@@ -330,8 +333,10 @@ fn by_entry_body<const WIDE: bool>(
                 add_transform(&mut record.transform, &d_t.lane(lane));
             }
         }
+        // The texel sums of an entry that does not own its row go to the reduction.
+        if !direct[k] {
+            record.texels = sums.read_out(0, texels);
+        }
     }
-    // The texel sums of the other entries go to the reduction.
-    sums.finish(list.len(), texels, |k, span| records[k].texels = span);
     background
 }
