@@ -389,7 +389,8 @@ pub(crate) const UNTOUCHED: [f32; 4] = [-0.0; 4];
 /// contributions, so it keeps one slot per entry of the tile and reads them all out at the end
 /// ([`TexelSums::finish`]); the entry-by-entry walk finishes one entry before the next, so it
 /// uses a single slot and reads it out after each entry ([`TexelSums::read_out`]), while its
-/// cells are still in cache (the tile's slots were 1 MB per 250 entries, more than L2).
+/// cells are still in cache (a slot per entry would take 1 MB for a tile of 250 entries, more
+/// than L2).
 ///
 /// Each contribution is added to its cell the moment the pixel pass produces it, so every cell
 /// is the sum of its contributions in pixel order, starting from the first one (assigned, not

@@ -40,8 +40,8 @@ pub(super) struct PixelBack {
 
 /// Where the texel gradients of one entry are added: one cell per texel of the texture (its
 /// billboard's gradient row, or the one slot of sums the tile's other entries share, read out
-/// after each of them) and a flag per cell, set to 1 by
-/// every add (the sums read them; a gradient row's flags are scratch that nothing reads).
+/// after each of them) and a flag per cell, set to 1 by every add (the sums read them; a
+/// gradient row's flags are scratch that nothing reads).
 pub(super) struct TexelTarget<'a> {
     pub(super) cells: &'a mut [[f32; 4]],
     pub(super) flags: &'a mut [u8],
