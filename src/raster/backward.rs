@@ -315,7 +315,9 @@ pub(super) fn add_transform(acc: &mut SplatTransform, d: &SplatTransform) {
 }
 
 /// One tile's texel gradients of the entries that do not own their billboard's row: (texel
-/// index, `[∂r, ∂g, ∂b, ∂alpha]`), grouped by entry (see [`EntryRecord::texels`]).
+/// index, `[∂r, ∂g, ∂b, ∂alpha]`), grouped by entry (see [`EntryRecord::texels`]). The groups
+/// are in no fixed order: the pixel walk writes them in list order, the entry walk in reverse
+/// list order. Readers reach each group through its record's span.
 pub(super) type TileTexels = Vec<(u32, [f32; 4])>;
 
 /// Reusable per-task scratch of the tile backward.
@@ -419,7 +421,8 @@ pub(crate) struct TexelSums {
 }
 
 impl TexelSums {
-    /// Prepares for a tile of `slots` entries with `texels` texels per channel.
+    /// Prepares for a tile with `slots` slots (one per entry in the pixel-by-pixel walk, a single
+    /// shared one in the entry-by-entry walk) of `texels` texels each.
     pub(crate) fn start(&mut self, slots: usize, texels: usize) {
         debug_assert!(self.slot_touched.iter().all(|&t| !t), "the previous tile was finished");
         let cells = slots * texels;
