@@ -88,13 +88,6 @@ unsafe fn load_ps(v: &[f32], q: usize) -> __m256 {
 }
 
 #[inline(always)]
-unsafe fn store_ps(v: &mut [f32], q: usize, x: __m256) {
-    let lanes = &mut v[q..q + LANES];
-    // SAFETY: as in `load_ps`.
-    unsafe { _mm256_storeu_ps(lanes.as_mut_ptr(), x) }
-}
-
-#[inline(always)]
 unsafe fn load_si(v: &[u32], q: usize) -> __m256i {
     let lanes = &v[q..q + LANES];
     // SAFETY: as in `load_ps`.
@@ -106,6 +99,32 @@ unsafe fn store_si(v: &mut [u32], q: usize, x: __m256i) {
     let lanes = &mut v[q..q + LANES];
     // SAFETY: as in `load_ps`.
     unsafe { _mm256_storeu_si256(lanes.as_mut_ptr().cast(), x) }
+}
+
+/// Writes `new` to the lanes of `v` from `q` where `mask` is set, and `old` (the value
+/// [`load_ps`] read there) to the others: a blend, then one plain 32-byte store (bounds
+/// checked).
+///
+/// The store is written in assembly on purpose. Left to the compiler, "load, blend with what
+/// was loaded, store back" becomes a masked store (`vmaskmovps`), which gives the same bits
+/// but is slow on AMD Zen cores: on a Zen 4 host the object scene's forward took 34 ms with
+/// the nine masked stores per run and 28 ms with blends and plain stores (docs/perf.md,
+/// 2026-11-29). Lanes outside a span are written back unchanged, as before.
+#[inline]
+#[target_feature(enable = "avx")]
+unsafe fn store_blend_ps(v: &mut [f32], q: usize, old: __m256, new: __m256, mask: __m256) {
+    let lanes = &mut v[q..q + LANES];
+    let x = _mm256_blendv_ps(old, new, mask);
+    // SAFETY: `lanes` holds LANES floats, so the unaligned 32-byte store stays inside `v`; the
+    // assembly writes only there and touches neither the stack nor the flags.
+    unsafe {
+        std::arch::asm!(
+            "vmovups ymmword ptr [{p}], {x}",
+            p = in(reg) lanes.as_mut_ptr(),
+            x = in(ymm_reg) x,
+            options(nostack, preserves_flags)
+        );
+    }
 }
 
 /// The eight lanes of `v`.
@@ -555,13 +574,9 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
                     for (acc, f) in states.features.iter_mut().zip(features) {
                         let old = load_ps(acc, q0);
                         let new = _mm256_add_ps(old, _mm256_mul_ps(f, weight));
-                        store_ps(acc, q0, _mm256_blendv_ps(old, new, blend));
+                        store_blend_ps(acc, q0, old, new, blend);
                     }
-                    store_ps(
-                        &mut states.transmittance,
-                        q0,
-                        _mm256_blendv_ps(transmittance, next, blend),
-                    );
+                    store_blend_ps(&mut states.transmittance, q0, transmittance, next, blend);
                     let rule = _mm256_and_ps(
                         blend,
                         _mm256_and_ps(
@@ -570,7 +585,7 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
                         ),
                     );
                     let median = load_ps(&states.median, q0);
-                    store_ps(&mut states.median, q0, _mm256_blendv_ps(median, depth, rule));
+                    store_blend_ps(&mut states.median, q0, median, depth, rule);
                     // The blended lanes' pairs, in pixel order.
                     push_pairs(blended, blend_bits, (q0, q0 - row, y), transmittance);
                     if DISTORTION {
