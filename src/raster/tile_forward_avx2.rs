@@ -35,22 +35,33 @@ use crate::stages::depth_distortion::{DistortionState, mapped_depth};
 use crate::stages::ray_plane::{LANES, intersect_lanes, row_centres};
 use std::arch::x86_64::*;
 
-/// The running state of a tile's pixels, one array per value: pixel `q` (tile-local,
-/// row-major) is element `q` of each; every array has [`LANES`] elements of padding after the
-/// last pixel, so that a run of [`LANES`] from any pixel is in bounds (lanes past a span are
-/// read and written back unchanged).
+/// The running state of a tile's pixels, one row per value: pixel `q` (tile-local, row-major)
+/// is element `q` of each row. Each row holds `stride` = pixels + [`LANES`] elements, the
+/// padding after the last pixel making a run of [`LANES`] from any pixel in bounds (lanes past a
+/// span are read and written back unchanged). The rows of one kind share one allocation, so
+/// that a chunk checks its bounds once for all of them ([`ChunkStates`]).
 #[derive(Default)]
 pub(crate) struct LaneStates {
-    transmittance: Vec<f32>,
-    features: [Vec<f32>; FORWARD_FEATURES],
-    /// All bits set once the pixel has stopped compositing, else 0.
-    done: Vec<u32>,
-    median: Vec<f32>,
-    evaluated: Vec<u32>,
-    nan_alpha: Vec<u32>,
+    /// [`FLOAT_ROWS`] rows: the transmittance ([`TRANSMITTANCE`]), the features from
+    /// [`FEATURES`], the median depth ([`MEDIAN`]).
+    floats: Vec<f32>,
+    /// [`WORD_ROWS`] rows: [`DONE`] (all bits set once the pixel has stopped compositing, else
+    /// 0), the [`EVALUATED`] and [`NAN_ALPHA`] counts.
+    words: Vec<u32>,
+    /// Elements per row.
+    stride: usize,
     /// Only with the depth distortion (else empty).
     spread: Vec<DistortionState>,
 }
+
+const TRANSMITTANCE: usize = 0;
+const FEATURES: usize = 1;
+const MEDIAN: usize = FEATURES + FORWARD_FEATURES;
+const FLOAT_ROWS: usize = MEDIAN + 1;
+const DONE: usize = 0;
+const EVALUATED: usize = 1;
+const NAN_ALPHA: usize = 2;
+const WORD_ROWS: usize = 3;
 
 /// `v` as `len` copies of `value`, keeping its allocation.
 fn refill<T: Copy>(v: &mut Vec<T>, len: usize, value: T) {
@@ -61,70 +72,134 @@ fn refill<T: Copy>(v: &mut Vec<T>, len: usize, value: T) {
 impl LaneStates {
     /// Every pixel of a tile of `n` pixels at the start of compositing.
     fn reset(&mut self, n: usize, distortion: bool) {
-        let len = n + LANES;
-        refill(&mut self.transmittance, len, 1.0);
-        for f in &mut self.features {
-            refill(f, len, 0.0);
-        }
-        refill(&mut self.done, len, 0);
-        refill(&mut self.median, len, 0.0);
-        refill(&mut self.evaluated, len, 0);
-        refill(&mut self.nan_alpha, len, 0);
+        let stride = n + LANES;
+        self.stride = stride;
+        refill(&mut self.floats, FLOAT_ROWS * stride, 0.0);
+        self.floats[TRANSMITTANCE * stride..(TRANSMITTANCE + 1) * stride].fill(1.0);
+        refill(&mut self.words, WORD_ROWS * stride, 0);
         let start = DistortionState {
             s1: 0.0,
             s2: 0.0,
             distortion: 0.0,
         };
-        refill(&mut self.spread, if distortion { len } else { 0 }, start);
+        refill(&mut self.spread, if distortion { stride } else { 0 }, start);
+    }
+
+    /// Element `q` of float row `row`.
+    fn float(&self, row: usize, q: usize) -> f32 {
+        self.floats[row * self.stride + q]
+    }
+
+    /// Element `q` of word row `row`.
+    fn word(&self, row: usize, q: usize) -> u32 {
+        self.words[row * self.stride + q]
+    }
+
+    /// The states of the [`LANES`] pixels from `q0` (`q0` below the tile's pixel count), every
+    /// row's bounds checked at once.
+    #[inline(always)]
+    fn chunk(&mut self, q0: usize) -> ChunkStates<'_> {
+        let stride = self.stride;
+        assert!(
+            q0 + LANES <= stride && self.floats.len() == FLOAT_ROWS * stride && self.words.len() == WORD_ROWS * stride,
+            "a chunk starts at a pixel of the tile"
+        );
+        ChunkStates {
+            floats: self.floats[q0..].as_mut_ptr(),
+            words: self.words[q0..].as_mut_ptr(),
+            stride,
+            _states: std::marker::PhantomData,
+        }
     }
 }
 
-/// The eight lanes of `v` from `q` (bounds checked).
-#[inline(always)]
-unsafe fn load_ps(v: &[f32], q: usize) -> __m256 {
-    let lanes = &v[q..q + LANES];
-    // SAFETY: `lanes` holds LANES floats; unaligned loads are allowed.
-    unsafe { _mm256_loadu_ps(lanes.as_ptr()) }
+/// The [`LANES`] elements from one pixel of every row of a [`LaneStates`]; rows are chosen by
+/// constant index, checked at compile time, and the chunk's bounds were checked when it was
+/// made ([`LaneStates::chunk`]).
+struct ChunkStates<'a> {
+    /// Element `q0` of the first float row.
+    floats: *mut f32,
+    /// Element `q0` of the first word row.
+    words: *mut u32,
+    stride: usize,
+    _states: std::marker::PhantomData<&'a mut LaneStates>,
 }
 
-#[inline(always)]
-unsafe fn load_si(v: &[u32], q: usize) -> __m256i {
-    let lanes = &v[q..q + LANES];
-    // SAFETY: as in `load_ps`.
-    unsafe { _mm256_loadu_si256(lanes.as_ptr().cast()) }
+impl ChunkStates<'_> {
+    /// The eight lanes of float row `ROW`.
+    #[inline(always)]
+    unsafe fn load_ps<const ROW: usize>(&self) -> __m256 {
+        const { assert!(ROW < FLOAT_ROWS) };
+        // SAFETY: `LaneStates::chunk` checked `q0 + LANES <= stride` and the length of the
+        // rows, so elements `ROW · stride + q0 ..+ LANES` are inside `floats`; AVX is enabled by
+        // every caller.
+        unsafe { _mm256_loadu_ps(self.floats.add(ROW * self.stride)) }
+    }
+
+    /// Float row `ROW` set to `new` where `mask` is set and left at `old` (its lanes as
+    /// [`Self::load_ps`] read them) elsewhere ([`store_blend_at`]).
+    #[inline(always)]
+    unsafe fn store_blend<const ROW: usize>(&mut self, old: __m256, new: __m256, mask: __m256) {
+        const { assert!(ROW < FLOAT_ROWS) };
+        // SAFETY: as in `load_ps` (eight floats at the pointer); the `LaneStates` is borrowed
+        // exclusively; AVX is enabled by every caller.
+        unsafe { store_blend_at(self.floats.add(ROW * self.stride), old, new, mask) }
+    }
+
+    /// The eight lanes of feature `c` (below [`FORWARD_FEATURES`]).
+    #[inline(always)]
+    unsafe fn load_feature(&self, c: usize) -> __m256 {
+        assert!(c < FORWARD_FEATURES, "a forward feature");
+        // SAFETY: as in `load_ps`, for row `FEATURES + c < FLOAT_ROWS`.
+        unsafe { _mm256_loadu_ps(self.floats.add((FEATURES + c) * self.stride)) }
+    }
+
+    /// [`Self::store_blend`] for feature `c`.
+    #[inline(always)]
+    unsafe fn store_feature_blend(&mut self, c: usize, old: __m256, new: __m256, mask: __m256) {
+        assert!(c < FORWARD_FEATURES, "a forward feature");
+        // SAFETY: as in `store_blend`, for row `FEATURES + c < FLOAT_ROWS`.
+        unsafe { store_blend_at(self.floats.add((FEATURES + c) * self.stride), old, new, mask) }
+    }
+
+    #[inline(always)]
+    unsafe fn load_si<const ROW: usize>(&self) -> __m256i {
+        const { assert!(ROW < WORD_ROWS) };
+        // SAFETY: as in `load_ps`, for `words`.
+        unsafe { _mm256_loadu_si256(self.words.add(ROW * self.stride).cast()) }
+    }
+
+    #[inline(always)]
+    unsafe fn store_si<const ROW: usize>(&mut self, x: __m256i) {
+        const { assert!(ROW < WORD_ROWS) };
+        // SAFETY: as in `load_ps`, for `words`; the `LaneStates` is borrowed exclusively.
+        unsafe { _mm256_storeu_si256(self.words.add(ROW * self.stride).cast(), x) }
+    }
 }
 
-#[inline(always)]
-unsafe fn store_si(v: &mut [u32], q: usize, x: __m256i) {
-    let lanes = &mut v[q..q + LANES];
-    // SAFETY: as in `load_ps`.
-    unsafe { _mm256_storeu_si256(lanes.as_mut_ptr().cast(), x) }
-}
-
-/// Writes `new` to the lanes of `v` from `q` where `mask` is set, and `old` (the value
-/// [`load_ps`] read there) to the others: a blend, then one plain 32-byte store (bounds
-/// checked).
+/// Writes `blendv(old, new, mask)` to the eight floats at `p` with one plain 32-byte store:
+/// `new` in the lanes where `mask` is set, `old` (what the caller loaded from `p`) in the others.
 ///
-/// The store is written in assembly on purpose. Left to the compiler, "load, blend with what
-/// was loaded, store back" becomes a masked store (`vmaskmovps`), which gives the same bits
-/// but is slow on AMD Zen cores: on a Zen 4 host the object scene's forward took 34 ms with
-/// the nine masked stores per run and 28 ms with blends and plain stores (docs/perf.md,
-/// 2026-11-29). Lanes outside a span are written back unchanged, as before.
+/// `old` first passes through an empty assembly block, which leaves its bits as they are but
+/// hides from the compiler that it was loaded from `p`. Otherwise the compiler turns "load,
+/// blend with what was loaded, store back" into a masked store (`vmaskmovps`), which gives the
+/// same bits but is slow on AMD Zen cores: on a Zen 4 host the object scene's forward took 34 ms
+/// with the nine masked stores per run and 28 ms with blends and plain stores (docs/perf.md,
+/// 2026-11-29). `tools/no_masked_stores.sh`, run by CI, checks the built forward for them.
+///
+/// # Safety
+/// `p` must be valid for reads and writes of eight floats; the CPU must support AVX.
 #[inline]
 #[target_feature(enable = "avx")]
-unsafe fn store_blend_ps(v: &mut [f32], q: usize, old: __m256, new: __m256, mask: __m256) {
-    let lanes = &mut v[q..q + LANES];
-    let x = _mm256_blendv_ps(old, new, mask);
-    // SAFETY: `lanes` holds LANES floats, so the unaligned 32-byte store stays inside `v`; the
-    // assembly writes only there and touches neither the stack nor the flags.
+unsafe fn store_blend_at(p: *mut f32, old: __m256, new: __m256, mask: __m256) {
+    let mut old = old;
+    // SAFETY: an empty block: it reads and writes no memory, and leaves the register and the
+    // flags as they are.
     unsafe {
-        std::arch::asm!(
-            "vmovups ymmword ptr [{p}], {x}",
-            p = in(reg) lanes.as_mut_ptr(),
-            x = in(ymm_reg) x,
-            options(nostack, preserves_flags)
-        );
+        std::arch::asm!("/* {old} */", old = inout(ymm_reg) old, options(pure, nomem, nostack, preserves_flags));
     }
+    // SAFETY: the caller's contract (eight floats at `p`).
+    unsafe { _mm256_storeu_ps(p, _mm256_blendv_ps(old, new, mask)) }
 }
 
 /// The eight lanes of `v`.
@@ -513,19 +588,21 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
                 let q0 = row + x;
                 let first = i0 + x as u32;
                 x += count;
+                let mut lanes = states.chunk(q0);
                 // SAFETY: AVX2 and FMA are enabled for this function (its caller checked the
-                // CPU); the loads and stores go through the bounds-checked helpers above and
-                // `sample_lanes` reads texels at indices `RowTaps` clamps into the texture.
+                // CPU); the loads and stores go through the chunk's states, whose bounds were
+                // checked when it was made, and `sample_lanes` reads texels at indices `RowTaps`
+                // clamps into the texture.
                 unsafe {
                     let in_run = _mm256_cmpgt_epi32(_mm256_set1_epi32(count as i32), iota);
-                    let done = load_si(&states.done, q0);
+                    let done = lanes.load_si::<DONE>();
                     let active = _mm256_andnot_si256(done, in_run);
                     if _mm256_testz_si256(active, active) != 0 {
                         continue;
                     }
                     // `evaluated += 1` on the active lanes (a mask is −1).
-                    let evaluated = _mm256_sub_epi32(load_si(&states.evaluated, q0), active);
-                    store_si(&mut states.evaluated, q0, evaluated);
+                    let evaluated = _mm256_sub_epi32(lanes.load_si::<EVALUATED>(), active);
+                    lanes.store_si::<EVALUATED>(evaluated);
                     let px = row_centres(first);
                     let hits = intersect_lanes(&p.transform, &plane, camera, &px, &[py; LANES]);
                     taps.refill::<false>(&hits.u, &hits.v, ts);
@@ -534,7 +611,7 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
                         active,
                         _mm256_and_si256(bool_mask(&hits.valid), bool_mask(taps.lane_arrays().3)),
                     ));
-                    let transmittance = load_ps(&states.transmittance, q0);
+                    let transmittance = lanes.load_ps::<TRANSMITTANCE>();
                     let LaneDecision {
                         alpha,
                         next,
@@ -546,13 +623,12 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
                     let blend = _mm256_and_ps(stepping, _mm256_andnot_ps(stop, kept));
                     let skipped_nan =
                         _mm256_andnot_ps(kept, _mm256_and_ps(stepping, _mm256_cmp_ps::<_CMP_UNORD_Q>(a, a)));
-                    let nan_alpha = _mm256_sub_epi32(load_si(&states.nan_alpha, q0), _mm256_castps_si256(skipped_nan));
-                    store_si(&mut states.nan_alpha, q0, nan_alpha);
-                    store_si(
-                        &mut states.done,
-                        q0,
-                        _mm256_or_si256(done, _mm256_castps_si256(_mm256_and_ps(stepping, stop))),
-                    );
+                    let nan_alpha = _mm256_sub_epi32(lanes.load_si::<NAN_ALPHA>(), _mm256_castps_si256(skipped_nan));
+                    lanes.store_si::<NAN_ALPHA>(nan_alpha);
+                    lanes.store_si::<DONE>(_mm256_or_si256(
+                        done,
+                        _mm256_castps_si256(_mm256_and_ps(stepping, stop)),
+                    ));
                     // No branch on the blend from here on. Which lanes blend depends on the
                     // texels just read, so a branch on it resolves late; skipping the blend's
                     // work in the quarter of the runs where no lane blends cost more in
@@ -571,12 +647,12 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
                         normal[1],
                         normal[2],
                     ];
-                    for (acc, f) in states.features.iter_mut().zip(features) {
-                        let old = load_ps(acc, q0);
+                    for (c, f) in features.into_iter().enumerate() {
+                        let old = lanes.load_feature(c);
                         let new = _mm256_add_ps(old, _mm256_mul_ps(f, weight));
-                        store_blend_ps(acc, q0, old, new, blend);
+                        lanes.store_feature_blend(c, old, new, blend);
                     }
-                    store_blend_ps(&mut states.transmittance, q0, transmittance, next, blend);
+                    lanes.store_blend::<TRANSMITTANCE>(transmittance, next, blend);
                     let rule = _mm256_and_ps(
                         blend,
                         _mm256_and_ps(
@@ -584,8 +660,8 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
                             _mm256_cmp_ps::<_CMP_GT_OQ>(alpha, median_alpha),
                         ),
                     );
-                    let median = load_ps(&states.median, q0);
-                    store_blend_ps(&mut states.median, q0, median, depth, rule);
+                    let median = lanes.load_ps::<MEDIAN>();
+                    lanes.store_blend::<MEDIAN>(median, depth, rule);
                     // The blended lanes' pairs, in pixel order.
                     push_pairs(blended, blend_bits, (q0, q0 - row, y), transmittance);
                     if DISTORTION {
@@ -613,16 +689,16 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
     pixels.clear();
     for q in 0..n {
         let state = CompositeState::<FORWARD_FEATURES> {
-            transmittance: states.transmittance[q],
-            features: std::array::from_fn(|c| states.features[c][q]),
-            done: states.done[q] != 0,
+            transmittance: states.float(TRANSMITTANCE, q),
+            features: std::array::from_fn(|c| states.float(FEATURES + c, q)),
+            done: states.word(DONE, q) != 0,
         };
         let distortion = if DISTORTION { states.spread[q].distortion } else { 0.0 };
         pixels.push(PixelOut::of(
             &state,
             bg,
-            states.median[q],
-            (states.evaluated[q], states.nan_alpha[q]),
+            states.float(MEDIAN, q),
+            (states.word(EVALUATED, q), states.word(NAN_ALPHA, q)),
             distortion,
         ));
     }
