@@ -806,22 +806,29 @@ impl SupportQuad {
         for k in 0..4 {
             let (a, b) = (self.corners[k], self.corners[(k + 1) % 4]);
             let dy = b.y - a.y;
-            // The edge's test depends on the edge only; the rest lane by lane.
+            // Both cases of `row_span` computed and the edge's own chosen by a select (a
+            // horizontal edge's divisions give infinities or NaN, which are not chosen), so that
+            // the four edges unroll and `lo`, `hi` stay in registers. Written with a branch on
+            // the edge, the compiler kept them in memory and updated them with masked stores,
+            // whose reloads wait for the store on AMD Zen (docs/perf.md, 2026-11-29).
             let flat = dy == 0.0;
+            let mut next_lo = [0.0f32; ROW_LANES];
+            let mut next_hi = [0.0f32; ROW_LANES];
             for l in 0..ROW_LANES {
-                let (t0, t1, keep) = if flat {
-                    (0.0f32, 1.0f32, a.y >= y_lo[l] && a.y <= y_hi[l])
+                let (ta, tb) = ((y_lo[l] - a.y) / dy, (y_hi[l] - a.y) / dy);
+                let (edge_t0, edge_t1) = (0.0f32.max(ta.min(tb)), 1.0f32.min(ta.max(tb)));
+                let (t0, t1) = if flat { (0.0f32, 1.0f32) } else { (edge_t0, edge_t1) };
+                let keep = if flat {
+                    a.y >= y_lo[l] && a.y <= y_hi[l]
                 } else {
-                    let (ta, tb) = ((y_lo[l] - a.y) / dy, (y_hi[l] - a.y) / dy);
-                    let t0 = 0.0f32.max(ta.min(tb));
-                    let t1 = 1.0f32.min(ta.max(tb));
-                    (t0, t1, !(t0.is_nan() || t1.is_nan() || t0 > t1))
+                    !(t0.is_nan() || t1.is_nan() || t0 > t1)
                 };
                 let (x0, x1) = (a.x + (b.x - a.x) * t0, a.x + (b.x - a.x) * t1);
                 let (new_lo, new_hi) = (lo[l].min(x0.min(x1)), hi[l].max(x0.max(x1)));
-                lo[l] = if keep { new_lo } else { lo[l] };
-                hi[l] = if keep { new_hi } else { hi[l] };
+                next_lo[l] = if keep { new_lo } else { lo[l] };
+                next_hi[l] = if keep { new_hi } else { hi[l] };
             }
+            (lo, hi) = (next_lo, next_hi);
         }
         std::array::from_fn(|l| (lo[l] <= hi[l]).then_some((lo[l] - m, hi[l] + m)))
     }
