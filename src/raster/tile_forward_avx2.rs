@@ -185,7 +185,7 @@ impl ChunkStates<'_> {
 /// blend with what was loaded, store back" into a masked store (`vmaskmovps`), which gives the
 /// same bits but is slow on AMD Zen cores: on a Zen 4 host the object scene's forward took 34 ms
 /// with the nine masked stores per run and 28 ms with blends and plain stores (docs/perf.md,
-/// 2026-11-29). `tools/no_masked_stores.sh`, run by CI, checks the built forward for them.
+/// 2026-11-29). `tools/no_masked_stores.sh`, run by CI, checks the built crate for them.
 ///
 /// # Safety
 /// `p` must be valid for reads and writes of eight floats; the CPU must support AVX.
