@@ -25,11 +25,14 @@
 //! billboard-by-billboard tile (`tile_backward_avx2.rs`), tested against the baseline the same
 //! way (bit for bit, also above the alpha clamp under both clamp gradients), and the forward's
 //! lane-wise decision and sample directly against the stages' scalar `classify` and
-//! `RowTaps::sample_rgba`.
+//! `RowTaps::sample_rgba`. The forward's explicit tile is also compiled a second time with
+//! AVX-512 enabled (the same source; [`avx512_lanes`], [`force_avx2`]), which runs where the
+//! CPU has it and is tested against the baseline in the same way.
 
 use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
 
 static FORCE_BASELINE: AtomicBool = AtomicBool::new(false);
+static FORCE_AVX2: AtomicBool = AtomicBool::new(false);
 static TILE_WALK: AtomicU8 = AtomicU8::new(TileWalk::Auto as u8);
 
 /// How tiles are walked ([`force_tile_walk`]).
@@ -68,6 +71,34 @@ pub(crate) fn walk_by_pixel(pixels: usize, entries: usize) -> bool {
 /// either way; only the speed differs.
 pub fn force_baseline(on: bool) {
     FORCE_BASELINE.store(on, Ordering::Relaxed);
+}
+
+/// Makes every later render of this process run the forward's billboard-by-billboard tile in
+/// its AVX2 build even on a CPU with AVX-512 when `on` (for tests that compare the two), or
+/// the widest build the CPU supports when not (the default). The same bits either way.
+pub fn force_avx2(on: bool) {
+    FORCE_AVX2.store(on, Ordering::Relaxed);
+}
+
+/// True when the forward's billboard-by-billboard tile runs its AVX-512 build: the same AVX2
+/// source compiled with AVX-512 (F, VL, BW, DQ) enabled, which gives the compiler 32 vector
+/// registers and faster forms of some operations (docs/perf.md, 2026-11-29). The CPU has those
+/// features, [`wide_lanes`] holds and [`force_avx2`] is off.
+#[inline]
+pub fn avx512_lanes() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        wide_lanes()
+            && !FORCE_AVX2.load(Ordering::Relaxed)
+            && std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx512vl")
+            && std::arch::is_x86_feature_detected!("avx512bw")
+            && std::arch::is_x86_feature_detected!("avx512dq")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
 }
 
 /// True when the tile loops run their AVX2 + FMA build: the CPU has both and

@@ -128,7 +128,8 @@ pub(crate) struct TileComposite {
 /// without it that code is not compiled in.
 ///
 /// On a CPU with AVX2 and FMA this runs the explicit vector implementation of
-/// [`super::tile_forward_avx2`] (eight pixels of a run side by side); elsewhere, and when
+/// [`super::tile_forward_avx2`] (eight pixels of a run side by side; its AVX-512 build where
+/// the CPU has that, see [`super::lanes::avx512_lanes`]); elsewhere, and when
 /// [`super::lanes::force_baseline`] is on, the body below, pixel after pixel with the stages'
 /// own code, which is the reference the vector one is tested against bit for bit.
 pub(crate) fn composite_tile<const DISTORTION: bool>(
@@ -140,15 +141,18 @@ pub(crate) fn composite_tile<const DISTORTION: bool>(
 ) {
     #[cfg(target_arch = "x86_64")]
     if super::lanes::wide_lanes() {
-        // SAFETY: the CPU has AVX2 and FMA (checked at run time by `wide_lanes`).
-        unsafe {
-            super::tile_forward_avx2::composite_tile_avx2::<DISTORTION>(
-                &mut scratch.lanes,
-                inputs,
-                impact,
-                pixels,
-                blended,
-            );
+        let lanes = &mut scratch.lanes;
+        if super::lanes::avx512_lanes() {
+            // SAFETY: the CPU has AVX2, FMA and the AVX-512 subsets (checked at run time by
+            // `avx512_lanes`).
+            unsafe {
+                super::tile_forward_avx2::composite_tile_avx512::<DISTORTION>(lanes, inputs, impact, pixels, blended);
+            }
+        } else {
+            // SAFETY: the CPU has AVX2 and FMA (checked at run time by `wide_lanes`).
+            unsafe {
+                super::tile_forward_avx2::composite_tile_avx2::<DISTORTION>(lanes, inputs, impact, pixels, blended);
+            }
         }
         return;
     }

@@ -1,12 +1,13 @@
 //! The rasterizer's choices made for speed alone (`bbsplat::raster::lanes`) give the same bits:
-//! the two instruction-set builds of its lane-wise tile loops (baseline SSE2, and AVX2 + FMA
-//! chosen at run time) and the two tile walks (billboard by billboard, pixel by pixel), in every
+//! the instruction-set builds of its lane-wise tile loops (baseline SSE2, AVX2 + FMA, and the
+//! forward's AVX-512 build, chosen at run time) and the two tile walks (billboard by billboard, pixel by pixel), in every
 //! combination: every image, the per-billboard impact and every gradient, on trained-like
 //! scenes (tens of blended billboards per pixel), the random benchmark scene (a pixel or two per
 //! entry), and with the normal and distortion maps.
 //!
-//! On a CPU without AVX2 both renders take the baseline path and the comparison is trivially
-//! equal; the test says so in its output.
+//! On a CPU without AVX2 all renders take the baseline path and the comparison is trivially
+//! equal, and without AVX-512 the last two builds are the same; the tests say so in their
+//! output.
 
 use bbsplat::billboards::{
     ActivatedBillboards, RandomSceneConfig, TrainedLikeConfig, random_scene, random_scene_camera, trained_like_scene,
@@ -130,20 +131,30 @@ fn all_variants_with(
 ) -> Vec<(String, Vec<u32>)> {
     let _guard = SWITCH.lock().unwrap_or_else(|e| e.into_inner());
     let mut out = Vec::new();
-    for baseline in [true, false] {
+    // The baseline build, the AVX2 build (AVX-512 ruled out), the widest build.
+    for (baseline, avx2) in [(true, false), (false, true), (false, false)] {
         lanes::force_baseline(baseline);
+        lanes::force_avx2(avx2);
         if baseline {
             assert!(!lanes::wide_lanes(), "the baseline build is forced");
         }
+        if avx2 {
+            assert!(!lanes::avx512_lanes(), "the AVX2 build is forced");
+        }
         for walk in [TileWalk::Auto, TileWalk::ByEntry, TileWalk::ByPixel] {
             lanes::force_tile_walk(walk);
-            let name = format!("baseline {baseline}, {walk:?}");
+            let name = format!("baseline {baseline}, AVX2 only {avx2}, {walk:?}");
             out.push((name, everything_with(scene, cam, settings, aux, upstream)));
         }
     }
     lanes::force_baseline(false);
+    lanes::force_avx2(false);
     lanes::force_tile_walk(TileWalk::Auto);
-    println!("wide lanes (AVX2 + FMA) on this CPU: {}", lanes::wide_lanes());
+    println!(
+        "wide lanes (AVX2 + FMA) on this CPU: {}; the AVX-512 build of the forward: {}",
+        lanes::wide_lanes(),
+        lanes::avx512_lanes()
+    );
     out
 }
 
