@@ -480,6 +480,15 @@ pub mod forward_avx2 {
     ) -> Option<Vec<(u16, u8, u8, u32)>> {
         crate::raster::tile_forward_avx2::push_pairs_lanes(pairs, bits, first, fronts)
     }
+
+    /// The runs the AVX2 forward makes of an entry's spans (`rows`: the columns `[first, last]`
+    /// of rows `first_row, first_row + 1, …`, a row empty when its first exceeds its last) in
+    /// a tile `tw` pixels wide: per run, its lanes' tile-local pixels in lane order, and
+    /// whether it has two parts.
+    #[cfg(target_arch = "x86_64")]
+    pub fn entry_runs(rows: &[[u8; 2]], first_row: u8, tw: usize) -> Vec<(Vec<usize>, bool)> {
+        crate::raster::tile_forward_avx2::entry_runs(rows, first_row, tw)
+    }
 }
 
 /// The tile passes' scheduling (`raster::schedule`).

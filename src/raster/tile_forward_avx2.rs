@@ -1,7 +1,10 @@
 //! The forward pass of one tile billboard by billboard ([`super::tile_forward`]), written in
 //! explicit AVX2 instructions: the eight pixels of a run are sampled, classified and composited
 //! side by side in vector registers, their states kept as one array per value (structure of
-//! arrays), instead of one pixel after another.
+//! arrays), instead of one pixel after another. A run is eight pixels of a row's span, or the
+//! rest of a row's span together with the first pixels of the next row's ([`EntryRuns`]: its
+//! two parts read and write two windows of the state arrays), so that the short rows of small
+//! billboards and the tails of wider ones do not leave most lanes idle.
 //!
 //! It is a second implementation of the same arithmetic, and gives the same bits as the
 //! baseline build of [`super::tile_forward`] (the scalar reference, which runs the stages'
@@ -27,12 +30,14 @@
 use super::TILE_SIZE;
 use super::forward::{EntryPair, PairOrder, TileBlended};
 use super::tile_forward::{FORWARD_FEATURES, PixelOut, TileInputs, prefetch_ahead};
+use crate::camera::Camera;
 use crate::stages::bilinear::RowTaps;
 #[cfg(feature = "testing")]
 use crate::stages::composite::{Blend, Step};
 use crate::stages::composite::{CompositeParams, CompositeState};
 use crate::stages::depth_distortion::{DistortionState, mapped_depth};
-use crate::stages::ray_plane::{LANES, intersect_lanes, row_centres};
+use crate::stages::ray_plane::{LANES, ViewPlane, intersect_lanes, row_centres};
+use crate::stages::splat_transform::SplatTransform;
 use std::arch::x86_64::*;
 
 /// The running state of a tile's pixels, one row per value: pixel `q` (tile-local, row-major)
@@ -95,27 +100,34 @@ impl LaneStates {
         self.words[row * self.stride + q]
     }
 
-    /// The states of the [`LANES`] pixels from `q0` (`q0` below the tile's pixel count), every
-    /// row's bounds checked at once.
+    /// The states of a run's two windows of [`LANES`] pixels, from `qa` and from `qb`: either
+    /// the same window (`qa == qb`) or two that share no pixel (`qb ≥ qa + LANES`), both
+    /// starting at a pixel of the tile; every row's bounds checked at once.
     #[inline(always)]
-    fn chunk(&mut self, q0: usize) -> ChunkStates<'_> {
+    fn chunk_pair(&mut self, qa: usize, qb: usize) -> (ChunkStates<'_>, ChunkStates<'_>) {
+        assert!(
+            qa == qb || qb >= qa + LANES,
+            "a run's two windows are one window or share no pixel"
+        );
         let stride = self.stride;
         assert!(
-            q0 + LANES <= stride && self.floats.len() == FLOAT_ROWS * stride && self.words.len() == WORD_ROWS * stride,
+            qb + LANES <= stride && self.floats.len() == FLOAT_ROWS * stride && self.words.len() == WORD_ROWS * stride,
             "a chunk starts at a pixel of the tile"
         );
-        ChunkStates {
-            floats: self.floats[q0..].as_mut_ptr(),
-            words: self.words[q0..].as_mut_ptr(),
+        let (floats, words) = (self.floats.as_mut_ptr(), self.words.as_mut_ptr());
+        let at = |q: usize| ChunkStates {
+            floats: floats.wrapping_add(q),
+            words: words.wrapping_add(q),
             stride,
             _states: std::marker::PhantomData,
-        }
+        };
+        (at(qa), at(qb))
     }
 }
 
 /// The [`LANES`] elements from one pixel of every row of a [`LaneStates`]; rows are chosen by
 /// constant index, checked at compile time, and the chunk's bounds were checked when it was
-/// made ([`LaneStates::chunk`]).
+/// made ([`LaneStates::chunk_pair`]).
 struct ChunkStates<'a> {
     /// Element `q0` of the first float row.
     floats: *mut f32,
@@ -127,7 +139,7 @@ struct ChunkStates<'a> {
 
 impl ChunkStates<'_> {
     /// Element `q0` of float row `row` (below [`FLOAT_ROWS`]): with the check
-    /// `LaneStates::chunk` made, the start of [`LANES`] floats inside the rows. Every access of
+    /// `LaneStates::chunk_pair` made, the start of [`LANES`] floats inside the rows. Every access of
     /// a float row goes through here.
     #[inline(always)]
     fn float_row(&self, row: usize) -> *mut f32 {
@@ -146,7 +158,7 @@ impl ChunkStates<'_> {
     #[inline(always)]
     unsafe fn load_ps<const ROW: usize>(&self) -> __m256 {
         const { assert!(ROW < FLOAT_ROWS) };
-        // SAFETY: `LaneStates::chunk` checked `q0 + LANES <= stride` and the length of the
+        // SAFETY: `LaneStates::chunk_pair` checked `q0 + LANES <= stride` and the length of the
         // rows, so the LANES floats at `float_row` are inside `floats`; AVX is enabled by every
         // caller.
         unsafe { _mm256_loadu_ps(self.float_row(ROW)) }
@@ -190,6 +202,128 @@ impl ChunkStates<'_> {
         const { assert!(ROW < WORD_ROWS) };
         // SAFETY: as in `load_ps`, for `words`; the `LaneStates` is borrowed exclusively.
         unsafe { _mm256_storeu_si256(self.word_row(ROW), x) }
+    }
+}
+
+/// The states of a run's lanes ([`RunPixels`]): lanes `0..split` in window `first`, the
+/// others in window `second` (`TWO`), or every lane in `first` (not `TWO`). A load takes each
+/// lane from its window; a store writes both windows, each lane of a window that is not its
+/// run lane getting back the value it held (read again just before: the windows share no
+/// pixel), so the other pixels' states keep their bits.
+struct RunStates<'a, const TWO: bool> {
+    first: ChunkStates<'a>,
+    second: ChunkStates<'a>,
+    /// The lanes of `second` (lanes `split..`), all bits set; with `TWO` only.
+    in_second: __m256,
+}
+
+impl<const TWO: bool> RunStates<'_, TWO> {
+    #[inline(always)]
+    unsafe fn load_ps<const ROW: usize>(&self) -> __m256 {
+        // SAFETY: the chunks' contract (`ChunkStates::load_ps`); AVX is enabled by every caller.
+        unsafe {
+            let a = self.first.load_ps::<ROW>();
+            if TWO {
+                _mm256_blendv_ps(a, self.second.load_ps::<ROW>(), self.in_second)
+            } else {
+                a
+            }
+        }
+    }
+
+    /// Float row `ROW` set to `new` where `mask` is set and left as it was elsewhere; `old`
+    /// is what [`Self::load_ps`] read.
+    #[inline(always)]
+    unsafe fn store_blend<const ROW: usize>(&mut self, old: __m256, new: __m256, mask: __m256) {
+        // SAFETY: the chunks' contract (`ChunkStates::store_blend`); AVX is enabled by every
+        // caller.
+        unsafe {
+            if TWO {
+                let first = self.first.load_ps::<ROW>();
+                self.first
+                    .store_blend::<ROW>(first, new, _mm256_andnot_ps(self.in_second, mask));
+                let second = self.second.load_ps::<ROW>();
+                self.second
+                    .store_blend::<ROW>(second, new, _mm256_and_ps(self.in_second, mask));
+            } else {
+                self.first.store_blend::<ROW>(old, new, mask);
+            }
+        }
+    }
+
+    #[inline(always)]
+    unsafe fn load_feature(&self, c: usize) -> __m256 {
+        // SAFETY: as in `load_ps`.
+        unsafe {
+            let a = self.first.load_feature(c);
+            if TWO {
+                _mm256_blendv_ps(a, self.second.load_feature(c), self.in_second)
+            } else {
+                a
+            }
+        }
+    }
+
+    /// [`Self::store_blend`] for feature `c`.
+    #[inline(always)]
+    unsafe fn store_feature_blend(&mut self, c: usize, old: __m256, new: __m256, mask: __m256) {
+        // SAFETY: as in `store_blend`.
+        unsafe {
+            if TWO {
+                let first = self.first.load_feature(c);
+                self.first
+                    .store_feature_blend(c, first, new, _mm256_andnot_ps(self.in_second, mask));
+                let second = self.second.load_feature(c);
+                self.second
+                    .store_feature_blend(c, second, new, _mm256_and_ps(self.in_second, mask));
+            } else {
+                self.first.store_feature_blend(c, old, new, mask);
+            }
+        }
+    }
+
+    #[inline(always)]
+    unsafe fn load_si<const ROW: usize>(&self) -> __m256i {
+        // SAFETY: as in `load_ps`.
+        unsafe { _mm256_castps_si256(self.load_words::<ROW>()) }
+    }
+
+    /// Word row `ROW` as floats (their bits): the blend chooses lanes by bits only.
+    #[inline(always)]
+    unsafe fn load_words<const ROW: usize>(&self) -> __m256 {
+        // SAFETY: as in `load_ps`.
+        unsafe {
+            let a = _mm256_castsi256_ps(self.first.load_si::<ROW>());
+            if TWO {
+                _mm256_blendv_ps(a, _mm256_castsi256_ps(self.second.load_si::<ROW>()), self.in_second)
+            } else {
+                a
+            }
+        }
+    }
+
+    /// Word row `ROW` set to `x` in the run's lanes.
+    #[inline(always)]
+    unsafe fn store_si<const ROW: usize>(&mut self, x: __m256i) {
+        // SAFETY: as in `store_blend`; a word row is written through its float view, bits
+        // unchanged.
+        unsafe {
+            if TWO {
+                let x = _mm256_castsi256_ps(x);
+                for (chunk, lanes) in [
+                    (
+                        &mut self.first,
+                        _mm256_xor_ps(self.in_second, _mm256_castsi256_ps(_mm256_set1_epi32(-1))),
+                    ),
+                    (&mut self.second, self.in_second),
+                ] {
+                    let row = chunk.word_row(ROW).cast::<f32>();
+                    store_blend_at(row, _mm256_loadu_ps(row), x, lanes);
+                }
+            } else {
+                self.first.store_si::<ROW>(x);
+            }
+        }
     }
 }
 
@@ -483,7 +617,36 @@ const _: () = assert!((TILE_SIZE * TILE_SIZE) as usize + LANES <= 1 << 16 && TIL
 /// The CPU must support AVX2 (the caller is compiled with it).
 #[inline(always)]
 unsafe fn push_pairs(pairs: &mut Vec<EntryPair>, bits: u32, (q0, x0, y): (usize, usize, u8), fronts: __m256) {
-    debug_assert!(bits < 1 << LANES && q0 < (TILE_SIZE * TILE_SIZE) as usize && x0 < TILE_SIZE as usize);
+    // SAFETY: AVX2 is enabled by the caller.
+    unsafe { push_placed_pairs(pairs, bits, lane_places((q0, x0, y), 0), fronts) }
+}
+
+/// Each lane's pair place (pixel, column and row packed as [`EntryPair`]'s first word) for a
+/// run of pixels from `(q0, x0, y)`, shifted by `shift` lanes: lane `l ≥ shift` holds pixel
+/// `q0 + l − shift`, column `x0 + l − shift`, row `y` (lanes below `shift` are unspecified).
+///
+/// # Safety
+/// The CPU must support AVX2 (the caller is compiled with it).
+#[inline(always)]
+unsafe fn lane_places((q0, x0, y): (usize, usize, u8), shift: usize) -> __m256i {
+    debug_assert!(q0 < (TILE_SIZE * TILE_SIZE) as usize && x0 < TILE_SIZE as usize && shift < LANES);
+    // SAFETY: register operations of AVX2, enabled by the caller.
+    unsafe {
+        // Lane `l`: `first + (l − shift)·(1 + 2¹⁶)`, in wrapping arithmetic; for `l ≥ shift` the
+        // pixel and column take no carry (they stay inside the tile), so the fields are exact.
+        let step = _mm256_setr_epi32(0, 0x1_0001, 0x2_0002, 0x3_0003, 0x4_0004, 0x5_0005, 0x6_0006, 0x7_0007);
+        let first = (q0 as u32 | (x0 as u32) << 16 | u32::from(y) << 24).wrapping_sub(shift as u32 * 0x1_0001);
+        _mm256_add_epi32(_mm256_set1_epi32(first as i32), step)
+    }
+}
+
+/// [`push_pairs`] with the lanes' places given (see [`lane_places`]).
+///
+/// # Safety
+/// The CPU must support AVX2 (the caller is compiled with it).
+#[inline(always)]
+unsafe fn push_placed_pairs(pairs: &mut Vec<EntryPair>, bits: u32, place: __m256i, fronts: __m256) {
+    debug_assert!(bits < 1 << LANES);
     pairs.reserve(LANES);
     let len = pairs.len();
     // SAFETY: register operations of AVX2, enabled by the caller. `reserve` left room for
@@ -493,11 +656,6 @@ unsafe fn push_pairs(pairs: &mut Vec<EntryPair>, bits: u32, (q0, x0, y): (usize,
     // them. The first `count_ones` stored pairs are the set lanes' pairs, so the new length
     // covers initialised pairs only.
     unsafe {
-        // Lane `l`: pixel `q0 + l` and column `x0 + l` (no carry: see the assertion above),
-        // row `y`.
-        let step = _mm256_setr_epi32(0, 0x1_0001, 0x2_0002, 0x3_0003, 0x4_0004, 0x5_0005, 0x6_0006, 0x7_0007);
-        let first = (q0 as u32 | (x0 as u32) << 16 | u32::from(y) << 24) as i32;
-        let place = _mm256_add_epi32(_mm256_set1_epi32(first), step);
         let order = _mm256_loadu_si256(LEFT_PACK[bits as usize & 0xff].as_ptr().cast());
         let place = _mm256_permutevar8x32_epi32(place, order);
         let front = _mm256_permutevar8x32_epi32(_mm256_castps_si256(fronts), order);
@@ -586,6 +744,318 @@ pub(crate) unsafe fn composite_tile_avx512<const DISTORTION: bool>(
     unsafe { composite_tile_lanes::<DISTORTION>(states, inputs, impact, pixels, out) }
 }
 
+/// Where a run's lanes start: tile-local pixel `q`, its column `x` and row `y`.
+#[derive(Clone, Copy, Debug)]
+struct RunStart {
+    q: usize,
+    x: usize,
+    y: u8,
+}
+
+/// The pixels of a run, in pixel order: lanes `0..split` from `first` on (along its row),
+/// lanes `split..len` from `second` on (along its row; none when `split == len`).
+#[derive(Clone, Copy, Debug)]
+struct RunPixels {
+    first: RunStart,
+    second: RunStart,
+    split: usize,
+    len: usize,
+}
+
+impl RunPixels {
+    /// `len` pixels from `first` along its row.
+    fn one(first: RunStart, len: usize) -> Self {
+        Self {
+            first,
+            second: first,
+            split: len,
+            len,
+        }
+    }
+}
+
+/// The runs of an entry's pixels, in pixel order, each with whether it has two parts: a
+/// row's span in runs of [`LANES`] pixels, and the rest of it (its tail, fewer than `LANES`)
+/// in one run with the head of the next non-empty row, when the two runs' windows of states
+/// share no pixel (else the tail is a run of its own). Rows of a billboard a few pixels wide
+/// thus share runs, as do the tails of wider ones.
+struct EntryRuns<'s> {
+    /// The columns `[first, last]` of the rows after the current one.
+    rows: std::slice::Iter<'s, [u8; 2]>,
+    /// The current row, its next column and the end of its span.
+    y: u8,
+    x: usize,
+    end: usize,
+    /// The tile's width.
+    tw: usize,
+}
+
+impl<'s> EntryRuns<'s> {
+    /// The runs of the rows `first_row, first_row + 1, …` whose spans are `rows`, in a tile
+    /// `tw` pixels wide.
+    fn new(rows: &'s [[u8; 2]], first_row: u8, tw: usize) -> Self {
+        Self {
+            rows: rows.iter(),
+            // One row before the first (wrapping: `next_row` adds 1 first).
+            y: first_row.wrapping_sub(1),
+            x: 0,
+            end: 0,
+            tw,
+        }
+    }
+
+    /// Moves to the next row whose span holds a pixel; false when there is none.
+    #[inline(always)]
+    fn next_row(&mut self) -> bool {
+        for &[x0, x1] in self.rows.by_ref() {
+            self.y = self.y.wrapping_add(1);
+            if x0 <= x1 {
+                (self.x, self.end) = (usize::from(x0), usize::from(x1) + 1);
+                return true;
+            }
+        }
+        false
+    }
+
+    /// Where the current row's next pixel is.
+    #[inline(always)]
+    fn start(&self) -> RunStart {
+        RunStart {
+            q: usize::from(self.y) * self.tw + self.x,
+            x: self.x,
+            y: self.y,
+        }
+    }
+}
+
+impl Iterator for EntryRuns<'_> {
+    type Item = (RunPixels, bool);
+
+    #[inline(always)]
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.x >= self.end && !self.next_row() {
+            return None;
+        }
+        let first = self.start();
+        let left = self.end - self.x;
+        if left >= LANES {
+            self.x += LANES;
+            return Some((RunPixels::one(first, LANES), false));
+        }
+        self.x = self.end;
+        if !self.next_row() {
+            return Some((RunPixels::one(first, left), false));
+        }
+        let second = self.start();
+        if second.q - first.q < left + LANES {
+            return Some((RunPixels::one(first, left), false));
+        }
+        let len = LANES.min(left + self.end - self.x);
+        self.x += len - left;
+        Some((
+            RunPixels {
+                first,
+                second,
+                split: left,
+                len,
+            },
+            true,
+        ))
+    }
+}
+
+/// For the tests (`testing_internals`): the runs of [`EntryRuns`], each as its lanes'
+/// tile-local pixels in lane order and whether it has two parts.
+#[cfg(feature = "testing")]
+pub(crate) fn entry_runs(rows: &[[u8; 2]], first_row: u8, tw: usize) -> Vec<(Vec<usize>, bool)> {
+    EntryRuns::new(rows, first_row, tw)
+        .map(|(run, two)| {
+            let pixels = (0..run.len)
+                .map(|l| {
+                    if l < run.split {
+                        run.first.q + l
+                    } else {
+                        run.second.q + l - run.split
+                    }
+                })
+                .collect();
+            (pixels, two)
+        })
+        .collect()
+}
+
+/// What the runs of one entry read and write ([`EntryRun::run`]).
+struct EntryRun<'e> {
+    states: &'e mut LaneStates,
+    taps: &'e mut RowTaps,
+    /// The tile's blended pairs.
+    pairs: &'e mut Vec<EntryPair>,
+    /// The entry's impact so far.
+    impact: f32,
+    transform: &'e SplatTransform,
+    plane: ViewPlane,
+    camera: &'e Camera,
+    texture: &'e [[f32; 4]],
+    ts: usize,
+    /// The tile's first pixel.
+    origin: (u32, u32),
+    colour: [__m256; 3],
+    normal: [__m256; 3],
+    thresholds: &'e Thresholds,
+}
+
+impl EntryRun<'_> {
+    /// Composites the entry over the pixels of `run` (see the module docs): with `TWO`, its
+    /// two parts, each in its own window of states ([`RunStates`]); else `run.split == run.len`
+    /// and one window.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2 and FMA (the caller is compiled with them).
+    #[inline(always)]
+    unsafe fn run<const TWO: bool, const DISTORTION: bool>(&mut self, run: RunPixels) {
+        let RunPixels {
+            first,
+            second,
+            split,
+            len,
+        } = run;
+        debug_assert!(0 < split && split <= len && len <= LANES && (TWO || split == len));
+        let (i0, j0) = self.origin;
+        // The second window starts `split` pixels before `second`, so that lane `l ≥ split`
+        // holds pixel `second.q + l − split`.
+        let window = if TWO { second.q - split } else { first.q };
+        let (a, b) = self.states.chunk_pair(first.q, window);
+        // SAFETY: AVX2 and FMA are enabled (the caller's contract); the loads and stores go
+        // through the run's windows of states, whose bounds were checked when they were made,
+        // and `sample_lanes` reads texels at indices `RowTaps` clamps into the texture.
+        unsafe {
+            let iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+            let in_second = _mm256_castsi256_ps(_mm256_cmpgt_epi32(iota, _mm256_set1_epi32(split as i32 - 1)));
+            let mut lanes = RunStates::<TWO> {
+                first: a,
+                second: b,
+                in_second,
+            };
+            let in_run = _mm256_cmpgt_epi32(_mm256_set1_epi32(len as i32), iota);
+            let done = lanes.load_si::<DONE>();
+            let active = _mm256_andnot_si256(done, in_run);
+            if _mm256_testz_si256(active, active) != 0 {
+                return;
+            }
+            // `evaluated += 1` on the active lanes (a mask is −1).
+            let evaluated = _mm256_sub_epi32(lanes.load_si::<EVALUATED>(), active);
+            lanes.store_si::<EVALUATED>(evaluated);
+            // The pixel centres, as the scalar code makes them: `(i0 + x) as f32 + 0.5`. For
+            // the second part `row_centres` starts `split` columns early (wrapping below 0),
+            // which leaves its lanes from `split` on exact.
+            let centre_row = |start: RunStart| (j0 + u32::from(start.y)) as f32 + 0.5;
+            let px = row_centres(i0 + first.x as u32);
+            let (px, py) = if TWO {
+                let px_second = row_centres((i0 + second.x as u32).wrapping_sub(split as u32));
+                (
+                    store(_mm256_blendv_ps(
+                        _mm256_loadu_ps(px.as_ptr()),
+                        _mm256_loadu_ps(px_second.as_ptr()),
+                        in_second,
+                    )),
+                    store(_mm256_blendv_ps(
+                        _mm256_set1_ps(centre_row(first)),
+                        _mm256_set1_ps(centre_row(second)),
+                        in_second,
+                    )),
+                )
+            } else {
+                (px, [centre_row(first); LANES])
+            };
+            let hits = intersect_lanes(self.transform, &self.plane, self.camera, &px, &py);
+            self.taps.refill::<false>(&hits.u, &hits.v, self.ts);
+            let [r, g, bl, a] = sample_lanes(self.taps, self.texture);
+            let stepping = _mm256_castsi256_ps(_mm256_and_si256(
+                active,
+                _mm256_and_si256(bool_mask(&hits.valid), bool_mask(self.taps.lane_arrays().3)),
+            ));
+            let transmittance = lanes.load_ps::<TRANSMITTANCE>();
+            let LaneDecision {
+                alpha,
+                next,
+                weight,
+                kept,
+                stop,
+                ..
+            } = decide(transmittance, a, self.thresholds);
+            let blend = _mm256_and_ps(stepping, _mm256_andnot_ps(stop, kept));
+            let skipped_nan = _mm256_andnot_ps(kept, _mm256_and_ps(stepping, _mm256_cmp_ps::<_CMP_UNORD_Q>(a, a)));
+            let nan_alpha = _mm256_sub_epi32(lanes.load_si::<NAN_ALPHA>(), _mm256_castps_si256(skipped_nan));
+            lanes.store_si::<NAN_ALPHA>(nan_alpha);
+            lanes.store_si::<DONE>(_mm256_or_si256(
+                done,
+                _mm256_castps_si256(_mm256_and_ps(stepping, stop)),
+            ));
+            // No branch on the blend from here on. Which lanes blend depends on the texels
+            // just read, so a branch on it resolves late; skipping the blend's work in the
+            // quarter of the runs where no lane blends cost more in mispredictions than the
+            // work (the forward is 6 % faster without it, docs/perf.md). A lane that does not
+            // blend keeps its values (the blends below choose the old ones), adds no pair and
+            // adds +0 to the impact.
+            let blend_bits = _mm256_movemask_ps(blend) as u32;
+            let depth = _mm256_loadu_ps(hits.depth.as_ptr());
+            let one = _mm256_set1_ps(1.0);
+            let features = [
+                _mm256_add_ps(r, self.colour[0]),
+                _mm256_add_ps(g, self.colour[1]),
+                _mm256_add_ps(bl, self.colour[2]),
+                one,
+                depth,
+                self.normal[0],
+                self.normal[1],
+                self.normal[2],
+            ];
+            for (c, f) in features.into_iter().enumerate() {
+                let old = lanes.load_feature(c);
+                let new = _mm256_add_ps(old, _mm256_mul_ps(f, weight));
+                lanes.store_feature_blend(c, old, new, blend);
+            }
+            lanes.store_blend::<TRANSMITTANCE>(transmittance, next, blend);
+            let rule = _mm256_and_ps(
+                blend,
+                _mm256_and_ps(
+                    _mm256_cmp_ps::<_CMP_GT_OQ>(transmittance, _mm256_set1_ps(0.5)),
+                    _mm256_cmp_ps::<_CMP_GT_OQ>(alpha, _mm256_set1_ps(0.05)),
+                ),
+            );
+            let median = lanes.load_ps::<MEDIAN>();
+            lanes.store_blend::<MEDIAN>(median, depth, rule);
+            // The blended lanes' pairs, in pixel order.
+            let places = lane_places((first.q, first.x, first.y), 0);
+            let places = if TWO {
+                _mm256_castps_si256(_mm256_blendv_ps(
+                    _mm256_castsi256_ps(places),
+                    _mm256_castsi256_ps(lane_places((second.q, second.x, second.y), split)),
+                    in_second,
+                ))
+            } else {
+                places
+            };
+            push_placed_pairs(self.pairs, blend_bits, places, transmittance);
+            if DISTORTION {
+                let (weights, fronts) = (store(weight), store(transmittance));
+                let mut bits = blend_bits;
+                while bits != 0 {
+                    let l = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    let q = if l < split { first.q + l } else { window + l };
+                    self.states.spread[q].add(mapped_depth(hits.depth[l]), weights[l], fronts[l]);
+                }
+            }
+            // The impact in pixel order, every lane adding its weight or +0 (which changes no
+            // bit: `x + 0 = x` unless `x` is −0, and a sum that starts at +0 is never −0).
+            for w in store(_mm256_and_ps(weight, blend)) {
+                self.impact += w;
+            }
+        }
+    }
+}
+
 /// The body of [`composite_tile_avx2`] and [`composite_tile_avx512`], inlined into each.
 ///
 /// # Safety
@@ -609,26 +1079,14 @@ unsafe fn composite_tile_lanes<const DISTORTION: bool>(
         offsets,
         ..
     } = out;
-    // Register operations of AVX, which every caller has enabled (this function's contract),
-    // here and in the broadcasts below.
-    // SAFETY: as just said.
-    let (iota, one, half, median_alpha) = unsafe {
-        (
-            _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
-            _mm256_set1_ps(1.0),
-            _mm256_set1_ps(0.5),
-            _mm256_set1_ps(0.05),
-        )
-    };
     let thresholds = Thresholds::of(params);
     let mut taps = RowTaps::default();
     for (k, (span, &b)) in spans.entries.iter().zip(list).enumerate() {
         offsets.push(blended.len() as u32);
         prefetch_ahead(set, prepared, list, &spans.entries, k, (i0, j0));
         let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
-        let plane = p.view_plane();
-        let texture = set.texture_of(b as usize);
-        // SAFETY: as for the broadcasts above.
+        // SAFETY: broadcasts, register operations of AVX, which every caller has enabled (this
+        // function's contract).
         let (colour, normal) = unsafe {
             (
                 [
@@ -643,111 +1101,32 @@ unsafe fn composite_tile_lanes<const DISTORTION: bool>(
                 ],
             )
         };
-        let mut entry_impact = impact[k];
-        for (y, &[x0, x1]) in (span.rows[0]..).zip(spans.row_cols(span)) {
-            let (x0, x1) = (usize::from(x0), usize::from(x1));
-            let py = (j0 + u32::from(y)) as f32 + 0.5;
-            let row = y as usize * tw;
-            let mut x = x0;
-            while x <= x1 {
-                let count = LANES.min(x1 + 1 - x);
-                let q0 = row + x;
-                let first = i0 + x as u32;
-                x += count;
-                let mut lanes = states.chunk(q0);
-                // SAFETY: AVX2 and FMA are enabled for this function (its caller checked the
-                // CPU); the loads and stores go through the chunk's states, whose bounds were
-                // checked when it was made, and `sample_lanes` reads texels at indices `RowTaps`
-                // clamps into the texture.
-                unsafe {
-                    let in_run = _mm256_cmpgt_epi32(_mm256_set1_epi32(count as i32), iota);
-                    let done = lanes.load_si::<DONE>();
-                    let active = _mm256_andnot_si256(done, in_run);
-                    if _mm256_testz_si256(active, active) != 0 {
-                        continue;
-                    }
-                    // `evaluated += 1` on the active lanes (a mask is −1).
-                    let evaluated = _mm256_sub_epi32(lanes.load_si::<EVALUATED>(), active);
-                    lanes.store_si::<EVALUATED>(evaluated);
-                    let px = row_centres(first);
-                    let hits = intersect_lanes(&p.transform, &plane, camera, &px, &[py; LANES]);
-                    taps.refill::<false>(&hits.u, &hits.v, ts);
-                    let [r, g, bl, a] = sample_lanes(&taps, texture);
-                    let stepping = _mm256_castsi256_ps(_mm256_and_si256(
-                        active,
-                        _mm256_and_si256(bool_mask(&hits.valid), bool_mask(taps.lane_arrays().3)),
-                    ));
-                    let transmittance = lanes.load_ps::<TRANSMITTANCE>();
-                    let LaneDecision {
-                        alpha,
-                        next,
-                        weight,
-                        kept,
-                        stop,
-                        ..
-                    } = decide(transmittance, a, &thresholds);
-                    let blend = _mm256_and_ps(stepping, _mm256_andnot_ps(stop, kept));
-                    let skipped_nan =
-                        _mm256_andnot_ps(kept, _mm256_and_ps(stepping, _mm256_cmp_ps::<_CMP_UNORD_Q>(a, a)));
-                    let nan_alpha = _mm256_sub_epi32(lanes.load_si::<NAN_ALPHA>(), _mm256_castps_si256(skipped_nan));
-                    lanes.store_si::<NAN_ALPHA>(nan_alpha);
-                    lanes.store_si::<DONE>(_mm256_or_si256(
-                        done,
-                        _mm256_castps_si256(_mm256_and_ps(stepping, stop)),
-                    ));
-                    // No branch on the blend from here on. Which lanes blend depends on the
-                    // texels just read, so a branch on it resolves late; skipping the blend's
-                    // work in the quarter of the runs where no lane blends cost more in
-                    // mispredictions than the work (the forward is 6 % faster without it,
-                    // docs/perf.md). A lane that does not blend keeps its values (the blends
-                    // below choose the old ones), adds no pair and adds +0 to the impact.
-                    let blend_bits = _mm256_movemask_ps(blend) as u32;
-                    let depth = _mm256_loadu_ps(hits.depth.as_ptr());
-                    let features = [
-                        _mm256_add_ps(r, colour[0]),
-                        _mm256_add_ps(g, colour[1]),
-                        _mm256_add_ps(bl, colour[2]),
-                        one,
-                        depth,
-                        normal[0],
-                        normal[1],
-                        normal[2],
-                    ];
-                    for (c, f) in features.into_iter().enumerate() {
-                        let old = lanes.load_feature(c);
-                        let new = _mm256_add_ps(old, _mm256_mul_ps(f, weight));
-                        lanes.store_feature_blend(c, old, new, blend);
-                    }
-                    lanes.store_blend::<TRANSMITTANCE>(transmittance, next, blend);
-                    let rule = _mm256_and_ps(
-                        blend,
-                        _mm256_and_ps(
-                            _mm256_cmp_ps::<_CMP_GT_OQ>(transmittance, half),
-                            _mm256_cmp_ps::<_CMP_GT_OQ>(alpha, median_alpha),
-                        ),
-                    );
-                    let median = lanes.load_ps::<MEDIAN>();
-                    lanes.store_blend::<MEDIAN>(median, depth, rule);
-                    // The blended lanes' pairs, in pixel order.
-                    push_pairs(blended, blend_bits, (q0, q0 - row, y), transmittance);
-                    if DISTORTION {
-                        let (weights, fronts) = (store(weight), store(transmittance));
-                        let mut bits = blend_bits;
-                        while bits != 0 {
-                            let l = bits.trailing_zeros() as usize;
-                            bits &= bits - 1;
-                            states.spread[q0 + l].add(mapped_depth(hits.depth[l]), weights[l], fronts[l]);
-                        }
-                    }
-                    // The impact in pixel order, every lane adding its weight or +0 (which
-                    // changes no bit: `x + 0 = x` unless `x` is −0, and a sum that starts at +0
-                    // is never −0).
-                    for w in store(_mm256_and_ps(weight, blend)) {
-                        entry_impact += w;
-                    }
+        let mut entry = EntryRun {
+            states: &mut *states,
+            taps: &mut taps,
+            pairs: &mut *blended,
+            impact: impact[k],
+            transform: &p.transform,
+            plane: p.view_plane(),
+            camera,
+            texture: set.texture_of(b as usize),
+            ts,
+            origin: (i0, j0),
+            colour,
+            normal,
+            thresholds: &thresholds,
+        };
+        for (run, two) in EntryRuns::new(spans.row_cols(span), span.rows[0], tw) {
+            // SAFETY: AVX2 and FMA are enabled for this function (its caller checked the CPU).
+            unsafe {
+                if two {
+                    entry.run::<true, DISTORTION>(run);
+                } else {
+                    entry.run::<false, DISTORTION>(run);
                 }
             }
         }
+        let entry_impact = entry.impact;
         impact[k] = entry_impact;
     }
     offsets.push(blended.len() as u32);

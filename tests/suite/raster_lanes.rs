@@ -404,6 +404,81 @@ fn avx2_packed_pairs_equal_pushing_lane_by_lane() {
     }
 }
 
+/// The AVX2 forward's runs of an entry (`EntryRuns`) hold each pixel of its spans once, in
+/// pixel order, at most eight per run, every part of a run along one row. A two-part run is
+/// the rest of a row's span (fewer than eight pixels) followed by the first pixels of the next
+/// non-empty row's, and its two windows of eight states (from the first part's first pixel,
+/// and from `split` pixels before the second part's) share no pixel. Random spans, narrow and
+/// wide, with empty rows; then a narrow billboard, whose rows share runs, and a wide one,
+/// whose tails cannot take the next row's head. (Letting windows one pixel apart pair up
+/// trips the forward's disjointness assertion in the raster tests: tried.)
+#[cfg(target_arch = "x86_64")]
+#[test]
+fn avx2_forward_runs_cover_each_span_pixel_once_in_pixel_order() {
+    use bbsplat::testing_internals::forward_avx2::entry_runs;
+    let tw = bbsplat::raster::TILE_SIZE as usize;
+    let mut rng = Rng::new(31);
+    let (mut runs_seen, mut two_part) = (0, 0);
+    for case in 0..3000 {
+        let first_row = rng.below(tw as u64) as usize;
+        let row_count = 1 + rng.below((tw - first_row) as u64) as usize;
+        let widest = [1, 3, 7, 12, tw][case % 5];
+        let rows: Vec<[u8; 2]> = (0..row_count)
+            .map(|_| {
+                if rng.uniform() < 0.1 {
+                    return [9, 4];
+                }
+                let x0 = rng.below(tw as u64) as usize;
+                let x1 = (x0 + rng.below(widest as u64) as usize).min(tw - 1);
+                [x0 as u8, x1 as u8]
+            })
+            .collect();
+        let want: Vec<usize> = rows
+            .iter()
+            .enumerate()
+            .flat_map(|(i, &[x0, x1])| (usize::from(x0)..=usize::from(x1)).map(move |x| (first_row + i) * tw + x))
+            .collect();
+        let runs = entry_runs(&rows, first_row as u8, tw);
+        let got: Vec<usize> = runs.iter().flat_map(|(pixels, _)| pixels.iter().copied()).collect();
+        assert_eq!(got, want, "case {case}: every pixel once, in pixel order");
+        for (pixels, two) in &runs {
+            assert!((1..=8).contains(&pixels.len()), "case {case}: {pixels:?}");
+            let breaks: Vec<usize> = (1..pixels.len()).filter(|&l| pixels[l] != pixels[l - 1] + 1).collect();
+            let same_row = |part: &[usize]| part.iter().all(|&q| q / tw == part[0] / tw);
+            if *two {
+                assert_eq!(breaks.len(), 1, "case {case}: two parts {pixels:?}");
+                let split = breaks[0];
+                let (first, second) = pixels.split_at(split);
+                assert!(same_row(first) && same_row(second) && second[0] / tw > first[0] / tw);
+                assert!(
+                    second[0] - split >= first[0] + 8,
+                    "case {case}: windows overlap {pixels:?}"
+                );
+                // The first part ends its row's span: the next span pixel is the second part's.
+                let at = want.iter().position(|&q| q == first[split - 1]).expect("a span pixel");
+                assert_eq!(want[at + 1], second[0]);
+                two_part += 1;
+            } else {
+                assert!(
+                    breaks.is_empty() && same_row(pixels),
+                    "case {case}: one part {pixels:?}"
+                );
+            }
+            runs_seen += 1;
+        }
+    }
+    println!("{runs_seen} runs, {two_part} of two parts");
+    assert!(two_part > runs_seen / 10, "the random spans exercise two-part runs");
+    // A billboard three pixels wide: two rows per run.
+    let narrow = entry_runs(&[[10, 12]; 8], 0, tw);
+    assert_eq!(narrow.len(), 4);
+    assert!(narrow.iter().all(|(pixels, two)| *two && pixels.len() == 6));
+    // Rows of 47 pixels: each tail's window would overlap the next row's, so it runs alone.
+    let wide = entry_runs(&[[0, 46]; 3], 0, tw);
+    assert_eq!(wide.len(), 3 * 6);
+    assert!(wide.iter().all(|(_, two)| !*two));
+}
+
 /// The AVX2 forward's sample of eight lanes is `RowTaps::sample_rgba` bit for bit on every lane
 /// with taps: coordinates across the texture, on its border ring and exactly on texel lines,
 /// textures with NaN, ±∞ and −0 texels among random ones.
