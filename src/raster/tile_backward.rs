@@ -21,7 +21,7 @@ use super::forward::{EntryPair, PairOrder, RenderOutput, prefetch_record, tile_p
 use super::preprocess::Prepared;
 #[cfg(target_arch = "x86_64")]
 use super::tile_backward_avx2::{add_lanes_in_order, chunk_backward, chunk_lanes};
-use super::tile_forward::{prefetch_texel_rect, texel_footprint};
+use super::tile_forward::{TexelRect, prefetch_texel_rect, prefetch_texel_rect_l2, texel_footprint};
 use super::{ActivatedRef, backward::ImageGradients};
 use crate::stages::bilinear::RowTaps;
 use crate::stages::composite::{CompositeBackState, Step, classify};
@@ -204,30 +204,51 @@ fn by_entry_body<const WIDE: bool>(
         }
         Some((x0, first, x1, last))
     };
-    // The record of an entry `RECORD_AHEAD` ahead (nearer); the texels of one `AHEAD` ahead, whose
-    // record, read to find them, was fetched some entries before.
-    const AHEAD: usize = 3;
+    // The record of an entry `RECORD_AHEAD` ahead (nearer). The texels of one `L2_AHEAD` ahead
+    // (and its gradient row's, when the entry owns it) into the second-level cache, their
+    // rectangle kept in a ring, and into the first-level cache `L1_AHEAD` ahead, from the ring:
+    // an entry's texels and gradient cells fetched into the first level several entries ahead
+    // were evicted again by the pixels and cells of the entries in between.
     const RECORD_AHEAD: usize = 8;
+    const L2_AHEAD: usize = 6;
+    const L1_AHEAD: usize = 1;
+    const RING: usize = 8;
+    const { assert!(L1_AHEAD < L2_AHEAD && L2_AHEAD - L1_AHEAD < RING) };
+    // Slot `k % RING`: entry `k`'s billboard, whether the entry owns its gradient row, and its
+    // texel rectangle (none when its footprint is not prefetched).
+    let mut footprints: [Option<(usize, bool, TexelRect)>; RING] = [None; RING];
+    // Entry `ahead`'s footprint, its lines asked into the second level.
+    let fetch_into_l2 = |ahead: usize| {
+        let b = list[ahead] as usize;
+        let rect = prepared[b].as_ref().and_then(|pa| {
+            let pixels = (starts[ahead + 1] - starts[ahead]) as usize;
+            pair_rect(ahead).and_then(|r| texel_footprint(pa, r, (i0, j0), ts, pixels))
+        })?;
+        prefetch_texel_rect_l2(set.texture_of(b).as_ptr(), ts, rect);
+        if direct[ahead] {
+            prefetch_texel_rect_l2(owned_rows.row_start(b), ts, rect);
+        }
+        Some((b, direct[ahead], rect))
+    };
+    // The entries walked before the first `L2_AHEAD` ahead (the last of the list).
+    for ahead in (list.len().saturating_sub(L2_AHEAD)..list.len()).rev() {
+        footprints[ahead % RING] = fetch_into_l2(ahead);
+    }
     // The taps of a chunk of pairs, refilled in place.
     let mut lane_taps = RowTaps::default();
     for k in (0..list.len()).rev() {
         if let Some(ahead) = k.checked_sub(RECORD_AHEAD) {
             prefetch_record(&prepared[list[ahead] as usize]);
         }
-        // The texels of an entry a few ahead, with where its texel gradients will go when that
-        // is its billboard's gradient row (the shared slot of sums stays in cache).
-        if let Some(ahead) = k.checked_sub(AHEAD) {
-            let b = list[ahead] as usize;
-            if let Some(pa) = prepared[b].as_ref()
-                && let Some(rect) = pair_rect(ahead).and_then(|r| {
-                    let pixels = (starts[ahead + 1] - starts[ahead]) as usize;
-                    texel_footprint(pa, r, (i0, j0), ts, pixels)
-                })
-            {
-                prefetch_texel_rect(set.texture_of(b).as_ptr(), ts, rect);
-                if direct[ahead] {
-                    prefetch_texel_rect(owned_rows.row_start(b), ts, rect);
-                }
+        if let Some(ahead) = k.checked_sub(L2_AHEAD) {
+            footprints[ahead % RING] = fetch_into_l2(ahead);
+        }
+        if let Some(ahead) = k.checked_sub(L1_AHEAD)
+            && let Some((b, owns, rect)) = footprints[ahead % RING]
+        {
+            prefetch_texel_rect(set.texture_of(b).as_ptr(), ts, rect);
+            if owns {
+                prefetch_texel_rect(owned_rows.row_start(b), ts, rect);
             }
         }
         let of = &pairs[starts[k] as usize..starts[k + 1] as usize];

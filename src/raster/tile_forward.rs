@@ -13,7 +13,9 @@
 //! Per (entry, pixel) pair, work stops as soon as the pixel has stopped compositing
 //! (transmittance threshold), which the pixel-by-pixel walk also did.
 
-use super::forward::{EntryPair, EntrySpans, PairOrder, TileBlended, TileSpans, prefetch_ptr, prefetch_record};
+use super::forward::{
+    EntryPair, EntrySpans, PairOrder, TileBlended, TileSpans, prefetch_ptr, prefetch_ptr_l2, prefetch_record,
+};
 use super::preprocess::Prepared;
 use super::{ActivatedRef, RenderSettings};
 use crate::camera::Camera;
@@ -183,9 +185,10 @@ fn composite_tile_body<const DISTORTION: bool>(
     } = out;
     // The taps of a chunk of lanes, refilled in place (for sampling only: no derivatives).
     let mut taps = RowTaps::default();
+    let mut texel_prefetch = TexelPrefetch::default();
     for (k, (span, &b)) in spans.entries.iter().zip(list).enumerate() {
         offsets.push(blended.len() as u32);
-        prefetch_ahead(set, prepared, list, &spans.entries, k, (i0, j0));
+        texel_prefetch.ahead(set, prepared, list, &spans.entries, k, (i0, j0));
         let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
         let plane = p.view_plane();
         let texture = set.texture_of(b as usize);
@@ -276,28 +279,58 @@ fn composite_tile_body<const DISTORTION: bool>(
     }
 }
 
-/// The prefetches of the forward tile loops before entry `k` of a tile at `(i0, j0)` with list
-/// `list` and spans `spans`: the record of the entry 12 ahead, and the texels of the one 6
-/// ahead (their reads would otherwise miss one by one). No effect on values.
-#[inline(always)]
-pub(crate) fn prefetch_ahead(
-    set: &ActivatedRef<'_>,
-    prepared: &[Option<Prepared>],
-    list: &[u32],
-    spans: &[EntrySpans],
-    k: usize,
-    (i0, j0): (u32, u32),
-) {
-    let ts = set.texture_size;
-    if let Some(&ahead) = list.get(k + 12) {
-        prefetch_record(&prepared[ahead as usize]);
-    }
-    if let (Some(&ahead), Some(ahead_span)) = (list.get(k + 6), spans.get(k + 6))
-        && let Some(pa) = prepared[ahead as usize].as_ref()
-        && let Some(rect) =
-            span_rect(ahead_span).and_then(|r| texel_footprint(pa, r, (i0, j0), ts, usize::from(ahead_span.pixels)))
-    {
-        prefetch_texel_rect(set.texture_of(ahead as usize).as_ptr(), ts, rect);
+/// A texel rectangle `(c0, r0, c1, r1)` (inclusive columns and rows) of a `ts × ts` texture.
+pub(crate) type TexelRect = (usize, usize, usize, usize);
+
+/// The texel prefetches of the forward tile loops: before entry `k` of a tile, the texels of
+/// the entry [`Self::L2_AHEAD`] ahead into the second-level cache, and those of the next entry
+/// into the first level, from the rectangle found then (kept in a ring). Texels fetched into
+/// the first level several entries ahead were evicted again by the states and texels of the
+/// entries in between. No effect on values.
+#[derive(Default)]
+pub(crate) struct TexelPrefetch {
+    /// Slot `k % RING`: entry `k`'s billboard and texel rectangle (none when not prefetched).
+    footprints: [Option<(usize, TexelRect)>; Self::RING],
+}
+
+impl TexelPrefetch {
+    const L2_AHEAD: usize = 6;
+    const RING: usize = 8;
+
+    /// The prefetches before entry `k` of a tile at `(i0, j0)` with list `list` and spans
+    /// `spans` (`k` from 0 up, in order; a new tile starts at `k = 0`): the record of the
+    /// entry 12 ahead, the texels of the one [`Self::L2_AHEAD`] ahead into the second level
+    /// (and at `k = 0` those of the entries before it), and those of entry `k + 1` into the
+    /// first level.
+    #[inline(always)]
+    pub(crate) fn ahead(
+        &mut self,
+        set: &ActivatedRef<'_>,
+        prepared: &[Option<Prepared>],
+        list: &[u32],
+        spans: &[EntrySpans],
+        k: usize,
+        (i0, j0): (u32, u32),
+    ) {
+        const { assert!(Self::L2_AHEAD < Self::RING, "the ring holds the entries in flight") };
+        let ts = set.texture_size;
+        if let Some(&ahead) = list.get(k + 12) {
+            prefetch_record(&prepared[ahead as usize]);
+        }
+        let footprint = |e: usize| {
+            let (&b, span) = (list.get(e)?, spans.get(e)?);
+            let pa = prepared[b as usize].as_ref()?;
+            let rect = span_rect(span).and_then(|r| texel_footprint(pa, r, (i0, j0), ts, usize::from(span.pixels)))?;
+            prefetch_texel_rect_l2(set.texture_of(b as usize).as_ptr(), ts, rect);
+            Some((b as usize, rect))
+        };
+        let first = if k == 0 { 1 } else { k + Self::L2_AHEAD };
+        for e in first..=k + Self::L2_AHEAD {
+            self.footprints[e % Self::RING] = footprint(e);
+        }
+        if let Some((b, rect)) = self.footprints[(k + 1) % Self::RING] {
+            prefetch_texel_rect(set.texture_of(b).as_ptr(), ts, rect);
+        }
     }
 }
 
@@ -323,7 +356,7 @@ pub(crate) fn texel_footprint(
     (i0, j0): (u32, u32),
     ts: usize,
     pixels: usize,
-) -> Option<(usize, usize, usize, usize)> {
+) -> Option<TexelRect> {
     let t = &p.transform;
     let (mut u_lo, mut u_hi, mut v_lo, mut v_hi) = (f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY);
     // One corner when the rectangle is a single pixel (the common case of small billboards).
@@ -356,15 +389,28 @@ pub(crate) const FOOTPRINT_TEXELS_PER_PIXEL: usize = 8;
 /// row-major `ts × ts` per-texel array starting at `texels` (a texture, a gradient row, a cell
 /// index). `texels` is never dereferenced.
 #[inline]
-pub(crate) fn prefetch_texel_rect<T>(texels: *const T, ts: usize, (c0, r0, c1, r1): (usize, usize, usize, usize)) {
+pub(crate) fn prefetch_texel_rect<T>(texels: *const T, ts: usize, rect: TexelRect) {
+    prefetch_rect_with(texels, ts, rect, prefetch_ptr);
+}
+
+/// [`prefetch_texel_rect`] into the second-level cache only ([`prefetch_ptr_l2`]).
+#[inline]
+pub(crate) fn prefetch_texel_rect_l2<T>(texels: *const T, ts: usize, rect: TexelRect) {
+    prefetch_rect_with(texels, ts, rect, prefetch_ptr_l2);
+}
+
+/// `prefetch` on the first byte of every cache line of the rectangle (see
+/// [`prefetch_texel_rect`]).
+#[inline(always)]
+fn prefetch_rect_with<T>(texels: *const T, ts: usize, (c0, r0, c1, r1): TexelRect, prefetch: fn(*const u8)) {
     let per_line = (64 / size_of::<T>().max(1)).max(1);
     for r in r0..=r1 {
         let row = texels.wrapping_add(r * ts);
         let mut c = c0;
         while c <= c1 {
-            prefetch_ptr(row.wrapping_add(c).cast::<u8>());
+            prefetch(row.wrapping_add(c).cast::<u8>());
             c += per_line;
         }
-        prefetch_ptr(row.wrapping_add(c1).cast::<u8>());
+        prefetch(row.wrapping_add(c1).cast::<u8>());
     }
 }

@@ -29,7 +29,7 @@
 
 use super::TILE_SIZE;
 use super::forward::{EntryPair, PairOrder, TileBlended};
-use super::tile_forward::{FORWARD_FEATURES, PixelOut, TileInputs, prefetch_ahead};
+use super::tile_forward::{FORWARD_FEATURES, PixelOut, TexelPrefetch, TileInputs};
 use crate::camera::Camera;
 use crate::stages::bilinear::RowTaps;
 #[cfg(feature = "testing")]
@@ -1081,9 +1081,10 @@ unsafe fn composite_tile_lanes<const DISTORTION: bool>(
     } = out;
     let thresholds = Thresholds::of(params);
     let mut taps = RowTaps::default();
+    let mut texel_prefetch = TexelPrefetch::default();
     for (k, (span, &b)) in spans.entries.iter().zip(list).enumerate() {
         offsets.push(blended.len() as u32);
-        prefetch_ahead(set, prepared, list, &spans.entries, k, (i0, j0));
+        texel_prefetch.ahead(set, prepared, list, &spans.entries, k, (i0, j0));
         let p = prepared[b as usize].as_ref().expect("binned billboards are prepared");
         // SAFETY: broadcasts, register operations of AVX, which every caller has enabled (this
         // function's contract).
