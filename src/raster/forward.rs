@@ -282,24 +282,30 @@ pub(crate) fn prefetch_taps<T>(texels: *const T, indices: &[u32]) {
 /// (`prefetcht1`), for a read further ahead than [`prefetch_ptr`]'s; `p` is never dereferenced.
 #[inline(always)]
 pub(crate) fn prefetch_ptr_l2(p: *const u8) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: a prefetch is only a hint: it never faults, whatever the address, and reads nothing
-    // the program can observe.
-    unsafe {
-        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T1 }>(p.cast::<i8>());
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = p;
+    prefetch_with_hint::<L2_HINT>(p);
 }
 
 /// Hints the CPU to fetch the cache line holding address `p`; `p` is never dereferenced.
 #[inline(always)]
 pub(crate) fn prefetch_ptr(p: *const u8) {
+    prefetch_with_hint::<L1_HINT>(p);
+}
+
+/// `_MM_HINT_T0`: into every level of cache.
+const L1_HINT: i32 = 3;
+/// `_MM_HINT_T1`: into the second level and beyond.
+const L2_HINT: i32 = 2;
+#[cfg(target_arch = "x86_64")]
+const _: () = assert!(L1_HINT == std::arch::x86_64::_MM_HINT_T0 && L2_HINT == std::arch::x86_64::_MM_HINT_T1);
+
+/// The prefetch of the line holding `p` with locality hint `HINT`; `p` is never dereferenced.
+#[inline(always)]
+fn prefetch_with_hint<const HINT: i32>(p: *const u8) {
     #[cfg(target_arch = "x86_64")]
     // SAFETY: a prefetch is only a hint: it never faults, whatever the address, and reads nothing
     // the program can observe.
     unsafe {
-        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(p.cast::<i8>());
+        std::arch::x86_64::_mm_prefetch::<HINT>(p.cast::<i8>());
     }
     #[cfg(not(target_arch = "x86_64"))]
     let _ = p;
