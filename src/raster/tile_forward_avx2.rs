@@ -615,6 +615,7 @@ const _: () = assert!((TILE_SIZE * TILE_SIZE) as usize + LANES <= 1 << 16 && TIL
 ///
 /// # Safety
 /// The CPU must support AVX2 (the caller is compiled with it).
+#[cfg(feature = "testing")]
 #[inline(always)]
 unsafe fn push_pairs(pairs: &mut Vec<EntryPair>, bits: u32, (q0, x0, y): (usize, usize, u8), fronts: __m256) {
     // SAFETY: AVX2 is enabled by the caller.
@@ -640,7 +641,8 @@ unsafe fn lane_places((q0, x0, y): (usize, usize, u8), shift: usize) -> __m256i 
     }
 }
 
-/// [`push_pairs`] with the lanes' places given (see [`lane_places`]).
+/// [`push_pairs`] with the lanes' places given (see [`lane_places`]): the runs of the forward
+/// push their pairs through this, with the places of their one or two parts.
 ///
 /// # Safety
 /// The CPU must support AVX2 (the caller is compiled with it).
