@@ -218,50 +218,63 @@ struct RunStates<'a, const TWO: bool> {
 }
 
 impl<const TWO: bool> RunStates<'_, TWO> {
+    /// `read` of the run's lanes: of `first`, and with `TWO` of `second` for lanes `split..`.
     #[inline(always)]
-    unsafe fn load_ps<const ROW: usize>(&self) -> __m256 {
-        // SAFETY: the chunks' contract (`ChunkStates::load_ps`); AVX is enabled by every caller.
-        unsafe {
-            let a = self.first.load_ps::<ROW>();
-            if TWO {
-                _mm256_blendv_ps(a, self.second.load_ps::<ROW>(), self.in_second)
-            } else {
-                a
-            }
+    unsafe fn read(&self, read: impl Fn(&ChunkStates<'_>) -> __m256) -> __m256 {
+        let a = read(&self.first);
+        if TWO {
+            // SAFETY: a register operation of AVX, enabled by every caller.
+            unsafe { _mm256_blendv_ps(a, read(&self.second), self.in_second) }
+        } else {
+            a
         }
     }
 
+    /// `write(window, mask)` of the run's lanes set in `mask`: once for `first` and, with `TWO`,
+    /// once per window with that window's lanes of `mask`. A write keeps the window's lanes
+    /// outside its mask as it reads them (the two windows share no pixel, so a window read
+    /// after the other was written still holds its own values).
+    #[inline(always)]
+    unsafe fn write(&mut self, mask: __m256, mut write: impl FnMut(&mut ChunkStates<'_>, __m256)) {
+        if TWO {
+            // SAFETY: register operations of AVX, enabled by every caller.
+            let (in_first, in_second) = unsafe {
+                (
+                    _mm256_andnot_ps(self.in_second, mask),
+                    _mm256_and_ps(self.in_second, mask),
+                )
+            };
+            write(&mut self.first, in_first);
+            write(&mut self.second, in_second);
+        } else {
+            write(&mut self.first, mask);
+        }
+    }
+
+    #[inline(always)]
+    unsafe fn load_ps<const ROW: usize>(&self) -> __m256 {
+        // SAFETY: the chunks' contract (`ChunkStates::load_ps`); AVX is enabled by every caller.
+        unsafe { self.read(|w| w.load_ps::<ROW>()) }
+    }
+
     /// Float row `ROW` set to `new` where `mask` is set and left as it was elsewhere; `old`
-    /// is what [`Self::load_ps`] read.
+    /// is what [`Self::load_ps`] read (read again per window with `TWO`).
     #[inline(always)]
     unsafe fn store_blend<const ROW: usize>(&mut self, old: __m256, new: __m256, mask: __m256) {
         // SAFETY: the chunks' contract (`ChunkStates::store_blend`); AVX is enabled by every
         // caller.
         unsafe {
-            if TWO {
-                let first = self.first.load_ps::<ROW>();
-                self.first
-                    .store_blend::<ROW>(first, new, _mm256_andnot_ps(self.in_second, mask));
-                let second = self.second.load_ps::<ROW>();
-                self.second
-                    .store_blend::<ROW>(second, new, _mm256_and_ps(self.in_second, mask));
-            } else {
-                self.first.store_blend::<ROW>(old, new, mask);
-            }
+            self.write(mask, |w, m| {
+                let old = if TWO { w.load_ps::<ROW>() } else { old };
+                w.store_blend::<ROW>(old, new, m);
+            });
         }
     }
 
     #[inline(always)]
     unsafe fn load_feature(&self, c: usize) -> __m256 {
         // SAFETY: as in `load_ps`.
-        unsafe {
-            let a = self.first.load_feature(c);
-            if TWO {
-                _mm256_blendv_ps(a, self.second.load_feature(c), self.in_second)
-            } else {
-                a
-            }
-        }
+        unsafe { self.read(|w| w.load_feature(c)) }
     }
 
     /// [`Self::store_blend`] for feature `c`.
@@ -269,60 +282,36 @@ impl<const TWO: bool> RunStates<'_, TWO> {
     unsafe fn store_feature_blend(&mut self, c: usize, old: __m256, new: __m256, mask: __m256) {
         // SAFETY: as in `store_blend`.
         unsafe {
-            if TWO {
-                let first = self.first.load_feature(c);
-                self.first
-                    .store_feature_blend(c, first, new, _mm256_andnot_ps(self.in_second, mask));
-                let second = self.second.load_feature(c);
-                self.second
-                    .store_feature_blend(c, second, new, _mm256_and_ps(self.in_second, mask));
-            } else {
-                self.first.store_feature_blend(c, old, new, mask);
-            }
+            self.write(mask, |w, m| {
+                let old = if TWO { w.load_feature(c) } else { old };
+                w.store_feature_blend(c, old, new, m);
+            });
         }
     }
 
+    /// Word row `ROW` (the blend of two windows chooses lanes by their bits only).
     #[inline(always)]
     unsafe fn load_si<const ROW: usize>(&self) -> __m256i {
         // SAFETY: as in `load_ps`.
-        unsafe { _mm256_castps_si256(self.load_words::<ROW>()) }
-    }
-
-    /// Word row `ROW` as floats (their bits): the blend chooses lanes by bits only.
-    #[inline(always)]
-    unsafe fn load_words<const ROW: usize>(&self) -> __m256 {
-        // SAFETY: as in `load_ps`.
-        unsafe {
-            let a = _mm256_castsi256_ps(self.first.load_si::<ROW>());
-            if TWO {
-                _mm256_blendv_ps(a, _mm256_castsi256_ps(self.second.load_si::<ROW>()), self.in_second)
-            } else {
-                a
-            }
-        }
+        unsafe { _mm256_castps_si256(self.read(|w| _mm256_castsi256_ps(w.load_si::<ROW>()))) }
     }
 
     /// Word row `ROW` set to `x` in the run's lanes.
     #[inline(always)]
     unsafe fn store_si<const ROW: usize>(&mut self, x: __m256i) {
-        // SAFETY: as in `store_blend`; a word row is written through its float view, bits
-        // unchanged.
+        if !TWO {
+            // SAFETY: as in `store_blend`.
+            unsafe { self.first.store_si::<ROW>(x) };
+            return;
+        }
+        // SAFETY: as in `store_blend`; the word row is written through its float view, bits
+        // unchanged (`store_blend_at` only selects lanes).
         unsafe {
-            if TWO {
-                let x = _mm256_castsi256_ps(x);
-                for (chunk, lanes) in [
-                    (
-                        &mut self.first,
-                        _mm256_xor_ps(self.in_second, _mm256_castsi256_ps(_mm256_set1_epi32(-1))),
-                    ),
-                    (&mut self.second, self.in_second),
-                ] {
-                    let row = chunk.word_row(ROW).cast::<f32>();
-                    store_blend_at(row, _mm256_loadu_ps(row), x, lanes);
-                }
-            } else {
-                self.first.store_si::<ROW>(x);
-            }
+            let all = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
+            self.write(all, |w, m| {
+                let old = _mm256_castsi256_ps(w.load_si::<ROW>());
+                store_blend_at(w.word_row(ROW).cast(), old, _mm256_castsi256_ps(x), m);
+            });
         }
     }
 }
@@ -774,10 +763,34 @@ impl RunPixels {
             len,
         }
     }
+
+    /// Whether the run has a second part.
+    fn has_two_parts(&self) -> bool {
+        self.split < self.len
+    }
+
+    /// The first pixel of the second part's window of [`LANES`] (`split` pixels before the
+    /// part), so that lane `l ≥ split` holds pixel `window + l`; `first.q` for one part.
+    fn second_window(&self) -> usize {
+        if self.has_two_parts() {
+            self.second.q - self.split
+        } else {
+            self.first.q
+        }
+    }
+
+    /// The tile-local pixel of lane `l` (below `len`).
+    fn pixel(&self, l: usize) -> usize {
+        debug_assert!(l < self.len);
+        if l < self.split {
+            self.first.q + l
+        } else {
+            self.second_window() + l
+        }
+    }
 }
 
-/// The runs of an entry's pixels, in pixel order, each with whether it has two parts: a
-/// row's span in runs of [`LANES`] pixels, and the rest of it (its tail, fewer than `LANES`)
+/// The runs of an entry's pixels, in pixel order: a row's span in runs of [`LANES`] pixels, and the rest of it (its tail, fewer than `LANES`)
 /// in one run with the head of the next non-empty row, when the two runs' windows of states
 /// share no pixel (else the tail is a run of its own). Rows of a billboard a few pixels wide
 /// thus share runs, as do the tails of wider ones.
@@ -831,7 +844,7 @@ impl<'s> EntryRuns<'s> {
 }
 
 impl Iterator for EntryRuns<'_> {
-    type Item = (RunPixels, bool);
+    type Item = RunPixels;
 
     #[inline(always)]
     fn next(&mut self) -> Option<Self::Item> {
@@ -842,27 +855,24 @@ impl Iterator for EntryRuns<'_> {
         let left = self.end - self.x;
         if left >= LANES {
             self.x += LANES;
-            return Some((RunPixels::one(first, LANES), false));
+            return Some(RunPixels::one(first, LANES));
         }
         self.x = self.end;
         if !self.next_row() {
-            return Some((RunPixels::one(first, left), false));
+            return Some(RunPixels::one(first, left));
         }
         let second = self.start();
         if second.q - first.q < left + LANES {
-            return Some((RunPixels::one(first, left), false));
+            return Some(RunPixels::one(first, left));
         }
         let len = LANES.min(left + self.end - self.x);
         self.x += len - left;
-        Some((
-            RunPixels {
-                first,
-                second,
-                split: left,
-                len,
-            },
-            true,
-        ))
+        Some(RunPixels {
+            first,
+            second,
+            split: left,
+            len,
+        })
     }
 }
 
@@ -871,18 +881,7 @@ impl Iterator for EntryRuns<'_> {
 #[cfg(feature = "testing")]
 pub(crate) fn entry_runs(rows: &[[u8; 2]], first_row: u8, tw: usize) -> Vec<(Vec<usize>, bool)> {
     EntryRuns::new(rows, first_row, tw)
-        .map(|(run, two)| {
-            let pixels = (0..run.len)
-                .map(|l| {
-                    if l < run.split {
-                        run.first.q + l
-                    } else {
-                        run.second.q + l - run.split
-                    }
-                })
-                .collect();
-            (pixels, two)
-        })
+        .map(|run| ((0..run.len).map(|l| run.pixel(l)).collect(), run.has_two_parts()))
         .collect()
 }
 
@@ -921,12 +920,9 @@ impl EntryRun<'_> {
             split,
             len,
         } = run;
-        debug_assert!(0 < split && split <= len && len <= LANES && (TWO || split == len));
+        debug_assert!(0 < split && split <= len && len <= LANES && TWO == run.has_two_parts());
         let (i0, j0) = self.origin;
-        // The second window starts `split` pixels before `second`, so that lane `l ≥ split`
-        // holds pixel `second.q + l − split`.
-        let window = if TWO { second.q - split } else { first.q };
-        let (a, b) = self.states.chunk_pair(first.q, window);
+        let (a, b) = self.states.chunk_pair(first.q, run.second_window());
         // SAFETY: AVX2 and FMA are enabled (the caller's contract); the loads and stores go
         // through the run's windows of states, whose bounds were checked when they were made,
         // and `sample_lanes` reads texels at indices `RowTaps` clamps into the texture.
@@ -1045,8 +1041,7 @@ impl EntryRun<'_> {
                 while bits != 0 {
                     let l = bits.trailing_zeros() as usize;
                     bits &= bits - 1;
-                    let q = if l < split { first.q + l } else { window + l };
-                    self.states.spread[q].add(mapped_depth(hits.depth[l]), weights[l], fronts[l]);
+                    self.states.spread[run.pixel(l)].add(mapped_depth(hits.depth[l]), weights[l], fronts[l]);
                 }
             }
             // The impact in pixel order, every lane adding its weight or +0 (which changes no
@@ -1119,10 +1114,10 @@ unsafe fn composite_tile_lanes<const DISTORTION: bool>(
             normal,
             thresholds: &thresholds,
         };
-        for (run, two) in EntryRuns::new(spans.row_cols(span), span.rows[0], tw) {
+        for run in EntryRuns::new(spans.row_cols(span), span.rows[0], tw) {
             // SAFETY: AVX2 and FMA are enabled for this function (its caller checked the CPU).
             unsafe {
-                if two {
+                if run.has_two_parts() {
                     entry.run::<true, DISTORTION>(run);
                 } else {
                     entry.run::<false, DISTORTION>(run);
