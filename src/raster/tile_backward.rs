@@ -206,9 +206,10 @@ fn by_entry_body<const WIDE: bool>(
     };
     // The record of an entry `RECORD_AHEAD` ahead (nearer). The texels of one `L2_AHEAD` ahead
     // (and its gradient row's, when the entry owns it) into the second-level cache, their
-    // rectangle kept in a ring, and into the first-level cache `L1_AHEAD` ahead, from the ring:
-    // an entry's texels and gradient cells fetched into the first level several entries ahead
-    // were evicted again by the pixels and cells of the entries in between.
+    // rectangle kept in a ring, and into the first-level cache `L1_AHEAD` ahead, from the ring.
+    // (Fetched into the first level three entries ahead, they were presumably evicted again by
+    // the entries in between: this form is 7 % faster, docs/perf.md; the eviction itself was
+    // not measured, this host has no cache counters.)
     const RECORD_AHEAD: usize = 8;
     const L2_AHEAD: usize = 6;
     const L1_AHEAD: usize = 1;
