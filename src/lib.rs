@@ -18,22 +18,23 @@
 //! | step | items | module |
 //! |---|---|---|
 //! | load posed photographs (COLMAP, NeRF-synthetic, instant-ngp) | [`load`], [`LoadOptions`], [`Scene`], [`SceneError`] | [`scene`] |
-//! | initial billboards from the scene's points | [`init_model`], [`InitError`] | [`init`] |
+//! | the settings `bbsplat train` would use, chosen for the scene and the run length, each with its reason | [`TrainPlan`], [`TrainRequest`], [`RunLength`], [`load_with_data_background`] | [`plan`] |
+//! | initial billboards from the scene's points | [`TrainPlan::init_model`], [`init_model`], [`InitError`] | [`init`] |
 //! | the three forms of the billboard set: raw optimised parameters (saved), activated (owned), activated (borrowed, what the renderer reads) | [`RawBillboards`], [`ActivatedBillboards`], [`ActivatedRef`] | [`model`], [`billboards`], [`raster`] |
 //! | train: the whole run (evaluations, checkpoints, stop requests) or single steps | [`run`], [`RunConfig`], [`TrainEvent`], [`RunOutcome`], [`RunError`], [`StopSignal`], [`Trainer`], [`TrainConfig`], [`TrainView`] | [`train`] |
 //! | model folders in the reference's format (PLY + 8-bit npz textures) | [`save_model`], [`load_model`], [`ModelMeta`], [`ModelFileError`] | [`model_file`] |
 //! | render, and back-propagate an image gradient | [`render`], [`render_backward`], [`RenderSettings`], [`RenderOutput`], [`Camera`] | [`raster`], [`camera`] |
 //!
 //! A whole round trip: a small dataset on disk (here the embedded demo scene written as a COLMAP
-//! model, feature `tools`; any dataset folder loads the same way), loaded, initialised, trained
-//! for a few steps, saved, loaded back and rendered. Images are linear RGB in `[0, 1]`,
-//! interleaved, rows from the top; cameras are world-to-camera with OpenCV axes (x right, y
-//! down, z forward).
+//! model, feature `tools`; any dataset folder loads the same way), loaded, planned as `bbsplat
+//! train` plans it, initialised, trained for a few steps, saved, loaded back and rendered.
+//! Images are linear RGB in `[0, 1]`, interleaved, rows from the top; cameras are
+//! world-to-camera with OpenCV axes (x right, y down, z forward).
 //!
 //! ```
 //! use bbsplat::{
-//!     LoadOptions, ModelMeta, RenderSettings, RunConfig, RunOutcome, StopSignal, TrainConfig,
-//!     TrainEvent, TrainView, Trainer, init_model, load, load_model, render, run, save_model,
+//!     LoadOptions, ModelMeta, RenderSettings, RunLength, RunOutcome, StopSignal, TrainEvent, TrainPlan,
+//!     TrainRequest, TrainView, load_model, load_with_data_background, render, run, save_model,
 //! };
 //! use bbsplat::demo::{DemoConfig, export_colmap, generate};
 //! use glam::Vec3;
@@ -43,23 +44,22 @@
 //! let demo = generate(&DemoConfig { resolution: 24, train_views: 7, test_views: 1, points: 300, seed: 0 });
 //! export_colmap(&demo, &dir.join("data"))?;
 //!
-//! // Load: 8 views, every 8th held out for testing, images undistorted to pinhole cameras.
-//! let scene = load(&dir.join("data"), &LoadOptions::default())?;
+//! // Load: 8 views, every 8th held out for testing, images undistorted to pinhole cameras, the
+//! // background chosen from the data.
+//! let (scene, background) = load_with_data_background(&dir.join("data"), &LoadOptions::default())?;
 //! assert_eq!((scene.train.len(), scene.test.len()), (7, 1));
 //!
-//! // Initialise 200 billboards with 4×4 textures from the scene's points, and train 30 steps.
-//! let (model, _report) = init_model(&scene, 200, 4, 0)?;
-//! let config = TrainConfig {
-//!     iterations: 30,
-//!     background: Vec3::from_array(scene.background.rgb()),
-//!     extent: scene.extent,
-//!     ..TrainConfig::default()
-//! };
-//! let mut trainer = Trainer::new(model, config);
+//! // Plan 30 steps with 4×4 textures; the rest (billboard count, growth, initialisation,
+//! // learning rates, coarse-to-fine) is chosen from the scene, as `bbsplat train` does.
+//! let request = TrainRequest { length: RunLength::Steps(30), texture_size: 4, ..TrainRequest::default() };
+//! let plan = TrainPlan::new(&scene, Some(&background), &request)?;
+//! assert!(plan.choices.iter().any(|c| c.setting == "billboards"));
+//! let (model, _report) = plan.init_model(&scene)?;
+//! let mut trainer = plan.trainer(model);
 //! let (train, test) = (TrainView::from_views(&scene.train), TrainView::from_views(&scene.test));
 //! let mut steps = 0;
 //! // No output folder: nothing is written, the final evaluation renders the float model.
-//! let outcome = run(&mut trainer, &train, &test, &RunConfig::default(), &StopSignal::new(), |event| {
+//! let outcome = run(&mut trainer, &train, &test, &plan.run_config(), &StopSignal::new(), |event| {
 //!     if let TrainEvent::Step { .. } = event {
 //!         steps += 1;
 //!     }
@@ -89,6 +89,10 @@
 //! # Ok(())
 //! # }
 //! ```
+//!
+//! [`TrainConfig::default`] alone is the reference's configuration (32 000 steps at its learning
+//! rates, no growth, full resolution); [`init_model`] the reference's initialisation. They are
+//! there for ablations and tests; short runs do much better with the plan.
 //!
 //! # Features
 //!
@@ -127,6 +131,7 @@ pub mod memory;
 pub mod mesh;
 pub mod model;
 pub mod model_file;
+pub mod plan;
 pub mod raster;
 pub mod report;
 pub mod rng;
@@ -145,6 +150,7 @@ pub use camera::Camera;
 pub use init::scene_init::{InitError, init_model};
 pub use model::RawBillboards;
 pub use model_file::{ModelFileError, ModelMeta, load_model, save_model};
+pub use plan::{RunLength, TrainPlan, TrainRequest, load_with_data_background};
 pub use raster::{ActivatedRef, RenderOutput, RenderSettings, render, render_backward};
 pub use scene::{LoadOptions, Scene, SceneError, load};
 pub use train::run::run;

@@ -45,7 +45,7 @@ enum Command {
         export: Option<PathBuf>,
     },
     /// Train a billboard model on a dataset (COLMAP, NeRF-synthetic or instant-ngp, detected).
-    Train(cli::train::TrainArgs),
+    Train(cli::train_args::TrainArgs),
     /// Render a saved model from a dataset's cameras to PNG files.
     Render(cli::render::RenderArgs),
     /// Evaluate a saved model on a dataset's views: per-view and mean PSNR/SSIM (8-bit images).

@@ -1,7 +1,6 @@
 //! Subcommands of the `bbsplat` binary (the library does the work; these parse flags, print and
 //! write files).
 
-pub mod auto_settings;
 pub mod common;
 pub mod demo;
 pub mod export;
@@ -11,5 +10,6 @@ pub mod render;
 pub mod resume;
 pub mod signals;
 pub mod train;
+pub mod train_args;
 pub mod validate;
 pub mod view;

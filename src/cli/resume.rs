@@ -1,7 +1,7 @@
 //! What `--resume` compares: the run record ([`bbsplat::train::run_record`]) of the flags and
 //! the dataset of this command against the one stored in the checkpoint.
 
-use super::train::TrainArgs;
+use super::train_args::TrainArgs;
 use anyhow::Result;
 use bbsplat::scene::Scene;
 use bbsplat::train::run_record::{DatasetFingerprint, RunRecord};

@@ -2,7 +2,7 @@
 //! of range is refused with a message naming the flag, never a panic or an abort later. Memory
 //! checks compare [`bbsplat::train::footprint`] estimates with the memory available.
 
-use super::train::TrainArgs;
+use super::train_args::TrainArgs;
 use anyhow::Result;
 use bbsplat::memory::{available_bytes, human_bytes};
 
@@ -10,15 +10,8 @@ use bbsplat::memory::{available_bytes, human_bytes};
 /// ([`bbsplat::model_file::MAX_TEXTURE_SIZE`]): larger would train and then fail to save.
 pub use bbsplat::model_file::MAX_TEXTURE_SIZE;
 
-/// Largest `--hull-resolution` (1024³ voxels is already 1.1 G voxels, each projected into every
-/// view).
-pub const MAX_HULL_RESOLUTION: usize = 1024;
-
 /// Largest `--threads`.
 pub const MAX_THREADS: usize = 4096;
-
-/// Largest `--coarse-factor`.
-pub const MAX_COARSE_FACTOR: u32 = 64;
 
 /// Largest `bbsplat demo --resolution` (square images).
 pub const MAX_DEMO_RESOLUTION: u32 = 8192;
@@ -50,42 +43,12 @@ pub fn threads(n: Option<usize>) -> Result<()> {
     Ok(())
 }
 
-/// Every numeric flag of `bbsplat train`.
+/// Every numeric flag of `bbsplat train`: the library's ranges of the request they make
+/// ([`bbsplat::plan::TrainRequest::check`], named by their flags), then `--threads`,
+/// `--downscale` and `--max-width`.
 pub fn train_args(args: &TrainArgs) -> Result<()> {
-    texture_size(args.texture_size)?;
-    if let Some(n) = args.billboards {
-        billboards(n)?;
-    }
+    args.request().check().map_err(|e| anyhow::anyhow!("--{e}"))?;
     threads(args.threads)?;
-    anyhow::ensure!(
-        args.sh_degree <= 3,
-        "--sh-degree must be 0, 1, 2 or 3 (got {})",
-        args.sh_degree
-    );
-    anyhow::ensure!(
-        args.iterations.is_none_or(|n| n >= 1),
-        "--iterations must be at least 1"
-    );
-    anyhow::ensure!(
-        (1..=MAX_COARSE_FACTOR).contains(&args.coarse_factor),
-        "--coarse-factor must be between 1 and {MAX_COARSE_FACTOR} (got {})",
-        args.coarse_factor
-    );
-    anyhow::ensure!(
-        (0.0..=1.0).contains(&args.coarse_until),
-        "--coarse-until must be a fraction between 0 and 1 (got {})",
-        args.coarse_until
-    );
-    anyhow::ensure!(
-        args.texture_threshold.is_finite() && args.texture_threshold >= 0.0,
-        "--texture-threshold must be a finite number ≥ 0 (got {})",
-        args.texture_threshold
-    );
-    anyhow::ensure!(
-        (2..=MAX_HULL_RESOLUTION).contains(&args.hull_resolution),
-        "--hull-resolution must be between 2 and {MAX_HULL_RESOLUTION} (got {})",
-        args.hull_resolution
-    );
     anyhow::ensure!(args.scene_args.downscale >= 1, "--downscale must be at least 1 (got 0)");
     anyhow::ensure!(args.scene_args.max_width != Some(0), "--max-width must be at least 1");
     Ok(())
