@@ -9,7 +9,7 @@ inclusive. OUT_SCENE gets `sparse/0/{cameras,images,points3D}.txt` in COLMAP's t
 only those images and their cameras, the 3D points whose track keeps at least two of them
 (tracks cut to them), and `images` as a symbolic link to the source's. `bbsplat train OUT_SCENE
 --test-every 0` then trains on all of them; `bbsplat eval MODEL OUT_SCENE --split train
---test-every 0` scores them (docs/quality.md, "beer_colmap: the capture's views disagree").
+--test-every 0` scores them (docs/quality-log.md, "beer_colmap: the capture's views disagree").
 Poses, intrinsics and points are copied unchanged. No dependency beyond the standard library.
 """
 

@@ -4,7 +4,7 @@
 #
 # Compilers turn "load, blend with what was loaded, store back" into a masked store. It gives
 # the same bits but is slow on AMD Zen cores, and a load of what it stored waits for it
-# (docs/perf.md, 2026-11-29): the AVX2 tile forward lost a sixth of its time to nine of them
+# (docs/perf-log.md, 2026-11-29): the AVX2 tile forward lost a sixth of its time to nine of them
 # per run. The forward's blended stores are written to prevent it
 # (`tile_forward_avx2::store_blend_at`), and `SupportQuad::row_spans` keeps its spans in
 # registers; this check keeps masked stores from coming back anywhere in the crate's code:

@@ -642,7 +642,7 @@ struct TileScratch {
 /// per entry, 16 to 23 per pixel), the pixel walk took 12-45 % less time up to 9-11 pixels per
 /// entry (one scene at 9.6 excepted: 12 % more) and the entry walk 2-38 % less from 16 on,
 /// whatever the depth; the trained-like scenes took 2.1-3.2 times as long by pixel
-/// (`docs/perf.md`, 2026-11-28 seventh session). The threshold had been 4, which left random
+/// (`docs/perf-log.md`, 2026-11-28 seventh session). The threshold had been 4, which left random
 /// scenes of 4-11 pixels per entry on the slower walk (400²/50k 1.6 times as long).
 pub const SMALL_ENTRY_PIXELS: usize = 12;
 

@@ -82,7 +82,7 @@ pub fn force_avx2(on: bool) {
 
 /// True when the forward's billboard-by-billboard tile runs its AVX-512 build: the same AVX2
 /// source compiled with AVX-512 (F, VL, BW, DQ) enabled, where the compiler has 32 vector
-/// registers and mask registers (docs/perf.md, 2026-11-29). The CPU has those features,
+/// registers and mask registers (docs/perf-log.md, 2026-11-29). The CPU has those features,
 /// [`wide_lanes`] holds and [`force_avx2`] is off.
 #[inline]
 pub fn avx512_lanes() -> bool {

@@ -52,7 +52,7 @@ pub use workload::WorkloadStats;
 /// 1e-7 of their size at the median and 1.4e-6 at the 99th percentile.
 ///
 /// 48 rather than the reference's 16: the per-entry work (records, prefetches, texel-sum
-/// read-outs) is shared by more pixels and the lanes of a billboard's rows are fuller. Measured in docs/perf.md (2026-11-27 evening, criterion,
+/// read-outs) is shared by more pixels and the lanes of a billboard's rows are fuller. Measured in docs/perf-log.md (2026-11-27 evening, criterion,
 /// interleaved with the 16-px code): forward + backward 0.87 (object) and 0.91 (capture) of
 /// the time on the trained-like scenes, the training step 0.88, the 256²/50k scene unchanged;
 /// 64 was slower on the latter.

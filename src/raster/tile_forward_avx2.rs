@@ -323,7 +323,7 @@ impl<const TWO: bool> RunStates<'_, TWO> {
 /// hides from the compiler that it was loaded from `p`. Otherwise the compiler turns "load,
 /// blend with what was loaded, store back" into a masked store (`vmaskmovps`), which gives the
 /// same bits but is slow on AMD Zen cores: on a Zen 4 host the object scene's forward took 34 ms
-/// with the nine masked stores per run and 28 ms with blends and plain stores (docs/perf.md,
+/// with the nine masked stores per run and 28 ms with blends and plain stores (docs/perf-log.md,
 /// 2026-11-29). `tools/no_masked_stores.sh`, run by CI, checks the built crate for them.
 ///
 /// # Safety
@@ -718,7 +718,7 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
 /// [`composite_tile_avx2`] compiled with AVX-512 (F, VL, BW, DQ) enabled as well: the same
 /// source and the same bits. The compiler then uses the upper 16 vector registers and mask
 /// registers, and the function has 6 % fewer instructions; on a Zen 4 host the forward took
-/// 0.94 of the AVX2 build's time (docs/perf.md, 2026-11-29). [`super::lanes::avx512_lanes`]
+/// 0.94 of the AVX2 build's time (docs/perf-log.md, 2026-11-29). [`super::lanes::avx512_lanes`]
 /// chooses it.
 ///
 /// # Safety

@@ -5,7 +5,7 @@
 //! a square-tiled floor) on top of the rest, turned by about 180° about the object's axis. Every
 //! image then fits its own points well, and nothing in the reconstruction's errors shows it, but
 //! views placed side by side see opposite sides of the room, and no static model fits both: on
-//! beer_colmap this cost 3.5 dB (`docs/quality.md`, "beer_colmap: the registration is folded").
+//! beer_colmap this cost 3.5 dB (`docs/quality-log.md`, "beer_colmap: the registration is folded").
 //! Where such a registration meets the rest, two frames taken a moment apart are registered facing
 //! nearly opposite ways, which [`sharp_turns`] finds in the frames' order. The COLMAP loader then
 //! tries to turn the folded passes back ([`super::unfold`]) and warns with these words when it

@@ -812,7 +812,7 @@ impl SupportQuad {
             // (seen in the compiled `fill_rows_avx2`). Written with a branch on the edge and the
             // lanes updated in place, the compiler kept them on the stack and updated them with
             // a masked store, which the next edge reloaded at once: on AMD Zen such a reload
-            // waits for the store (docs/perf.md, 2026-11-29).
+            // waits for the store (docs/perf-log.md, 2026-11-29).
             let flat = dy == 0.0;
             let mut next_lo = [0.0f32; ROW_LANES];
             let mut next_hi = [0.0f32; ROW_LANES];

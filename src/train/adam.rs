@@ -84,7 +84,7 @@ impl AdamGroup {
     /// the number of updates this row has received. Dense PyTorch Adam would also decay the
     /// moments of rows with zero gradient and keep moving them; here a billboard that is not
     /// seen in a view is left exactly as it is. This saves the work on unseen rows; what it saves
-    /// and costs in quality against dense Adam is measured in `docs/quality.md` ("Dense against
+    /// and costs in quality against dense Adam is measured in `docs/quality-log.md` ("Dense against
     /// row-sparse Adam").
     pub fn step_row(&mut self, row: usize, params: &mut [f32], grads: &[f32], lr: f32, hp: &AdamParams) {
         // The count this update brings the row to (`step_row_with` stores it).
