@@ -145,6 +145,11 @@ pub mod sweep;
 pub mod testing_internals;
 pub mod train;
 
+/// The README's Rust examples, compiled by `cargo test` (a doctest each).
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;
+
 pub use billboards::ActivatedBillboards;
 pub use camera::Camera;
 pub use init::scene_init::{InitError, init_model};
