@@ -3,14 +3,15 @@
 
 use super::common::SceneArgs;
 use super::common::read_model;
+use super::http;
 use anyhow::{Context, Result};
 use bbsplat::camera::Camera;
 use bbsplat::export::viewer::{ViewerCamera, write_viewer};
 use clap::Args;
 use glam::Vec3;
-use std::io::{BufRead, BufReader, Write};
-use std::net::TcpListener;
+use std::io::Write;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 /// Flags of `bbsplat view`.
 #[derive(Args, Clone, Debug)]
@@ -25,7 +26,8 @@ pub struct ViewArgs {
     /// The page to write.
     #[arg(short, long, default_value = "bbsplat_view.html")]
     pub output: PathBuf,
-    /// Also serve the page on http://127.0.0.1:<port>/ until interrupted.
+    /// Also serve the page on http://127.0.0.1:<port>/ until interrupted (to this machine only:
+    /// the `Host` must be localhost or 127.0.0.1; docs/export.md).
     #[arg(long)]
     pub serve: bool,
     /// Port for --serve (0: any free port, printed).
@@ -81,37 +83,21 @@ pub fn run(args: ViewArgs) -> Result<()> {
     Ok(())
 }
 
-/// Serves the file at `path` to every GET request on 127.0.0.1:`port`, one request at a time.
+/// Serves the file at `path` as `/` (and `/index.html`) on 127.0.0.1:`port` ([`super::http`]:
+/// clients served side by side, bounded and timed requests, loopback `Host` only).
 fn serve(path: &std::path::Path, port: u16) -> Result<()> {
-    let page = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    let listener = TcpListener::bind(("127.0.0.1", port)).with_context(|| format!("binding 127.0.0.1:{port}"))?;
+    let page = Arc::new(std::fs::read(path).with_context(|| format!("reading {}", path.display()))?);
+    let listener = http::bind(port)?;
     let address = listener.local_addr()?;
     println!("serving on http://{address}/ (Ctrl-C to stop)");
     std::io::stdout().flush()?;
-    for stream in listener.incoming() {
-        let Ok(mut stream) = stream else { continue };
-        let mut request_line = String::new();
-        let mut reader = BufReader::new(&stream);
-        if reader.read_line(&mut request_line).is_err() {
-            continue;
-        }
-        // Skip the headers.
-        let mut line = String::new();
-        while reader.read_line(&mut line).map(|n| n > 0).unwrap_or(false) && line != "\r\n" {
-            line.clear();
-        }
-        let response = if request_line.starts_with("GET ") {
-            let mut r = format!(
-                "HTTP/1.1 200 OK\r\nContent-Type: text/html; charset=utf-8\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
-                page.len()
-            )
-            .into_bytes();
-            r.extend_from_slice(&page);
-            r
-        } else {
-            b"HTTP/1.1 405 Method Not Allowed\r\nContent-Length: 0\r\nConnection: close\r\n\r\n".to_vec()
-        };
-        let _ = stream.write_all(&response);
-    }
-    Ok(())
+    let handler = move |target: &str| {
+        let path = target.split(['?', '#']).next().unwrap_or_default();
+        matches!(path, "/" | "/index.html").then(|| http::Response {
+            status: "200 OK",
+            content_type: "text/html; charset=utf-8",
+            body: Arc::clone(&page),
+        })
+    };
+    http::serve(listener, Arc::new(handler))
 }

@@ -109,7 +109,7 @@ fn export_view_and_orbit_write_their_files() {
         })
         .expect("the server prints its address");
     let mut stream = std::net::TcpStream::connect(&address).unwrap();
-    std::io::Write::write_all(&mut stream, b"GET / HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+    std::io::Write::write_all(&mut stream, b"GET / HTTP/1.1\r\nHost: localhost\r\n\r\n").unwrap();
     let mut response = Vec::new();
     std::io::Read::read_to_end(&mut stream, &mut response).unwrap();
     child.kill().unwrap();

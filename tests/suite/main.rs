@@ -11,6 +11,7 @@ mod cli;
 mod cli_export;
 #[cfg(feature = "cli")]
 mod cli_reliability;
+mod cli_serve;
 mod demo;
 mod eval;
 mod exp_f32;
