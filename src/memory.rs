@@ -109,12 +109,18 @@ pub fn available_bytes() -> Option<u64> {
     Some(available)
 }
 
-/// A byte count for messages: `"41.0 GB"`, `"512 MB"` (decimal units).
+/// A byte count for messages, in decimal units rounded to the nearest tenth, never up to the
+/// next whole unit (a free-space figure must not look larger than it is): `"41.0 GB"`,
+/// `"511.2 MB"`, `"8.2 kB"`, `"512 bytes"`.
 pub fn human_bytes(bytes: u64) -> String {
     let b = bytes as f64;
     if b >= 1e9 {
         format!("{:.1} GB", b / 1e9)
+    } else if b >= 1e6 {
+        format!("{:.1} MB", b / 1e6)
+    } else if b >= 1e3 {
+        format!("{:.1} kB", b / 1e3)
     } else {
-        format!("{:.0} MB", (b / 1e6).ceil())
+        format!("{bytes} bytes")
     }
 }

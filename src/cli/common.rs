@@ -152,21 +152,56 @@ pub fn start_threads(threads: Option<usize>) -> Result<usize> {
     Ok(rayon::current_num_threads())
 }
 
-/// Writes an interleaved RGB float image as an 8-bit PNG, through a temporary name.
+/// Writes an interleaved RGB float image as an 8-bit PNG, atomically
+/// ([`bbsplat::train::checkpoint::write_atomic`]: encoded in memory, written to a temporary file
+/// beside `path`, flushed to disk and renamed, so that a full disk fails the write instead of
+/// leaving an empty or cut PNG).
 pub fn write_png_atomic(path: &Path, rgb: &[f32], width: u32, height: u32) -> Result<()> {
     let bytes: Vec<u8> = rgb.iter().map(|&c| bbsplat::loss::psnr::quantize_u8(c)).collect();
-    let tmp = path.with_extension("png.tmp");
-    image::save_buffer_with_format(
-        &tmp,
+    let mut png = Vec::new();
+    image::ImageEncoder::write_image(
+        image::codecs::png::PngEncoder::new(&mut png),
         &bytes,
         width,
         height,
         image::ExtendedColorType::Rgb8,
-        image::ImageFormat::Png,
     )
-    .with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))?;
+    .with_context(|| format!("encoding {}", path.display()))?;
+    bbsplat::train::checkpoint::write_atomic(path, &png)?;
     Ok(())
+}
+
+/// An output folder a command creates: removed, with what the command wrote into it, unless
+/// [`OutputDir::keep`] is called, so that a command that fails leaves no empty or half-filled
+/// folder behind. A folder that already existed is left alone.
+pub struct OutputDir {
+    path: std::path::PathBuf,
+    created: bool,
+}
+
+impl OutputDir {
+    /// Creates `path` (and missing parents) if it does not exist.
+    pub fn create(path: &Path) -> Result<Self> {
+        let created = !path.exists();
+        std::fs::create_dir_all(path).with_context(|| format!("creating {}", path.display()))?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            created,
+        })
+    }
+
+    /// The command succeeded: the folder stays.
+    pub fn keep(mut self) {
+        self.created = false;
+    }
+}
+
+impl Drop for OutputDir {
+    fn drop(&mut self) {
+        if self.created {
+            let _ = std::fs::remove_dir_all(&self.path);
+        }
+    }
 }
 
 /// Writes `text` to `path` atomically ([`bbsplat::train::checkpoint::write_atomic`]: a temporary

@@ -1,7 +1,7 @@
 //! `bbsplat render <model> <scene> -o <dir>` and `bbsplat eval <model> <scene>`.
 
 use super::common::{
-    SceneArgs, Split, render_file_name, split_views, start_threads, write_png_atomic, write_text_atomic,
+    OutputDir, SceneArgs, Split, render_file_name, split_views, start_threads, write_png_atomic, write_text_atomic,
 };
 use anyhow::{Context, Result};
 use bbsplat::eval::{EvalReport, EvalView, evaluate_views};
@@ -41,10 +41,12 @@ pub struct RenderArgs {
     /// Instead of the dataset's views, render N frames on a circle around the scene
     /// (`bbsplat::export::orbit`: placed from the training cameras) to `orbit_NNNN.png` and an
     /// animated `orbit.gif` (looping, --frame-ms per frame).
-    #[arg(long, value_name = "N")]
+    /// At most 100 000 frames.
+    #[arg(long, value_name = "N", value_parser = super::validate::count_between::<1, { super::validate::MAX_ORBIT_FRAMES }>)]
     pub orbit: Option<usize>,
-    /// Milliseconds per frame of `orbit.gif`.
-    #[arg(long, default_value_t = 80)]
+    /// Milliseconds per frame of `orbit.gif`: 10 to 655 350, a multiple of 10 (a GIF stores
+    /// hundredths of a second).
+    #[arg(long, default_value_t = 80, value_parser = super::validate::frame_ms)]
     pub frame_ms: u32,
 }
 
@@ -115,11 +117,16 @@ fn run_views(
 
 /// Runs `bbsplat render`.
 pub fn render(args: RenderArgs) -> Result<()> {
-    std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
     if let Some(frames) = args.orbit {
         return render_orbit(&args, frames);
     }
+    // Created as the first render is written (after the model and scene loaded), removed again
+    // if the command fails.
+    let mut output: Option<OutputDir> = None;
     let report = run_views(&args.common, |i, name, rendered, truth, w, h| {
+        if output.is_none() {
+            output = Some(OutputDir::create(&args.output)?);
+        }
         let file = render_file_name(i, name);
         write_png_atomic(&args.output.join(&file), rendered, w, h)?;
         if args.with_truth {
@@ -135,6 +142,7 @@ pub fn render(args: RenderArgs) -> Result<()> {
         report.mean_ssim,
         report.mean_render_ms
     );
+    output.map(OutputDir::keep);
     Ok(())
 }
 
@@ -160,6 +168,14 @@ fn render_orbit(args: &RenderArgs, frames: usize) -> Result<()> {
     start_threads(common.threads)?;
     let (model, meta, scene) = common.scene_args.load_model_and_scene(&common.model, &common.scene)?;
     let cameras: Vec<_> = scene.train.iter().map(|v| v.camera).collect();
+    let output = OutputDir::create(&args.output)?;
+    if let Some(first) = cameras.first() {
+        // Each frame: a PNG of at most 3 bytes a pixel plus its share of the GIF (1 byte a pixel).
+        let bytes = (frames as u64)
+            .saturating_mul(first.pixel_count() as u64)
+            .saturating_mul(4);
+        super::preflight::free_space(&args.output, bytes)?;
+    }
     let path = bbsplat::export::orbit::orbit_cameras(&cameras, frames)
         .with_context(|| format!("{}: placing the orbit", common.scene.display()))?;
     let activated = model.activate();
@@ -170,39 +186,62 @@ fn render_orbit(args: &RenderArgs, frames: usize) -> Result<()> {
     };
     let gif_path = args.output.join("orbit.gif");
     let gif_tmp = args.output.join("orbit.gif.tmp");
-    let file = std::fs::File::create(&gif_tmp).with_context(|| format!("creating {}", gif_tmp.display()))?;
-    let mut gif = GifEncoder::new_with_speed(std::io::BufWriter::new(file), 10);
-    gif.set_repeat(Repeat::Infinite)
-        .with_context(|| format!("writing {}", gif_tmp.display()))?;
-    let delay = image::Delay::from_numer_denom_ms(args.frame_ms, 1);
-    // The render's storage recycled from frame to frame (the same images, fewer fresh pages).
-    let mut buffers = bbsplat::raster::RenderBuffers::default();
-    for (k, camera) in path.iter().enumerate() {
-        let out = bbsplat::raster::render_with(&activated.borrowed(), camera, &settings, std::mem::take(&mut buffers));
-        write_png_atomic(
-            &args.output.join(format!("orbit_{k:04}.png")),
-            &out.rgb,
-            out.width,
-            out.height,
-        )?;
-        let rgba: Vec<u8> = out
-            .rgb
-            .chunks_exact(3)
-            .flat_map(|c| {
-                [c[0], c[1], c[2]]
-                    .map(bbsplat::loss::psnr::quantize_u8)
-                    .into_iter()
-                    .chain([255])
-            })
-            .collect();
-        let frame = image::RgbaImage::from_raw(out.width, out.height, rgba).context("frame size")?;
-        gif.encode_frame(image::Frame::from_parts(frame, 0, 0, delay))
+    let write_frames = || -> Result<()> {
+        let file = std::fs::File::create(&gif_tmp).with_context(|| format!("creating {}", gif_tmp.display()))?;
+        let mut writer = std::io::BufWriter::new(file);
+        {
+            let mut gif = GifEncoder::new_with_speed(&mut writer, 10);
+            gif.set_repeat(Repeat::Infinite)
+                .with_context(|| format!("writing {}", gif_tmp.display()))?;
+            let delay = image::Delay::from_numer_denom_ms(args.frame_ms, 1);
+            // The render's storage recycled from frame to frame (the same images, fewer fresh pages).
+            let mut buffers = bbsplat::raster::RenderBuffers::default();
+            for (k, camera) in path.iter().enumerate() {
+                let out = bbsplat::raster::render_with(
+                    &activated.borrowed(),
+                    camera,
+                    &settings,
+                    std::mem::take(&mut buffers),
+                );
+                write_png_atomic(
+                    &args.output.join(format!("orbit_{k:04}.png")),
+                    &out.rgb,
+                    out.width,
+                    out.height,
+                )?;
+                let rgba: Vec<u8> = out
+                    .rgb
+                    .chunks_exact(3)
+                    .flat_map(|c| {
+                        [c[0], c[1], c[2]]
+                            .map(bbsplat::loss::psnr::quantize_u8)
+                            .into_iter()
+                            .chain([255])
+                    })
+                    .collect();
+                let frame = image::RgbaImage::from_raw(out.width, out.height, rgba).context("frame size")?;
+                gif.encode_frame(image::Frame::from_parts(frame, 0, 0, delay))
+                    .with_context(|| format!("writing {}", gif_tmp.display()))?;
+                buffers = out.into_buffers();
+            }
+            // Dropping the encoder writes the GIF's trailer into `writer`.
+        }
+        // Errors the buffer held back (a full disk) surface here, not in a silent drop.
+        let file = writer
+            .into_inner()
+            .map_err(|e| e.into_error())
             .with_context(|| format!("writing {}", gif_tmp.display()))?;
-        buffers = out.into_buffers();
+        file.sync_all()
+            .with_context(|| format!("flushing {} to disk", gif_tmp.display()))?;
+        std::fs::rename(&gif_tmp, &gif_path)
+            .with_context(|| format!("renaming {} to {}", gif_tmp.display(), gif_path.display()))?;
+        Ok(())
+    };
+    if let Err(e) = write_frames() {
+        let _ = std::fs::remove_file(&gif_tmp);
+        return Err(e);
     }
-    drop(gif);
-    std::fs::rename(&gif_tmp, &gif_path)
-        .with_context(|| format!("renaming {} to {}", gif_tmp.display(), gif_path.display()))?;
+    output.keep();
     println!(
         "wrote {frames} orbit frames and {} ({} bytes) to {}",
         gif_path.display(),

@@ -7,8 +7,10 @@ mod bench_scene;
 mod camera;
 #[cfg(feature = "cli")]
 mod cli;
+mod cli_bounds;
 #[cfg(feature = "cli")]
 mod cli_export;
+mod cli_full_disk;
 #[cfg(feature = "cli")]
 mod cli_reliability;
 mod cli_serve;

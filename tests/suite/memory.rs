@@ -21,5 +21,9 @@ fn available_memory_is_positive_where_known_and_bytes_print_in_units() {
         assert!(b > 0);
     }
     assert_eq!(human_bytes(41_000_000_000), "41.0 GB");
-    assert_eq!(human_bytes(511_200_000), "512 MB");
+    assert_eq!(human_bytes(511_200_000), "511.2 MB");
+    // A 2 MiB file system is 2.1 MB, not the 3 MB that rounding up made of it.
+    assert_eq!(human_bytes(2 << 20), "2.1 MB");
+    assert_eq!(human_bytes(8192), "8.2 kB");
+    assert_eq!(human_bytes(512), "512 bytes");
 }
