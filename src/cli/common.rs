@@ -59,13 +59,16 @@ pub struct SceneArgs {
 }
 
 impl SceneArgs {
-    fn options(&self, background: Background, quiet: bool) -> LoadOptions {
+    /// The load options of these flags. Warnings (a folded registration turned back, damaged
+    /// images, ...) are always printed to stderr, `--quiet` or not, and recorded in the run's
+    /// summary.
+    fn options(&self, background: Background) -> LoadOptions {
         LoadOptions {
             background,
             downscale: self.downscale,
             max_width: self.max_width,
             test_every: self.test_every,
-            print_warnings: !quiet,
+            print_warnings: true,
             allow_damaged_images: self.allow_damaged_images,
             unfold: !self.keep_folded,
             ..LoadOptions::default()
@@ -73,10 +76,10 @@ impl SceneArgs {
     }
 
     /// Loads `path` with these options and `--background` if given, else `default`; warnings go
-    /// to stderr unless `quiet`.
-    pub fn load(&self, path: &Path, quiet: bool, default: Background) -> Result<Scene> {
+    /// to stderr.
+    pub fn load(&self, path: &Path, default: Background) -> Result<Scene> {
         let background = self.background.map_or(default, Background::from);
-        bbsplat::scene::load(path, &self.options(background, quiet))
+        bbsplat::scene::load(path, &self.options(background))
             .with_context(|| format!("loading the scene {}", path.display()))
     }
 
@@ -93,7 +96,7 @@ impl SceneArgs {
                 )
             })?,
         };
-        self.load(path, true, background)
+        self.load(path, background)
     }
 
     /// Reads the model folder `model` and loads the scene `scene` for it
@@ -106,18 +109,18 @@ impl SceneArgs {
 
     /// Loads `path` for training: with `--background` if given, else with the background of
     /// the data ([`load_with_data_background`]); returns the choice and why.
-    pub fn load_for_training(&self, path: &Path, quiet: bool) -> Result<(Scene, BackgroundChoice)> {
+    pub fn load_for_training(&self, path: &Path) -> Result<(Scene, BackgroundChoice)> {
         let context = || format!("loading the scene {}", path.display());
         match self.background {
             Some(arg) => {
-                let scene = self.load(path, quiet, arg.into())?;
+                let scene = self.load(path, arg.into())?;
                 let choice = BackgroundChoice {
                     background: arg.into(),
                     reason: format!("{}: given by --background", format!("{arg:?}").to_lowercase()),
                 };
                 Ok((scene, choice))
             }
-            None => load_with_data_background(path, &self.options(Background::Black, quiet)).with_context(context),
+            None => load_with_data_background(path, &self.options(Background::Black)).with_context(context),
         }
     }
 }

@@ -71,7 +71,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
     }
     preflight::output_folder(&args.output, args.resume.as_deref(), args.overwrite)?;
     let threads = start_threads(args.threads)?;
-    let (scene, background) = args.scene_args.load_for_training(&args.scene, args.quiet)?;
+    let (scene, background) = args.scene_args.load_for_training(&args.scene)?;
     anyhow::ensure!(
         !scene.train.is_empty(),
         "{}: the scene has no training view",

@@ -26,6 +26,14 @@
 //! collection in no order fails these, and the poses are then left alone (the warning of
 //! [`super::registration`] remains).
 //!
+//! The folds are looked for only where the frames show that they are an ordered video: within
+//! each pass, consecutive frames turn by at most [`MAX_VIDEO_TURN_DEG`] and no step is longer
+//! than [`MAX_VIDEO_STEP_RATIO`] times the pass's median step ([`video_evidence`]; beer_colmap's
+//! passes turn by at most 13.8° a frame and step at most 1.88 times their median,
+//! `tests/suite/scene_real_data.rs`). A collection of
+//! photographs, even one whose sharp turns happen to sit where folds would, moves unevenly
+//! between its neighbours and is left as registered (with the warning).
+//!
 //! All arithmetic in f64.
 
 use glam::{DMat3, DVec3};
@@ -39,6 +47,12 @@ pub const MAX_AXIS_SPREAD_DEG: f64 = 15.0;
 pub const MAX_RESIDUAL_TURN_DEG: f64 = 10.0;
 /// ... and its centre lie within this many of the previous pass's last steps of the predicted one.
 pub const MAX_RESIDUAL_STEPS: f64 = 3.0;
+
+/// Consecutive frames of one pass of a video turn by at most this much (degrees).
+pub const MAX_VIDEO_TURN_DEG: f64 = 30.0;
+/// ... and no step of a pass (its centre's move between consecutive frames) is longer than this
+/// many times the pass's median step.
+pub const MAX_VIDEO_STEP_RATIO: f64 = 5.0;
 
 /// A frame's registered pose: world-to-camera rotation and camera centre.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -143,6 +157,47 @@ fn best_turn(axis: DVec3, m: DMat3) -> f64 {
     cross.atan2(trace - aa).rem_euclid(std::f64::consts::TAU)
 }
 
+/// `Ok` when every pass of `poses` moves as frames of a video do (module documentation), else
+/// the first pass and step that does not.
+///
+/// # Errors
+/// The reason, naming the frames.
+pub fn video_evidence(poses: &[Pose], passes: &[Range<usize>]) -> Result<(), String> {
+    for pass in passes {
+        let frames = &poses[pass.clone()];
+        let mut steps: Vec<f64> = frames
+            .windows(2)
+            .map(|w| (w[1].centre - w[0].centre).length())
+            .collect();
+        for (k, w) in frames.windows(2).enumerate() {
+            let turn = angle_of(w[0].rotation * w[1].rotation.transpose()).to_degrees();
+            if turn > MAX_VIDEO_TURN_DEG {
+                return Err(format!(
+                    "frames {} and {} turn by {turn:.0} deg: not neighbours in a video",
+                    pass.start + k,
+                    pass.start + k + 1
+                ));
+            }
+        }
+        if steps.len() < 2 {
+            continue;
+        }
+        let longest = steps.iter().copied().fold(0.0, f64::max);
+        let at = steps.iter().position(|&s| s == longest).unwrap_or(0);
+        steps.sort_by(f64::total_cmp);
+        let median = steps[steps.len() / 2];
+        if longest > MAX_VIDEO_STEP_RATIO * median {
+            return Err(format!(
+                "frames {} and {} are {:.1} median steps apart: the images are not frames of a video in capture order",
+                pass.start + at,
+                pass.start + at + 1,
+                longest / median.max(f64::MIN_POSITIVE)
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Explains the sharp turns between consecutive `poses` (capture order) as folds of one orbit,
 /// or says why not. See the module documentation.
 pub fn plan(poses: &[Pose]) -> Plan {
@@ -160,6 +215,9 @@ pub fn plan(poses: &[Pose]) -> Plan {
             "the pass of frames {}..{} is too short to predict the next one from",
             short.start, short.end
         ));
+    }
+    if let Err(reason) = video_evidence(poses, &passes) {
+        return Plan::NotFolds(reason);
     }
     let Some(pivot) = pivot(poses) else {
         return Plan::NotFolds("the cameras' optical axes are parallel: no object they circle".into());
