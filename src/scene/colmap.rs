@@ -139,6 +139,38 @@ pub struct Intrinsics {
     pub distortion: Distortion,
 }
 
+/// Narrowest field of view a camera may have, degrees (a telephoto lens of 1° has a focal
+/// length of 57 image widths).
+pub const MIN_FOV_DEG: f64 = 1.0;
+/// Widest field of view a pinhole camera may have, degrees (180° is a focal length of 0).
+pub const MAX_FOV_DEG: f64 = 179.0;
+
+impl Intrinsics {
+    /// What makes these intrinsics implausible for an image of `width × height`, or `None`: a
+    /// field of view (`2·atan(size / 2f)`) along either axis outside [`MIN_FOV_DEG`] to
+    /// [`MAX_FOV_DEG`], or a principal point outside the image. Such values come from a unit
+    /// mix-up or a broken export, and training on them would silently give garbage.
+    pub fn implausibility(&self, width: u32, height: u32) -> Option<String> {
+        let fov = |size: u32, f: f64| 2.0 * (0.5 * size as f64 / f).atan().to_degrees();
+        for (axis, name, size, f) in [("x", "fx", width, self.fx), ("y", "fy", height, self.fy)] {
+            let deg = fov(size, f);
+            if !(MIN_FOV_DEG..=MAX_FOV_DEG).contains(&deg) {
+                return Some(format!(
+                    "the field of view along {axis} is {deg:.3} deg ({name} = {f} px for {size} px),                      outside {MIN_FOV_DEG}-{MAX_FOV_DEG} deg: the focal length is implausible (a unit mix-up?)"
+                ));
+            }
+        }
+        let inside = |c: f64, size: u32| (0.0..=size as f64).contains(&c);
+        if !inside(self.cx, width) || !inside(self.cy, height) {
+            return Some(format!(
+                "the principal point ({}, {}) lies outside the {width}x{height} image",
+                self.cx, self.cy
+            ));
+        }
+        None
+    }
+}
+
 impl ColmapCamera {
     /// The camera's intrinsics, with every distortion model mapped to OpenCV's
     /// `k1 k2 p1 p2` (missing terms zero).

@@ -92,6 +92,19 @@ pub(crate) fn load(model_dir: &Path, options: &LoadOptions, warnings: &mut Vec<S
         Some(d) => d.clone(),
         None => find_images_dir(model_dir)?,
     };
+    // Implausible intrinsics are refused here, before the lens distortion is inverted (which
+    // would otherwise blame them on the distortion). The parsers accept them: they read files.
+    let cameras_file = model_dir.join(if binary { "cameras.bin" } else { "cameras.txt" });
+    for (i, cam) in model.cameras.iter().enumerate() {
+        let (w, h) = (
+            cam.width.min(u32::MAX as u64) as u32,
+            cam.height.min(u32::MAX as u64) as u32,
+        );
+        if let Some(problem) = cam.intrinsics().implausibility(w, h) {
+            let location = Location::Record(format!("camera {i} (camera_id {})", cam.id));
+            return Err(SceneError::parse(&cameras_file, location, problem));
+        }
+    }
     let cameras: HashMap<u32, (usize, &colmap::ColmapCamera)> =
         model.cameras.iter().enumerate().map(|(i, c)| (c.id, (i, c))).collect();
     let mut seen_names: HashMap<&str, usize> = HashMap::new();

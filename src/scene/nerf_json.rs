@@ -143,6 +143,9 @@ impl IntrinsicFields {
                 p2: get(self.p2, scene.p2),
             },
         };
+        if let Some(problem) = k.implausibility(w, h) {
+            return Err(problem);
+        }
         Ok((k, w, h))
     }
 }

@@ -258,6 +258,73 @@ fn non_finite_poses_and_intrinsics_are_refused() {
     );
 }
 
+/// Cameras no lens has: a field of view outside 1-179 deg or a principal point outside the
+/// image are refused by name before anything is trained (they used to train silently, or be
+/// blamed on the lens distortion's fold-over).
+#[test]
+fn implausible_cameras_are_refused_naming_the_camera() {
+    let cases = [
+        (
+            "7 PINHOLE 32 24 1e30 1e30 16 12\n",
+            "field of view along x is 0.000 deg",
+        ),
+        ("7 PINHOLE 32 24 0.01 0.01 16 12\n", "field of view along x is 179."),
+        ("7 PINHOLE 32 24 30 1e9 16 12\n", "field of view along y"),
+        (
+            "7 PINHOLE 32 24 30 31 500 12\n",
+            "principal point (500, 12) lies outside the 32x24 image",
+        ),
+        // With distortion: the principal point is named, not the distortion's fold-over.
+        ("7 OPENCV 32 24 30 31 5000 12 0.1 0 0 0\n", "principal point (5000, 12)"),
+        (
+            "7 OPENCV 32 24 1e30 1e30 16 12 0.1 0 0 0\n",
+            "focal length is implausible",
+        ),
+    ];
+    for (k, (text, says)) in cases.into_iter().enumerate() {
+        let d = temp_dir(&format!("implausible_colmap_{k}"));
+        colmap_dataset(&d, 3, false);
+        let cameras = d.join("sparse/0/cameras.txt");
+        std::fs::write(&cameras, format!("{text}9 PINHOLE 32 24 30 31 16 12\n")).unwrap();
+        let msg = expect(load_err(&d), &["sparse/0/cameras.txt: camera 0 (camera_id 7): ", says]);
+        assert!(!msg.contains("fold"), "{msg}");
+        // The parser itself reads the values (a file format round-trips whatever it holds).
+        assert!(txt::parse_cameras(text, Path::new("cameras.txt")).is_ok());
+    }
+    // Near the limits of the range: accepted (1 deg and 179 deg across 32 px).
+    for f in [
+        16.0 / (0.5f64).to_radians().tan() * 0.999,
+        16.0 / (89.5f64).to_radians().tan() * 1.001,
+    ] {
+        let k = bbsplat::scene::colmap::Intrinsics {
+            fx: f,
+            fy: 30.0,
+            cx: 16.0,
+            cy: 12.0,
+            distortion: Default::default(),
+        };
+        assert_eq!(k.implausibility(32, 24), None, "{f}");
+    }
+    // NeRF-synthetic: camera_angle_x of pi (a focal of 0) and of 1e-30, named with the frame.
+    for angle in ["3.14159265", "1e-30"] {
+        let d = temp_dir(&format!("implausible_{angle}"));
+        write_png(&d.join("train/r_0.png"), 32, 24);
+        let json = format!(
+            r#"{{"camera_angle_x": {angle}, "frames": [{}]}}"#,
+            frame("./train/r_0", 4.0)
+        );
+        std::fs::write(d.join("transforms_train.json"), json).unwrap();
+        expect(
+            load_err(&d),
+            &[
+                "transforms_train.json: frames[0] (\"./train/r_0\")",
+                "field of view along x",
+                "implausible",
+            ],
+        );
+    }
+}
+
 #[test]
 fn zero_and_negative_sizes_are_refused() {
     let m = model(1);
