@@ -56,7 +56,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             ..RenderSettings::default()
         },
     );
-    let rgb: Vec<u8> = render(&trainer.activated.borrowed(), cam, &settings)
+    let rgb: Vec<u8> = render(&trainer.activated().borrowed(), cam, &settings)
         .rgb
         .iter()
         .map(|&c| bbsplat::loss::psnr::quantize_u8(c))

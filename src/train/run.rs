@@ -431,7 +431,7 @@ pub fn run(
     }
     let tc = *trainer.config();
     let run_start = Instant::now();
-    let initial_billboards = trainer.model.len();
+    let initial_billboards = trainer.model().len();
     // A time budget plans the run's length from the step times measured so far.
     let replan = |trainer: &mut Trainer| {
         let step = trainer.step_index();
@@ -459,8 +459,8 @@ pub fn run(
         test_views: test.len(),
         width: first.camera.width,
         height: first.camera.height,
-        billboards: trainer.model.len(),
-        texture_size: trainer.model.texture_size,
+        billboards: trainer.model().len(),
+        texture_size: trainer.model().texture_size,
     });
     let mut warnings = config.warnings.clone();
     if test.is_empty() {
@@ -582,7 +582,7 @@ pub fn run(
             && step < iterations
             && !eval_subset.is_empty()
         {
-            let Some((psnr, ssim, _)) = evaluate(&trainer.activated.borrowed(), &eval_subset, &eval_settings, stop)?
+            let Some((psnr, ssim, _)) = evaluate(&trainer.activated().borrowed(), &eval_subset, &eval_settings, stop)?
             else {
                 // Interrupted: the stop request is handled at the top of the loop.
                 continue;
@@ -611,7 +611,7 @@ pub fn run(
         Some(dir) => {
             let written = save(trainer, &mut on_event)?;
             let model_dir = dir.join(MODEL_DIR);
-            let meta = ModelMeta::for_model(&trainer.model, tc.sh_degree, tc.background.to_array());
+            let meta = ModelMeta::for_model(trainer.model(), tc.sh_degree, tc.background.to_array());
             model_bytes = match save_model(&model_dir, &trainer.export_model(), &meta) {
                 Ok(bytes) => bytes,
                 Err(source) => {
@@ -653,7 +653,7 @@ pub fn run(
     } else {
         let set = match &saved {
             Some(b) => b.borrowed(),
-            None => trainer.activated.borrowed(),
+            None => trainer.activated().borrowed(),
         };
         match evaluate(&set, &all_test, &eval_settings, stop)? {
             Some(result) => result,
@@ -675,9 +675,9 @@ pub fn run(
         version: SUMMARY_VERSION,
         scene: config.scene.clone(),
         iterations,
-        billboards: trainer.model.len(),
+        billboards: trainer.model().len(),
         alive: trainer.alive_count(),
-        texture_size: trainer.model.texture_size,
+        texture_size: trainer.model().texture_size,
         sh_degree: tc.sh_degree,
         resolution: [first.camera.width, first.camera.height],
         train_seconds,
@@ -704,7 +704,7 @@ pub fn run(
         }),
         growth: Some(GrowthRecord {
             initial: initial_billboards,
-            final_count: trainer.model.len(),
+            final_count: trainer.model().len(),
             alive: summary.alive,
             cap: trainer.config().growth_cap,
         }),
