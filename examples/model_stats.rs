@@ -36,7 +36,7 @@ fn load_any(path: &Path) -> Result<(RawBillboards, u32, [f32; 3]), Box<dyn std::
         let trainer = Trainer::load_checkpoint(path)?;
         let settings = trainer.settings();
         Ok((
-            trainer.model.clone(),
+            trainer.model().clone(),
             settings.sh_degree,
             settings.background.to_array(),
         ))

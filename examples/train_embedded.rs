@@ -60,7 +60,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         background: plan.config.background,
         ..RenderSettings::default()
     };
-    let rgb: Vec<u8> = render(&trainer.activated.borrowed(), camera, &render_settings)
+    let rgb: Vec<u8> = render(&trainer.activated().borrowed(), camera, &render_settings)
         .rgb
         .iter()
         .map(|&c| bbsplat::loss::psnr::quantize_u8(c))

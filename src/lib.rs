@@ -122,7 +122,10 @@ pub mod demo;
 pub mod eval;
 pub mod exp_f32;
 pub mod export;
+#[cfg(feature = "fault-injection")]
 pub mod fault;
+#[cfg(not(feature = "fault-injection"))]
+mod fault;
 #[cfg(feature = "testing")]
 pub mod gradcheck;
 pub mod init;

@@ -8,6 +8,7 @@
 //! through an explicit mask shared by every billboard, instead of infinite logits.
 
 use crate::billboards::ActivatedBillboards;
+pub use crate::billboards::alive::{DEAD_ALPHA, is_alive, mean_alpha};
 use crate::init::knn::mean_sq_dist_3nn;
 use crate::raster::SH_FLOATS;
 use crate::rng::Rng;
@@ -85,30 +86,6 @@ pub fn initial_alpha(ts: usize) -> Vec<f32> {
 /// the mask are held at alpha 0 (spec §1.1: 15 of 256 texels at TS = 16).
 pub fn standard_alpha_mask(ts: usize) -> Vec<bool> {
     alpha_asset(ts).iter().map(|&g| g > 0.0).collect()
-}
-
-/// Billboards whose mean activated alpha is at most this are *dead* (spec §6, the reference's
-/// `dead_opacity`): relocation moves them, [`is_alive`] and the `alive_count` methods count the
-/// others.
-pub const DEAD_ALPHA: f32 = 0.005;
-
-/// The mean alpha of one billboard: its `texels` activated alpha values (`TS²`, masked texels
-/// included as 0) summed in f64 in texel order and divided by `texels` (an empty row gives 0).
-/// The one definition used by relocation, the alive counts and the Gaussian-mode opacity.
-///
-/// ```
-/// assert_eq!(bbsplat::model::mean_alpha([0.5, 0.0, 0.25, 0.25], 4), 0.25);
-/// ```
-pub fn mean_alpha(alphas: impl IntoIterator<Item = f32>, texels: usize) -> f32 {
-    let sum: f64 = alphas.into_iter().map(f64::from).sum();
-    (sum / texels.max(1) as f64) as f32
-}
-
-/// True when a billboard of mean alpha `mean_alpha` is alive: strictly above [`DEAD_ALPHA`]
-/// (NaN is dead).
-#[inline]
-pub fn is_alive(mean_alpha: f32) -> bool {
-    mean_alpha > DEAD_ALPHA
 }
 
 /// `ln(p / (1 − p))`.

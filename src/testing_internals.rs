@@ -397,6 +397,17 @@ pub mod raster {
 pub mod train {
     /// Elements per parallel task of the non-finite scans.
     pub const FINITE_SCAN_CHUNK: usize = crate::train::finite::CHUNK;
+
+    /// `edit` applied to the trainer's raw parameters **without** refreshing its activated copy
+    /// (what [`Trainer::edit_model`](crate::train::Trainer::edit_model) does): the next step
+    /// renders the previous values and its optimiser step carries the edited ones on. The tests
+    /// of the after-step parameter check use it to make a value turn non-finite inside a step.
+    pub fn edit_model_unsynced(
+        trainer: &mut crate::train::Trainer,
+        edit: impl FnOnce(&mut crate::model::RawBillboards),
+    ) {
+        edit(trainer.model_unsynced_mut());
+    }
 }
 
 /// Sweep tool internals (`sweep`, feature `tools`).

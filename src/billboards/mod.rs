@@ -5,20 +5,19 @@
 //!
 //! | type | holds | made by |
 //! | --- | --- | --- |
-//! | [`RawBillboards`] | the optimised parameters: alpha and colour texture *logits* (planar, `[billboard][channel][texel]`), log half sides, raw quaternions, SH; what training updates and model files and checkpoints save | `RawBillboards::from_points`, `model_file::load_model`, `Trainer::export_model` |
-//! | [`ActivatedBillboards`] | the same billboards, owned and *activated*: textures `sigmoid(logit)` in `[0, 1]` as interleaved RGBA texels (masked alpha texels 0), geometry and SH copied | [`RawBillboards::activate`] (one row: [`RawBillboards::activate_row`]), [`random_scene`] |
+//! | [`RawBillboards`](crate::model::RawBillboards) | the optimised parameters: alpha and colour texture *logits* (planar, `[billboard][channel][texel]`), log half sides, raw quaternions, SH; what training updates and model files and checkpoints save | `RawBillboards::from_points`, `model_file::load_model`, `Trainer::export_model` |
+//! | [`ActivatedBillboards`] | the same billboards, owned and *activated*: textures `sigmoid(logit)` in `[0, 1]` as interleaved RGBA texels (masked alpha texels 0), geometry and SH copied | [`RawBillboards::activate`](crate::model::RawBillboards::activate) (one row: [`RawBillboards::activate_row`](crate::model::RawBillboards::activate_row)), [`random_scene`] |
 //! | [`ActivatedRef<'a>`](ActivatedRef) | the activated arrays, borrowed: what the rasterizer reads | [`ActivatedBillboards::borrowed`], or a struct literal over any slices in the layout |
 //!
 //! Raw → activated is one way (`activate`); where the raw form is needed back from activated
 //! values, the caller takes the `logit` (e.g. `Trainer::export_model` in Gaussian mode).
 
+pub mod alive;
 pub mod trained_like;
 
 pub use trained_like::{TrainedLikeConfig, trained_like_scene};
 
 use crate::camera::Camera;
-#[cfg(doc)]
-use crate::model::RawBillboards;
 use crate::raster::{ActivatedRef, SH_FLOATS};
 use crate::rng::Rng;
 use glam::{Vec2, Vec3};
@@ -67,23 +66,20 @@ impl ActivatedBillboards {
         self.positions.is_empty()
     }
 
-    /// The mean alpha of each billboard ([`crate::model::mean_alpha`] of its texels' alpha
+    /// The mean alpha of each billboard ([`alive::mean_alpha`] of its texels' alpha
     /// channel), in billboard order.
     pub fn mean_alphas(&self) -> Vec<f32> {
         let t = self.texture_size * self.texture_size;
         self.textures
             .chunks_exact(t.max(1))
-            .map(|row| crate::model::mean_alpha(row.iter().map(|x| x[3]), t))
+            .map(|row| alive::mean_alpha(row.iter().map(|x| x[3]), t))
             .collect()
     }
 
-    /// Billboards that are alive ([`crate::model::is_alive`]: mean alpha above
-    /// [`crate::model::DEAD_ALPHA`]).
+    /// Billboards that are alive ([`alive::is_alive`]: mean alpha above
+    /// [`alive::DEAD_ALPHA`]).
     pub fn alive_count(&self) -> usize {
-        self.mean_alphas()
-            .into_iter()
-            .filter(|&m| crate::model::is_alive(m))
-            .count()
+        self.mean_alphas().into_iter().filter(|&m| alive::is_alive(m)).count()
     }
 
     /// The borrowed form ([`ActivatedRef`]) the rasterizer reads.

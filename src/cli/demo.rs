@@ -122,7 +122,7 @@ pub fn run(
             ..Default::default()
         };
         for (i, v) in test.iter().enumerate() {
-            let out = render(&trainer.activated.borrowed(), &v.camera, &settings);
+            let out = render(&trainer.activated().borrowed(), &v.camera, &settings);
             write_png_atomic(
                 &dir.join(format!("test_{i:03}_render.png")),
                 &out.rgb,

@@ -111,7 +111,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
             if let Some(note) = resume::check(path, t.run_record(), &record)? {
                 eprintln!("{note}");
             }
-            preflight::free_space(&args.output, output_bytes(t.model.len(), t.model.texture_size))?;
+            preflight::free_space(&args.output, output_bytes(t.model().len(), t.model().texture_size))?;
             println!("resuming at step {} from {}", t.step_index(), path.display());
             t
         }

@@ -473,7 +473,64 @@ fn decode_growth_and_plan(r: &mut Reader<'_>) -> Result<(usize, bool, Option<Tim
     Ok((cap, by_length, Some(plan)))
 }
 
+/// Reads a checkpoint, section by section in the order of the format table (module docs).
 fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
+    let (version, body) = check_envelope(data, path)?;
+    let mut r = Reader {
+        data: body,
+        pos: 20,
+        path,
+    };
+    let mut config = decode_config(&mut r, version)?;
+    let step = r.u64("step")? as usize;
+    let rng = Rng::from_state([r.u64("RNG")?, r.u64("RNG")?, r.u64("RNG")?, r.u64("RNG")?]);
+    let k = r.count(8, "view-order length")?;
+    let order = (0..k)
+        .map(|_| r.u64("view order").map(|x| x as usize))
+        .collect::<Result<Vec<_>, _>>()?;
+    let model = decode_model(&mut r)?;
+    let n = model.len();
+    let t = model.texture_size * model.texture_size;
+    let opacity_logits = decode_opacity_logits(&mut r, config.texture_mode, n)?;
+    let adam = decode_adam(&mut r, n, t)?;
+    let (growth_cap, lr_by_run_length, time_plan) = if version >= 4 {
+        decode_growth_and_plan(&mut r)?
+    } else {
+        (0, false, None)
+    };
+    config.growth_cap = growth_cap;
+    config.lr_by_run_length = lr_by_run_length;
+    let record = decode_record(&mut r, version)?;
+    if r.pos != body.len() {
+        return Err(r.inconsistent(format!("{} unexpected bytes before the checksum", body.len() - r.pos)));
+    }
+    let mut trainer = Trainer::with_adam(
+        model,
+        TrainConfig {
+            texture_mode: TextureMode::Full,
+            ..config
+        },
+        adam,
+    );
+    trainer.config = config;
+    trainer.opacity_logits = opacity_logits;
+    if config.texture_mode == TextureMode::Gaussian {
+        for b in 0..n {
+            trainer.refresh_row(b);
+        }
+    }
+    trainer.order = order;
+    trainer.rng = rng;
+    trainer.step = step;
+    trainer.record = record;
+    trainer.time_plan = time_plan;
+    Ok(trainer)
+}
+
+/// The checks of the whole file before any field is read: magic, version, stated length
+/// against the file's, checksum. Returns the version and the body (the bytes before the
+/// checksum; the fields start at offset 20).
+fn check_envelope<'d>(data: &'d [u8], path: &Path) -> Result<(u32, &'d [u8]), CheckpointError> {
     let p = || path.to_path_buf();
     if data.len() < 8 || data[..8] != MAGIC {
         return Err(CheckpointError::BadMagic { path: p() });
@@ -520,11 +577,13 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
             computed,
         });
     }
-    let mut r = Reader {
-        data: body,
-        pos: 20,
-        path,
-    };
+    Ok((version, body))
+}
+
+/// The training settings, from `iterations` to the error-growth share (fields a `version`
+/// lacks read as what it trained with); the growth cap and the learning rate by run length,
+/// stored later, are left 0 and false.
+fn decode_config(r: &mut Reader<'_>, version: u32) -> Result<TrainConfig, CheckpointError> {
     let iterations = r.u64("iterations")? as usize;
     let sh_degree = r.u32("sh_degree")?;
     if sh_degree > 3 {
@@ -596,7 +655,7 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
     } else {
         0.0
     };
-    let mut config = TrainConfig {
+    Ok(TrainConfig {
         iterations,
         sh_degree,
         background,
@@ -615,13 +674,11 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
         lr_scales,
         clamp_gradient,
         geometry,
-    };
-    let step = r.u64("step")? as usize;
-    let rng = Rng::from_state([r.u64("RNG")?, r.u64("RNG")?, r.u64("RNG")?, r.u64("RNG")?]);
-    let k = r.count(8, "view-order length")?;
-    let order = (0..k)
-        .map(|_| r.u64("view order").map(|x| x as usize))
-        .collect::<Result<Vec<_>, _>>()?;
+    })
+}
+
+/// The raw parameters: count, texture size, alpha mask, then the arrays.
+fn decode_model(r: &mut Reader<'_>) -> Result<RawBillboards, CheckpointError> {
     let n = r.count(4 * SH_FLOATS, "billboard count")?;
     let ts = r.u64("texture size")?;
     if !(2..=4096).contains(&ts) {
@@ -636,7 +693,7 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
     let sh = r.f32s(SH_FLOATS * n, "SH")?;
     let alpha_logits = r.f32s(t * n, "alpha logits")?;
     let colour_logits = r.f32s(3 * t * n, "colour logits")?;
-    let model = RawBillboards {
+    Ok(RawBillboards {
         positions: positions.chunks_exact(3).map(Vec3::from_slice).collect(),
         quaternions: quaternions.chunks_exact(4).map(|q| [q[0], q[1], q[2], q[3]]).collect(),
         log_scales: log_scales.chunks_exact(2).map(Vec2::from_slice).collect(),
@@ -645,7 +702,11 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
         colour_logits,
         alpha_mask,
         texture_size: ts,
-    };
+    })
+}
+
+/// The Gaussian-mode opacity logits: `n` of them in that mode, none in full-texture mode.
+fn decode_opacity_logits(r: &mut Reader<'_>, texture_mode: TextureMode, n: usize) -> Result<Vec<f32>, CheckpointError> {
     let o = r.count(4, "opacity count")?;
     let expected_o = if texture_mode == TextureMode::Gaussian { n } else { 0 };
     if o != expected_o {
@@ -653,7 +714,12 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
             "{o} opacity logits for {n} billboards in {texture_mode:?} mode (expected {expected_o})"
         )));
     }
-    let opacity_logits = r.f32s(o, "opacity logits")?;
+    r.f32s(o, "opacity logits")
+}
+
+/// The Adam groups, in the order of [`group`], each with `n` rows (texture groups: `t` texels a
+/// row).
+fn decode_adam(r: &mut Reader<'_>, n: usize, t: usize) -> Result<[AdamGroup; group::COUNT], CheckpointError> {
     let groups = r.u32("group count")? as usize;
     if groups != group::COUNT {
         return Err(r.inconsistent(format!("{groups} Adam groups, expected {}", group::COUNT)));
@@ -685,45 +751,17 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
             global_step,
         };
     }
-    let (growth_cap, lr_by_run_length, time_plan) = if version >= 4 {
-        decode_growth_and_plan(&mut r)?
-    } else {
-        (0, false, None)
-    };
-    config.growth_cap = growth_cap;
-    config.lr_by_run_length = lr_by_run_length;
-    let record = if version >= 4 {
-        let len = r.count(1, "run record length")?;
-        let bytes = r.take(len, "run record")?;
-        serde_json::from_slice::<RunRecord>(bytes)
-            .map_err(|e| r.inconsistent(format!("the run record is not valid: {e}")))?
-    } else {
-        RunRecord::default()
-    };
-    if r.pos != body.len() {
-        return Err(r.inconsistent(format!("{} unexpected bytes before the checksum", body.len() - r.pos)));
+    Ok(adam)
+}
+
+/// The run record (version 4; empty before).
+fn decode_record(r: &mut Reader<'_>, version: u32) -> Result<RunRecord, CheckpointError> {
+    if version < 4 {
+        return Ok(RunRecord::default());
     }
-    let mut trainer = Trainer::with_adam(
-        model,
-        TrainConfig {
-            texture_mode: TextureMode::Full,
-            ..config
-        },
-        adam,
-    );
-    trainer.config = config;
-    trainer.opacity_logits = opacity_logits;
-    if texture_mode == TextureMode::Gaussian {
-        for b in 0..n {
-            trainer.refresh_row(b);
-        }
-    }
-    trainer.order = order;
-    trainer.rng = rng;
-    trainer.step = step;
-    trainer.record = record;
-    trainer.time_plan = time_plan;
-    Ok(trainer)
+    let len = r.count(1, "run record length")?;
+    let bytes = r.take(len, "run record")?;
+    serde_json::from_slice::<RunRecord>(bytes).map_err(|e| r.inconsistent(format!("the run record is not valid: {e}")))
 }
 
 /// Writes `bytes` to `path` atomically: a temporary file in the same folder, flushed to disk,

@@ -517,15 +517,20 @@ pub mod group {
 
 /// Optimiser state of a training run.
 ///
+/// It holds the billboard set in two forms, the raw parameters ([`Trainer::model`]) and their
+/// activated copy that the rasterizer reads ([`Trainer::activated`]), kept in sync by every
+/// method: from outside, the parameters change only through [`Trainer::edit_model`].
+///
 /// Deterministic: the same model, config and views give bit-identical results for any rayon
 /// thread count, and a run continued from [`Trainer::save_checkpoint`] /
 /// [`Trainer::load_checkpoint`] is bit-identical to an uninterrupted one.
 pub struct Trainer {
-    /// The raw parameters. Edit only between steps and through the trainer's own methods: the
-    /// activated copy is refreshed row by row.
-    pub model: RawBillboards,
-    /// Activated copy the rasterizer reads (kept in sync row by row).
-    pub activated: ActivatedBillboards,
+    /// The raw parameters ([`Trainer::model`]; edited from outside only through
+    /// [`Trainer::edit_model`]).
+    model: RawBillboards,
+    /// The activated copy the rasterizer reads ([`Trainer::activated`]): every method that
+    /// changes a row of `model` refreshes the row here ([`Trainer::refresh_row`]).
+    activated: ActivatedBillboards,
     adam: [AdamGroup; group::COUNT],
     grads: RenderGradients,
     config: TrainConfig,
@@ -624,6 +629,83 @@ impl Trainer {
             }
         }
         trainer
+    }
+
+    /// The raw parameters being trained (what checkpoints save; [`Trainer::export_model`] gives
+    /// the model to save or render).
+    pub fn model(&self) -> &RawBillboards {
+        &self.model
+    }
+
+    /// The activated copy of [`Trainer::model`] the rasterizer reads, in sync with it row for row:
+    /// bit for bit [`RawBillboards::activate`] of the model in [`TextureMode::Full`]; in
+    /// [`TextureMode::Gaussian`] the alpha texels are `opacity · shape` (the alpha logits are
+    /// their clamped logits).
+    pub fn activated(&self) -> &ActivatedBillboards {
+        &self.activated
+    }
+
+    /// Edits the raw parameters between steps with `edit`, then refreshes every row of the
+    /// activated copy from them, so that [`Trainer::activated`] stays in sync; returns what
+    /// `edit` returns. The optimiser state is kept as it is.
+    ///
+    /// In [`TextureMode::Gaussian`] the alpha logits follow the opacity logits: edits to them are
+    /// overwritten by the refresh (the other parameters are kept).
+    ///
+    /// # Panics
+    /// When `edit` changes the number of billboards, the texture size or the alpha mask (the
+    /// optimiser state, the gradients and the regulariser's `A0` are sized and derived from
+    /// them); the trainer is then left as `edit` left it, out of sync.
+    ///
+    /// ```
+    /// use bbsplat::model::RawBillboards;
+    /// use bbsplat::train::{TrainConfig, Trainer};
+    /// use glam::Vec3;
+    ///
+    /// let model = RawBillboards::from_points(&[Vec3::ZERO, Vec3::X], &[[0.5; 3]; 2], 4, 0);
+    /// let mut trainer = Trainer::new(model, TrainConfig::default());
+    /// trainer.edit_model(|m| m.positions[1] = Vec3::Y);
+    /// assert_eq!(trainer.activated().positions[1], Vec3::Y);
+    /// ```
+    ///
+    /// The two forms themselves are private: no edit can skip the refresh.
+    ///
+    /// ```compile_fail,E0616
+    /// # use bbsplat::model::RawBillboards;
+    /// # use bbsplat::train::{TrainConfig, Trainer};
+    /// # let model = RawBillboards::from_points(&[glam::Vec3::ZERO], &[[0.5; 3]], 4, 0);
+    /// let mut trainer = Trainer::new(model, TrainConfig::default());
+    /// trainer.model.positions[0] = glam::Vec3::Y; // error[E0616]: field `model` is private
+    /// ```
+    pub fn edit_model<R>(&mut self, edit: impl FnOnce(&mut RawBillboards) -> R) -> R {
+        let (n, ts) = (self.model.len(), self.model.texture_size);
+        let mask = self.model.alpha_mask.clone();
+        let result = edit(&mut self.model);
+        let m = &self.model;
+        let rows_ok = m.positions.len() == n
+            && m.quaternions.len() == n
+            && m.log_scales.len() == n
+            && m.sh.len() == n * SH_FLOATS
+            && m.alpha_logits.len() == n * ts * ts
+            && m.colour_logits.len() == 3 * n * ts * ts;
+        assert!(
+            rows_ok && m.texture_size == ts,
+            "Trainer::edit_model: the edit changed the number of billboards ({n}) or the texture size ({ts})"
+        );
+        assert!(
+            m.alpha_mask == mask,
+            "Trainer::edit_model: the edit changed the alpha mask"
+        );
+        for b in 0..n {
+            self.refresh_row(b);
+        }
+        result
+    }
+
+    /// The raw parameters, the activated copy left as it is (`testing_internals` only).
+    #[cfg(feature = "testing")]
+    pub(crate) fn model_unsynced_mut(&mut self) -> &mut RawBillboards {
+        &mut self.model
     }
 
     /// The run record saved with the checkpoint ([`run_record`]; empty unless set, or loaded

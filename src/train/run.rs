@@ -70,6 +70,7 @@
 
 use super::resolution::{ResolutionSchedule, downscale_view};
 use super::{CheckpointError, NonFinite, ParamGroup, StepLog, TrainError, TrainView, Trainer};
+use crate::billboards::ActivatedBillboards;
 use crate::eval::{EvalView, evaluate_views};
 use crate::loss::LossError;
 use crate::model_file::{ModelFileError, ModelMeta, load_model, save_model};
@@ -411,6 +412,10 @@ fn clamp_gradient_name(c: ClampGradient) -> &'static str {
 /// evaluating on `test`; `on_event` sees every [`TrainEvent`]. The trainer is left at the state
 /// reached: trained, stopped, or (on error) as each [`RunError`] variant says.
 ///
+/// The phases are one function each (of the private `RunState`): `start` (checks and setup),
+/// per step `step` and `after_step` (periodic checkpoint and evaluation), then `save_final`,
+/// `final_evaluation` and `finish` (the summary).
+///
 /// # Errors
 /// [`RunError`]: no training views, a non-finite parameter before the run, a failed step (bad
 /// views, non-finite values), or a file that could not be written or re-loaded.
@@ -422,74 +427,178 @@ pub fn run(
     stop: &StopSignal,
     mut on_event: impl FnMut(&TrainEvent),
 ) -> Result<RunOutcome, RunError> {
-    let first = train.first().ok_or(RunError::NoTrainViews)?;
-    if let Some(group) = trainer.non_finite_parameter() {
-        return Err(RunError::NonFiniteStart {
-            step: trainer.step_index(),
-            group,
-        });
-    }
-    let tc = *trainer.config();
-    let run_start = Instant::now();
-    let initial_billboards = trainer.model.len();
-    // A time budget plans the run's length from the step times measured so far.
-    let replan = |trainer: &mut Trainer| {
-        let step = trainer.step_index();
-        if let Some(n) = trainer
-            .time_plan()
-            .map(|p| p.planned_iterations(step, &config.resolution))
-        {
-            trainer.set_iterations(n);
+    let on_event: &mut dyn FnMut(&TrainEvent) = &mut on_event;
+    let mut state = RunState::start(trainer, train, test, config, stop, on_event)?;
+    while trainer.step_index() < trainer.config().iterations {
+        if let Some(reason) = state.stop_reason(trainer) {
+            let checkpoint = state.save(trainer, on_event)?;
+            return Ok(stopped(trainer.step_index(), reason, checkpoint, on_event));
         }
+        let step = state.step(trainer, train, on_event)?;
+        state.after_step(trainer, step, on_event)?;
+    }
+    let (model_bytes, saved) = state.save_final(trainer, on_event)?;
+    if stop.is_requested() {
+        return Ok(state.stopped_after_the_last_step(trainer, on_event));
+    }
+    let Some(evaluated) = state.final_evaluation(trainer, test, saved.as_ref())? else {
+        // Interrupted during the final evaluation: the model and the checkpoint are saved;
+        // resuming from the checkpoint (at the last step) redoes the save and evaluation.
+        return Ok(state.stopped_after_the_last_step(trainer, on_event));
     };
-    replan(trainer);
-    let iterations = trainer.config().iterations;
-    let coarse: Vec<TrainView> = if config.resolution.factor > 1 {
-        train
-            .iter()
-            .map(|v| downscale_view(v, config.resolution.factor))
-            .collect()
-    } else {
-        Vec::new()
-    };
-    on_event(&TrainEvent::Started {
-        step: trainer.step_index(),
-        iterations,
-        train_views: train.len(),
-        test_views: test.len(),
-        width: first.camera.width,
-        height: first.camera.height,
-        billboards: trainer.model.len(),
-        texture_size: trainer.model.texture_size,
+    state.finish(trainer, test, evaluated, model_bytes, on_event)
+}
+
+/// A time budget plans the run's length from the step times measured so far.
+fn replan(trainer: &mut Trainer, resolution: &ResolutionSchedule) {
+    let step = trainer.step_index();
+    if let Some(n) = trainer.time_plan().map(|p| p.planned_iterations(step, resolution)) {
+        trainer.set_iterations(n);
+    }
+}
+
+/// [`TrainEvent::Stopped`] sent, and the outcome it reports.
+fn stopped(
+    step: usize,
+    reason: StopReason,
+    checkpoint: Option<PathBuf>,
+    on_event: &mut dyn FnMut(&TrainEvent),
+) -> RunOutcome {
+    on_event(&TrainEvent::Stopped {
+        step,
+        reason,
+        checkpoint: checkpoint.clone(),
     });
-    let mut warnings = config.warnings.clone();
-    if test.is_empty() {
-        on_event(&TrainEvent::Warning(RunWarning::NoTestViews));
-        warnings.push(RunWarning::NoTestViews.to_string());
+    RunOutcome::Stopped {
+        step,
+        reason,
+        checkpoint,
     }
-    let output = config.output.as_deref();
-    if let Some(dir) = output {
-        std::fs::create_dir_all(dir).map_err(|source| RunError::Io {
-            path: dir.to_path_buf(),
-            action: "creating the output folder",
-            source,
-        })?;
+}
+
+/// What a run carries from phase to phase: the settings around the steps, fixed at the start,
+/// and what the steps measured so far.
+struct RunState<'a> {
+    config: &'a RunConfig,
+    stop: &'a StopSignal,
+    /// The trainer's config at the start (its iterations may be re-planned since).
+    tc: super::TrainConfig,
+    run_start: Instant,
+    initial_billboards: usize,
+    /// Size of the first training view, pixels.
+    resolution: [u32; 2],
+    /// The downscaled training views of the coarse phase (empty without one).
+    coarse: Vec<TrainView>,
+    /// The run's warnings and the caller's, for the summary.
+    warnings: Vec<String>,
+    /// Where checkpoints go (`None` without an output folder).
+    checkpoint: Option<PathBuf>,
+    eval_settings: RenderSettings,
+    /// The test views of the intermediate evaluations.
+    eval_subset: Vec<&'a TrainView>,
+    curve: Vec<CurvePoint>,
+    train_seconds: f64,
+    running_psnr: f64,
+    relocated_total: usize,
+    /// The last checkpoint this call wrote (named by a failed step's error).
+    last_checkpoint: Option<PathBuf>,
+}
+
+impl<'a> RunState<'a> {
+    /// Setup: the checks before the run (training views, finite parameters), the time budget's
+    /// first plan, the coarse views, [`TrainEvent::Started`] and the warnings, the output folder.
+    fn start(
+        trainer: &mut Trainer,
+        train: &[TrainView],
+        test: &'a [TrainView],
+        config: &'a RunConfig,
+        stop: &'a StopSignal,
+        on_event: &mut dyn FnMut(&TrainEvent),
+    ) -> Result<Self, RunError> {
+        let first = train.first().ok_or(RunError::NoTrainViews)?;
+        if let Some(group) = trainer.non_finite_parameter() {
+            return Err(RunError::NonFiniteStart {
+                step: trainer.step_index(),
+                group,
+            });
+        }
+        let tc = *trainer.config();
+        let run_start = Instant::now();
+        let initial_billboards = trainer.model().len();
+        replan(trainer, &config.resolution);
+        let iterations = trainer.config().iterations;
+        let coarse: Vec<TrainView> = if config.resolution.factor > 1 {
+            train
+                .iter()
+                .map(|v| downscale_view(v, config.resolution.factor))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        on_event(&TrainEvent::Started {
+            step: trainer.step_index(),
+            iterations,
+            train_views: train.len(),
+            test_views: test.len(),
+            width: first.camera.width,
+            height: first.camera.height,
+            billboards: trainer.model().len(),
+            texture_size: trainer.model().texture_size,
+        });
+        let mut warnings = config.warnings.clone();
+        if test.is_empty() {
+            on_event(&TrainEvent::Warning(RunWarning::NoTestViews));
+            warnings.push(RunWarning::NoTestViews.to_string());
+        }
+        let output = config.output.as_deref();
+        if let Some(dir) = output {
+            std::fs::create_dir_all(dir).map_err(|source| RunError::Io {
+                path: dir.to_path_buf(),
+                action: "creating the output folder",
+                source,
+            })?;
+        }
+        let checkpoint = output.map(|d| d.join(CHECKPOINT_FILE));
+        let eval_settings = RenderSettings {
+            background: tc.background,
+            sh_degree: tc.sh_degree,
+            ..RenderSettings::default()
+        };
+        let eval_subset = evenly_spaced(test, config.eval_views);
+        Ok(Self {
+            config,
+            stop,
+            tc,
+            run_start,
+            initial_billboards,
+            resolution: [first.camera.width, first.camera.height],
+            coarse,
+            warnings,
+            checkpoint,
+            eval_settings,
+            eval_subset,
+            curve: Vec::new(),
+            train_seconds: 0.0,
+            running_psnr: f64::NAN,
+            relocated_total: 0,
+            last_checkpoint: None,
+        })
     }
-    let checkpoint = output.map(|d| d.join(CHECKPOINT_FILE));
-    let eval_settings = RenderSettings {
-        background: tc.background,
-        sh_degree: tc.sh_degree,
-        ..RenderSettings::default()
-    };
-    let eval_subset = evenly_spaced(test, config.eval_views);
-    let mut curve = Vec::new();
-    let mut train_seconds = 0.0;
-    let mut running_psnr = f64::NAN;
-    let mut relocated_total = 0usize;
-    // The last checkpoint this call wrote (named by a failed step's error).
-    let mut last_checkpoint: Option<PathBuf> = None;
-    let save = |trainer: &Trainer, on_event: &mut dyn FnMut(&TrainEvent)| -> Result<Option<PathBuf>, RunError> {
-        let Some(path) = &checkpoint else {
+
+    /// Why the run stops before the next step, if it does.
+    fn stop_reason(&self, trainer: &Trainer) -> Option<StopReason> {
+        if self.config.stop_after.is_some_and(|n| trainer.step_index() >= n) {
+            Some(StopReason::StopAfter)
+        } else if self.stop.is_requested() {
+            Some(StopReason::Requested)
+        } else {
+            None
+        }
+    }
+
+    /// Writes the checkpoint (with an output folder), then [`TrainEvent::Checkpoint`].
+    fn save(&self, trainer: &Trainer, on_event: &mut dyn FnMut(&TrainEvent)) -> Result<Option<PathBuf>, RunError> {
+        let Some(path) = &self.checkpoint else {
             return Ok(None);
         };
         trainer.save_checkpoint(path)?;
@@ -498,59 +607,32 @@ pub fn run(
             path: path.clone(),
         });
         Ok(Some(path.clone()))
-    };
-    while trainer.step_index() < trainer.config().iterations {
-        let reason = if config.stop_after.is_some_and(|n| trainer.step_index() >= n) {
-            Some(StopReason::StopAfter)
-        } else if stop.is_requested() {
-            Some(StopReason::Requested)
-        } else {
-            None
-        };
-        if let Some(reason) = reason {
-            let checkpoint = save(trainer, &mut on_event)?;
-            let step = trainer.step_index();
-            on_event(&TrainEvent::Stopped {
-                step,
-                reason,
-                checkpoint: checkpoint.clone(),
-            });
-            return Ok(RunOutcome::Stopped {
-                step,
-                reason,
-                checkpoint,
-            });
-        }
+    }
+
+    /// One step on the coarse or full-size views, timed; the time recorded in the time plan,
+    /// which then re-plans the run's length; then [`TrainEvent::Step`]. Returns the steps done.
+    fn step(
+        &mut self,
+        trainer: &mut Trainer,
+        train: &[TrainView],
+        on_event: &mut dyn FnMut(&TrainEvent),
+    ) -> Result<usize, RunError> {
         let t0 = Instant::now();
         let (step_before, planned) = (trainer.step_index(), trainer.config().iterations);
+        let config = self.config;
+        let resolution = &config.resolution;
         let (is_coarse, calibrating) = match trainer.time_plan() {
-            Some(plan) if plan.wants_calibration(&config.resolution) => (false, true),
-            Some(plan) => (plan.is_coarse(step_before, planned, &config.resolution), false),
-            None => (config.resolution.is_coarse(step_before, planned), false),
+            Some(plan) if plan.wants_calibration(resolution) => (false, true),
+            Some(plan) => (plan.is_coarse(step_before, planned, resolution), false),
+            None => (resolution.is_coarse(step_before, planned), false),
         };
-        let views = if is_coarse { &coarse } else { train };
+        let views = if is_coarse { &self.coarse } else { train };
         let log = match trainer.step(views) {
             Ok(log) => log,
-            Err(source) => {
-                let refused = matches!(
-                    source,
-                    TrainError::NonFinite {
-                        value: NonFinite::Loss | NonFinite::Gradient(_),
-                        ..
-                    }
-                );
-                // A refused step left the trainer as it was before the step, with parameters
-                // checked after the previous step (or before the run): the last good state.
-                let checkpoint = if refused && checkpoint.is_some() {
-                    save(trainer, &mut on_event)?
-                } else {
-                    last_checkpoint
-                };
-                return Err(RunError::Step { source, checkpoint });
-            }
+            Err(source) => return Err(self.step_failed(trainer, source, on_event)),
         };
         let seconds = t0.elapsed().as_secs_f64();
-        train_seconds += seconds;
+        self.train_seconds += seconds;
         if let Some(plan) = trainer.time_plan_mut() {
             if calibrating {
                 plan.record_calibration(seconds);
@@ -558,38 +640,78 @@ pub fn run(
                 plan.record(step_before, is_coarse, seconds);
             }
         }
-        replan(trainer);
+        replan(trainer, resolution);
         let iterations = trainer.config().iterations;
-        running_psnr = if running_psnr.is_nan() {
+        self.running_psnr = if self.running_psnr.is_nan() {
             log.psnr
         } else {
-            0.95 * running_psnr + 0.05 * log.psnr
+            0.95 * self.running_psnr + 0.05 * log.psnr
         };
-        relocated_total += log.relocated;
+        self.relocated_total += log.relocated;
         let step = log.step;
         on_event(&TrainEvent::Step {
             log,
             iterations,
-            running_psnr,
-            relocated_total,
-            train_seconds,
+            running_psnr: self.running_psnr,
+            relocated_total: self.relocated_total,
+            train_seconds: self.train_seconds,
         });
+        Ok(step)
+    }
+
+    /// The error of a failed step, naming the last good checkpoint: a refused step (non-finite
+    /// loss or gradient) left the trainer as it was before the step, with parameters checked
+    /// after the previous step (or before the run), and is saved as that state.
+    fn step_failed(&self, trainer: &Trainer, source: TrainError, on_event: &mut dyn FnMut(&TrainEvent)) -> RunError {
+        let refused = matches!(
+            source,
+            TrainError::NonFinite {
+                value: NonFinite::Loss | NonFinite::Gradient(_),
+                ..
+            }
+        );
+        let checkpoint = if refused && self.checkpoint.is_some() {
+            match self.save(trainer, on_event) {
+                Ok(checkpoint) => checkpoint,
+                Err(e) => return e,
+            }
+        } else {
+            self.last_checkpoint.clone()
+        };
+        RunError::Step { source, checkpoint }
+    }
+
+    /// After step `step`: the checkpoint every [`RunConfig::save_every`] steps, the evaluation
+    /// on the test subset every [`RunConfig::eval_every`] (not at the last step; abandoned when a
+    /// stop request arrives, which the next turn of the loop handles).
+    fn after_step(
+        &mut self,
+        trainer: &Trainer,
+        step: usize,
+        on_event: &mut dyn FnMut(&TrainEvent),
+    ) -> Result<(), RunError> {
+        let config = self.config;
+        let iterations = trainer.config().iterations;
         if config.save_every > 0 && step.is_multiple_of(config.save_every) {
-            last_checkpoint = save(trainer, &mut on_event)?;
+            self.last_checkpoint = self.save(trainer, on_event)?;
         }
         if config.eval_every > 0
             && step.is_multiple_of(config.eval_every)
             && step < iterations
-            && !eval_subset.is_empty()
+            && !self.eval_subset.is_empty()
         {
-            let Some((psnr, ssim, _)) = evaluate(&trainer.activated.borrowed(), &eval_subset, &eval_settings, stop)?
+            let Some((psnr, ssim, _)) = evaluate(
+                &trainer.activated().borrowed(),
+                &self.eval_subset,
+                &self.eval_settings,
+                self.stop,
+            )?
             else {
-                // Interrupted: the stop request is handled at the top of the loop.
-                continue;
+                return Ok(());
             };
-            curve.push(CurvePoint {
+            self.curve.push(CurvePoint {
                 step,
-                seconds: train_seconds,
+                seconds: self.train_seconds,
                 psnr,
                 ssim,
             });
@@ -597,140 +719,160 @@ pub fn run(
                 step,
                 psnr,
                 ssim,
-                seconds: train_seconds,
-                views: eval_subset.len(),
+                seconds: self.train_seconds,
+                views: self.eval_subset.len(),
             });
         }
+        Ok(())
     }
-    let iterations = trainer.config().iterations;
-    // The model is saved as the reference saves it (8-bit textures) and evaluated as re-loaded,
-    // as the reference's render.py does. The checkpoint is written first: if the model cannot
-    // be saved, the trained state is not lost.
-    let mut model_bytes = 0;
-    let saved = match output {
-        Some(dir) => {
-            let written = save(trainer, &mut on_event)?;
-            let model_dir = dir.join(MODEL_DIR);
-            let meta = ModelMeta::for_model(&trainer.model, tc.sh_degree, tc.background.to_array());
-            model_bytes = match save_model(&model_dir, &trainer.export_model(), &meta) {
-                Ok(bytes) => bytes,
-                Err(source) => {
-                    return Err(match written {
-                        Some(checkpoint) => RunError::ModelSave { source, checkpoint },
-                        None => RunError::Model(source),
-                    });
-                }
-            };
-            on_event(&TrainEvent::ModelSaved {
-                path: model_dir.clone(),
-                bytes: model_bytes,
-            });
-            let (model, _) = load_model(&model_dir)?;
-            Some(model.activate())
-        }
-        None => None,
-    };
-    let stopped = |on_event: &mut dyn FnMut(&TrainEvent)| {
-        let step = trainer.step_index();
-        let reason = StopReason::Requested;
-        on_event(&TrainEvent::Stopped {
-            step,
-            reason,
-            checkpoint: checkpoint.clone(),
+
+    /// The final save, with an output folder: the checkpoint first (if the model cannot be
+    /// saved, the trained state is not lost), then the model as the reference saves it (8-bit
+    /// textures), re-loaded as the reference's render.py evaluates it. Returns the model's bytes
+    /// (0 without an output folder) and the re-loaded set, activated (`None` without).
+    fn save_final(
+        &self,
+        trainer: &Trainer,
+        on_event: &mut dyn FnMut(&TrainEvent),
+    ) -> Result<(u64, Option<ActivatedBillboards>), RunError> {
+        let Some(dir) = self.config.output.as_deref() else {
+            return Ok((0, None));
+        };
+        let tc = &self.tc;
+        let written = self.save(trainer, on_event)?;
+        let model_dir = dir.join(MODEL_DIR);
+        let meta = ModelMeta::for_model(trainer.model(), tc.sh_degree, tc.background.to_array());
+        let model_bytes = match save_model(&model_dir, &trainer.export_model(), &meta) {
+            Ok(bytes) => bytes,
+            Err(source) => {
+                return Err(match written {
+                    Some(checkpoint) => RunError::ModelSave { source, checkpoint },
+                    None => RunError::Model(source),
+                });
+            }
+        };
+        on_event(&TrainEvent::ModelSaved {
+            path: model_dir.clone(),
+            bytes: model_bytes,
         });
-        Ok(RunOutcome::Stopped {
-            step,
-            reason,
-            checkpoint: checkpoint.clone(),
-        })
-    };
-    if stop.is_requested() {
-        return stopped(&mut on_event);
+        let (model, _) = load_model(&model_dir)?;
+        Ok((model_bytes, Some(model.activate())))
     }
-    let all_test: Vec<&TrainView> = test.iter().collect();
-    let (test_psnr, test_ssim, render_ms) = if test.is_empty() {
-        (f64::NAN, f64::NAN, f64::NAN)
-    } else {
-        let set = match &saved {
+
+    /// A stop request after the last step, once the checkpoint and model are saved.
+    fn stopped_after_the_last_step(&self, trainer: &Trainer, on_event: &mut dyn FnMut(&TrainEvent)) -> RunOutcome {
+        stopped(
+            trainer.step_index(),
+            StopReason::Requested,
+            self.checkpoint.clone(),
+            on_event,
+        )
+    }
+
+    /// Mean PSNR, SSIM and render milliseconds on every test view (NaN without test views) of
+    /// the re-loaded model `saved`, or of the trainer's float model without one; `None` when a
+    /// stop request interrupts.
+    fn final_evaluation(
+        &self,
+        trainer: &Trainer,
+        test: &[TrainView],
+        saved: Option<&ActivatedBillboards>,
+    ) -> Result<Option<(f64, f64, f64)>, RunError> {
+        if test.is_empty() {
+            return Ok(Some((f64::NAN, f64::NAN, f64::NAN)));
+        }
+        let all_test: Vec<&TrainView> = test.iter().collect();
+        let set = match saved {
             Some(b) => b.borrowed(),
-            None => trainer.activated.borrowed(),
+            None => trainer.activated().borrowed(),
         };
-        match evaluate(&set, &all_test, &eval_settings, stop)? {
-            Some(result) => result,
-            // Interrupted during the final evaluation: the model and the checkpoint are saved;
-            // resuming from the checkpoint (at the last step) redoes the save and evaluation.
-            None => return stopped(&mut on_event),
-        }
-    };
-    // The curve holds evaluations only: none without test views.
-    if !test.is_empty() {
-        curve.push(CurvePoint {
-            step: iterations,
-            seconds: train_seconds,
-            psnr: test_psnr,
-            ssim: test_ssim,
-        });
+        Ok(evaluate(&set, &all_test, &self.eval_settings, self.stop)?)
     }
-    let summary = TrainSummary {
-        version: SUMMARY_VERSION,
-        scene: config.scene.clone(),
-        iterations,
-        billboards: trainer.model.len(),
-        alive: trainer.alive_count(),
-        texture_size: trainer.model.texture_size,
-        sh_degree: tc.sh_degree,
-        resolution: [first.camera.width, first.camera.height],
-        train_seconds,
-        render_ms_per_frame: render_ms,
-        test_psnr,
-        test_ssim,
-        test_views: test.len(),
-        model_bytes,
-        peak_rss_bytes: peak_rss_bytes(),
-        seed: tc.seed,
-        threads: rayon::current_num_threads(),
-        curve,
-        command: config.command.clone(),
-    };
-    let record = RunReport {
-        automatic: config.automatic.clone(),
-        plan: trainer.time_plan().map(|p| PlanRecord {
-            budget_minutes: p.budget_seconds / 60.0,
-            spent_minutes: p.spent_seconds / 60.0,
-            planned_steps: iterations,
-            coarse_step_seconds: p.coarse_step_seconds,
-            fine_step_seconds: p.fine_step_seconds,
-            fine_from: p.fine_from,
-        }),
-        growth: Some(GrowthRecord {
-            initial: initial_billboards,
-            final_count: trainer.model.len(),
-            alive: summary.alive,
-            cap: trainer.config().growth_cap,
-        }),
-        other_seconds: (run_start.elapsed().as_secs_f64() - train_seconds).max(0.0),
-    };
-    on_event(&TrainEvent::Record(Box::new(record.clone())));
-    let summary = if let Some(dir) = output {
-        let file = SummaryFile {
-            summary,
-            settings: RecordedSettings {
-                clamp_gradient: clamp_gradient_name(tc.clamp_gradient).to_string(),
-                lambda_normal: tc.geometry.lambda_normal,
-                lambda_distortion: tc.geometry.lambda_distortion,
-                normal_from: (tc.geometry.lambda_normal != 0.0).then_some(tc.geometry.normal_from),
-                distortion_from: (tc.geometry.lambda_distortion != 0.0).then_some(tc.geometry.distortion_from),
-            },
-            warnings,
-            record,
+
+    /// The end: the final evaluation on the curve, the summary and the record
+    /// ([`TrainEvent::Record`]), `summary.json` with an output folder, then
+    /// [`TrainEvent::Finished`].
+    fn finish(
+        mut self,
+        trainer: &Trainer,
+        test: &[TrainView],
+        (test_psnr, test_ssim, render_ms): (f64, f64, f64),
+        model_bytes: u64,
+        on_event: &mut dyn FnMut(&TrainEvent),
+    ) -> Result<RunOutcome, RunError> {
+        let config = self.config;
+        let tc = self.tc;
+        let iterations = trainer.config().iterations;
+        // The curve holds evaluations only: none without test views.
+        if !test.is_empty() {
+            self.curve.push(CurvePoint {
+                step: iterations,
+                seconds: self.train_seconds,
+                psnr: test_psnr,
+                ssim: test_ssim,
+            });
+        }
+        let summary = TrainSummary {
+            version: SUMMARY_VERSION,
+            scene: config.scene.clone(),
+            iterations,
+            billboards: trainer.model().len(),
+            alive: trainer.alive_count(),
+            texture_size: trainer.model().texture_size,
+            sh_degree: tc.sh_degree,
+            resolution: self.resolution,
+            train_seconds: self.train_seconds,
+            render_ms_per_frame: render_ms,
+            test_psnr,
+            test_ssim,
+            test_views: test.len(),
+            model_bytes,
+            peak_rss_bytes: peak_rss_bytes(),
+            seed: tc.seed,
+            threads: rayon::current_num_threads(),
+            curve: self.curve,
+            command: config.command.clone(),
         };
-        let text = serde_json::to_string_pretty(&file).map_err(RunError::Summary)?;
-        write_text_atomic(&dir.join(SUMMARY_FILE), &text)?;
-        file.summary
-    } else {
-        summary
-    };
-    let summary = Box::new(summary);
-    on_event(&TrainEvent::Finished(summary.clone()));
-    Ok(RunOutcome::Finished(summary))
+        let record = RunReport {
+            automatic: config.automatic.clone(),
+            plan: trainer.time_plan().map(|p| PlanRecord {
+                budget_minutes: p.budget_seconds / 60.0,
+                spent_minutes: p.spent_seconds / 60.0,
+                planned_steps: iterations,
+                coarse_step_seconds: p.coarse_step_seconds,
+                fine_step_seconds: p.fine_step_seconds,
+                fine_from: p.fine_from,
+            }),
+            growth: Some(GrowthRecord {
+                initial: self.initial_billboards,
+                final_count: trainer.model().len(),
+                alive: summary.alive,
+                cap: trainer.config().growth_cap,
+            }),
+            other_seconds: (self.run_start.elapsed().as_secs_f64() - self.train_seconds).max(0.0),
+        };
+        on_event(&TrainEvent::Record(Box::new(record.clone())));
+        let summary = if let Some(dir) = config.output.as_deref() {
+            let file = SummaryFile {
+                summary,
+                settings: RecordedSettings {
+                    clamp_gradient: clamp_gradient_name(tc.clamp_gradient).to_string(),
+                    lambda_normal: tc.geometry.lambda_normal,
+                    lambda_distortion: tc.geometry.lambda_distortion,
+                    normal_from: (tc.geometry.lambda_normal != 0.0).then_some(tc.geometry.normal_from),
+                    distortion_from: (tc.geometry.lambda_distortion != 0.0).then_some(tc.geometry.distortion_from),
+                },
+                warnings: self.warnings,
+                record,
+            };
+            let text = serde_json::to_string_pretty(&file).map_err(RunError::Summary)?;
+            write_text_atomic(&dir.join(SUMMARY_FILE), &text)?;
+            file.summary
+        } else {
+            summary
+        };
+        let summary = Box::new(summary);
+        on_event(&TrainEvent::Finished(summary.clone()));
+        Ok(RunOutcome::Finished(summary))
+    }
 }

@@ -76,6 +76,7 @@ mod train_camera_fit;
 mod train_checkpoint;
 mod train_demo;
 mod train_depth_sweep;
+mod train_edit;
 mod train_finite;
 mod train_geometry;
 mod train_grow;

@@ -88,10 +88,10 @@ fn resume_equals_uninterrupted(adam: AdamMode, mode: TextureMode, tag: &str) {
         resumed.step(&views).unwrap();
     }
     // Model parameters, Adam moments and counters, RNG and view order: the whole serialised state.
-    assert_eq!(resumed.model, straight.model, "{tag}: model parameters differ");
+    assert_eq!(resumed.model(), straight.model(), "{tag}: model parameters differ");
     assert_eq!(resumed.adam(), straight.adam(), "{tag}: Adam state differs");
     assert_eq!(resumed.opacity_logits(), straight.opacity_logits());
-    assert_eq!(resumed.activated.textures, straight.activated.textures);
+    assert_eq!(resumed.activated().textures, straight.activated().textures);
     assert!(
         resumed.checkpoint_bytes() == straight.checkpoint_bytes(),
         "{tag}: state differs"

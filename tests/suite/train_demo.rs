@@ -80,7 +80,7 @@ fn training_is_deterministic_across_thread_counts() {
             .num_threads(threads)
             .build()
             .unwrap()
-            .install(|| tiny_run(60).3.model)
+            .install(|| tiny_run(60).3.model().clone())
     };
     assert_eq!(run(1), run(2));
 }
@@ -140,7 +140,7 @@ fn measure_adam_modes() {
             "{mode:?}: {} steps, {} billboards, {}px: {secs:.1} s (incl. 2 evaluations), test PSNR {before:.2} -> \
              {after:.2} dB, last-10% loss {last:.4}, alive {}",
             v[2],
-            trainer.model.len(),
+            trainer.model().len(),
             v[0],
             trainer.alive_count()
         );
@@ -168,7 +168,7 @@ fn learning_rate_scales_scale_the_first_step() {
         shape: 0.0,
         ..LearningRateScales::REFERENCE
     });
-    let (m0, m1, m2, mf) = (&start.model, &base.model, &doubled.model, &frozen.model);
+    let (m0, m1, m2, mf) = (start.model(), base.model(), doubled.model(), frozen.model());
     // Largest |doubled displacement − 2 × base displacement| over a group, against the base.
     let check = |name: &str, x0: Vec<f32>, x1: Vec<f32>, x2: Vec<f32>| {
         let moved = x0.iter().zip(&x1).filter(|(a, b)| a != b).count();

@@ -60,8 +60,8 @@ fn regularisers_that_are_off_change_no_bit() {
         }),
     )
     .3;
-    assert_eq!(plain.model, later.model);
-    assert_eq!(plain.model, zero.model);
+    assert_eq!(plain.model(), later.model());
+    assert_eq!(plain.model(), zero.model());
 }
 
 /// On, they change the model, their values are reported, and the run stays deterministic for
@@ -78,8 +78,8 @@ fn regularisers_that_are_on_train_deterministically() {
             .install(|| run(&demo(), 8, steps, with(ON)).3)
     };
     let (one, two) = (on(1), on(2));
-    assert_eq!(one.model, two.model);
-    assert_ne!(one.model, plain.model);
+    assert_eq!(one.model(), two.model());
+    assert_ne!(one.model(), plain.model());
 }
 
 /// A step with both terms on reports positive values that are part of its total loss.
@@ -127,7 +127,7 @@ fn regularised_runs_resume_bit_for_bit() {
     for _ in 0..10 {
         resumed.step(&views).unwrap();
     }
-    assert_eq!(resumed.model, straight.model);
+    assert_eq!(resumed.model(), straight.model());
 }
 
 /// Bad settings are refused by the step, naming the setting.

@@ -37,28 +37,28 @@ fn synthetic(cap: usize, mode: TextureMode) -> Trainer {
 #[test]
 fn counts_follow_five_percent_steps_up_to_the_cap() {
     let mut tr = synthetic(50, TextureMode::Full);
-    let mut counts = vec![tr.model.len()];
+    let mut counts = vec![tr.model().len()];
     for _ in 0..8 {
-        let before = tr.model.len();
+        let before = tr.model().len();
         let added = tr.grow();
-        assert_eq!(tr.model.len(), before + added);
-        counts.push(tr.model.len());
+        assert_eq!(tr.model().len(), before + added);
+        counts.push(tr.model().len());
     }
     // ⌊40·1.05⌋ = 42, ⌊42·1.05⌋ = 44, 46, 48, then the cap 50, then nothing.
     assert_eq!(counts, [40, 42, 44, 46, 48, 50, 50, 50, 50]);
     // Every array follows the count.
-    let n = tr.model.len();
-    assert_eq!(tr.activated.len(), n);
-    assert_eq!(tr.model.alpha_logits.len(), n * T);
-    assert_eq!(tr.model.colour_logits.len(), 3 * n * T);
-    assert_eq!(tr.model.sh.len(), n * SH_FLOATS);
+    let n = tr.model().len();
+    assert_eq!(tr.activated().len(), n);
+    assert_eq!(tr.model().alpha_logits.len(), n * T);
+    assert_eq!(tr.model().colour_logits.len(), 3 * n * T);
+    assert_eq!(tr.model().sh.len(), n * SH_FLOATS);
     for g in tr.adam() {
         assert_eq!(g.rows(), n);
     }
     // No growth without a cap above the count.
     let mut off = synthetic(0, TextureMode::Full);
     assert_eq!(off.grow(), 0);
-    assert_eq!(off.model.len(), 40);
+    assert_eq!(off.model().len(), 40);
     assert_eq!(growth_target(40, 1000), 42);
 }
 
@@ -70,20 +70,20 @@ fn new_rows_are_copies_with_the_split_alpha_and_zero_adam_state() {
     for _ in 0..3 {
         tr.step(&demo_views).unwrap();
     }
-    let before_model = tr.model.clone();
-    let before_alpha: Vec<f32> = tr.activated.textures.iter().map(|t| t[3]).collect();
+    let before_model = tr.model().clone();
+    let before_alpha: Vec<f32> = tr.activated().textures.iter().map(|t| t[3]).collect();
     let before_adam = tr.adam().clone();
     // The plan the trainer will draw (same RNG state): sources ∝ mean alpha over all rows.
-    let n = tr.model.len();
+    let n = tr.model().len();
     let added = tr.grow();
     assert_eq!(added, growth_target(n, 1000) - n);
     let source_of = |d: usize| {
         (0..n)
-            .find(|&s| before_model.positions[s] == tr.model.positions[d])
+            .find(|&s| before_model.positions[s] == tr.model().positions[d])
             .expect("a new row copies an existing billboard")
     };
     let sources: Vec<usize> = (n..n + added).map(source_of).collect();
-    let m = &tr.model;
+    let m = tr.model();
     for (d, &s) in (n..n + added).zip(&sources) {
         assert_eq!(m.quaternions[d], before_model.quaternions[s]);
         assert_eq!(m.log_scales[d], before_model.log_scales[s]);
@@ -157,14 +157,14 @@ fn growth_sampling_follows_the_weights_and_skips_zero_weights() {
 #[test]
 fn gaussian_mode_splits_the_opacity_of_grown_rows() {
     let mut tr = synthetic(100, TextureMode::Gaussian);
-    let n = tr.model.len();
+    let n = tr.model().len();
     let before: Vec<f32> = tr.opacity_logits().to_vec();
     let added = tr.grow();
     assert!(added > 0);
     assert_eq!(tr.opacity_logits().len(), n + added);
     for d in n..n + added {
         let s = (0..n)
-            .find(|&s| tr.model.positions[s] == tr.model.positions[d])
+            .find(|&s| tr.model().positions[s] == tr.model().positions[d])
             .unwrap();
         assert_eq!(tr.opacity_logits()[d], tr.opacity_logits()[s]);
         assert!(tr.opacity_logits()[s] < before[s], "the source's opacity was split");
@@ -255,7 +255,7 @@ fn resume_across_a_growth_step(error_growth: f32) {
     for _ in 0..150 {
         first.step(&train).unwrap();
     }
-    assert_eq!(first.model.len(), 126);
+    assert_eq!(first.model().len(), 126);
     let bytes = first.checkpoint_bytes();
     let mut resumed = Trainer::from_checkpoint_bytes(&bytes, Path::new("mem")).unwrap();
     assert_eq!(resumed.config().growth_cap, 400);
@@ -263,6 +263,6 @@ fn resume_across_a_growth_step(error_growth: f32) {
     for _ in 0..150 {
         resumed.step(&train).unwrap();
     }
-    assert_eq!(resumed.model.len(), 132);
+    assert_eq!(resumed.model().len(), 132);
     assert_eq!(resumed.checkpoint_bytes(), straight.checkpoint_bytes());
 }

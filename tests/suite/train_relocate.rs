@@ -39,20 +39,20 @@ fn dead_rows_get_copies_whose_split_alpha_composites_back() {
     let seed = 11;
     let mut tr = synthetic(seed, TextureMode::Full);
     assert_eq!(tr.alive_count(), 12 - DEAD.len());
-    let before_model = tr.model.clone();
-    let before_alpha: Vec<f32> = tr.activated.textures.iter().map(|t| t[3]).collect();
+    let before_model = tr.model().clone();
+    let before_alpha: Vec<f32> = tr.activated().textures.iter().map(|t| t[3]).collect();
     let moved = tr.relocate();
     assert_eq!(moved, DEAD.len(), "seed {seed}");
     assert_eq!(tr.alive_count(), 12, "seed {seed}");
     // Identify each dead slot's source by its (unique) position, then count multiplicities.
     let source_of = |d: usize| {
         (0..12)
-            .find(|&s| !DEAD.contains(&s) && before_model.positions[s] == tr.model.positions[d])
+            .find(|&s| !DEAD.contains(&s) && before_model.positions[s] == tr.model().positions[d])
             .expect("a dead slot holds a copy of an alive billboard")
     };
     let sources: Vec<usize> = DEAD.iter().map(|&d| source_of(d)).collect();
     for (&d, &s) in DEAD.iter().zip(&sources) {
-        let m = &tr.model;
+        let m = tr.model();
         assert_eq!(m.quaternions[d], before_model.quaternions[s]);
         assert_eq!(m.log_scales[d], before_model.log_scales[s]);
         assert_eq!(
@@ -73,7 +73,7 @@ fn dead_rows_get_copies_whose_split_alpha_composites_back() {
         }
         for k in 0..T {
             let original = before_alpha[s * T + k] as f64;
-            let split = tr.activated.textures[s * T + k][3] as f64;
+            let split = tr.activated().textures[s * T + k][3] as f64;
             if n == 0 {
                 assert_eq!(split, original, "billboard {s} was not a source: unchanged");
                 continue;
@@ -84,7 +84,7 @@ fn dead_rows_get_copies_whose_split_alpha_composites_back() {
                 (recomposed - original).abs() <= 2e-6 * original.max(1e-3),
                 "seed {seed}, source {s} (n = {n}), texel {k}: {recomposed} vs {original}"
             );
-            if tr.model.alpha_mask[k] && original > 1e-3 {
+            if tr.model().alpha_mask[k] && original > 1e-3 {
                 assert!(split < original, "the split lowers alpha");
             }
         }
@@ -92,8 +92,8 @@ fn dead_rows_get_copies_whose_split_alpha_composites_back() {
     // Masked texels stay exactly zero.
     for i in 0..12 {
         for k in 0..T {
-            if !tr.model.alpha_mask[k] {
-                assert_eq!(tr.activated.textures[i * T + k][3], 0.0);
+            if !tr.model().alpha_mask[k] {
+                assert_eq!(tr.activated().textures[i * T + k][3], 0.0);
             }
         }
     }
@@ -104,7 +104,7 @@ fn relocation_is_deterministic_given_the_seed() {
     let run = |seed| {
         let mut tr = synthetic(seed, TextureMode::Full);
         tr.relocate();
-        tr.model
+        tr.model().clone()
     };
     assert_eq!(run(5), run(5));
     // Different seeds give different draws for at least one of a few seeds.
@@ -115,9 +115,9 @@ fn relocation_is_deterministic_given_the_seed() {
 fn nothing_dead_relocates_nothing() {
     let mut tr = synthetic(1, TextureMode::Full);
     tr.relocate();
-    let snapshot = tr.model.clone();
+    let snapshot = tr.model().clone();
     assert_eq!(tr.relocate(), 0);
-    assert_eq!(tr.model, snapshot);
+    assert_eq!(*tr.model(), snapshot);
 }
 
 #[test]
@@ -125,13 +125,17 @@ fn gaussian_mode_splits_the_opacity_scalar() {
     let seed = 3;
     let mut tr = synthetic(seed, TextureMode::Gaussian);
     let before: Vec<f32> = tr.opacity_logits().to_vec();
-    let before_positions = tr.model.positions.clone();
+    let before_positions = tr.model().positions.clone();
     assert_eq!(tr.relocate(), DEAD.len());
     let after = tr.opacity_logits();
     // Sources identified by the copied (unique) positions.
     let sources: Vec<usize> = DEAD
         .iter()
-        .map(|&d| (0..12).find(|&s| before_positions[s] == tr.model.positions[d]).unwrap())
+        .map(|&d| {
+            (0..12)
+                .find(|&s| before_positions[s] == tr.model().positions[d])
+                .unwrap()
+        })
         .collect();
     for (&d, &s) in DEAD.iter().zip(&sources) {
         assert_eq!(after[d], after[s], "the copy shares its source's split opacity");
@@ -174,24 +178,29 @@ fn relocation_resets_the_moments_of_sources_and_dead_slots_only() {
     for _ in 0..3 {
         tr.step(&views).unwrap();
     }
-    // Kill three rows by hand (model and activated copy).
+    // Kill three rows by hand (the activated copy follows).
+    tr.edit_model(|m| {
+        for &d in &DEAD {
+            m.alpha_logits[d * T..(d + 1) * T].fill(-12.0);
+        }
+    });
     for &d in &DEAD {
         for k in 0..T {
-            tr.model.alpha_logits[d * T + k] = -12.0;
-            tr.activated.textures[d * T + k][3] = if tr.model.alpha_mask[k] { sigmoid(-12.0) } else { 0.0 };
+            let dead = if tr.model().alpha_mask[k] { sigmoid(-12.0) } else { 0.0 };
+            assert_eq!(tr.activated().textures[d * T + k][3].to_bits(), dead.to_bits());
         }
     }
-    let before = tr.model.clone();
+    let before = tr.model().clone();
     let moved = tr.relocate();
     assert_eq!(moved, DEAD.len());
-    let reset: Vec<usize> = (0..tr.model.len())
+    let reset: Vec<usize> = (0..tr.model().len())
         .filter(|&i| {
-            DEAD.contains(&i) || tr.model.alpha_logits[i * T..(i + 1) * T] != before.alpha_logits[i * T..(i + 1) * T]
+            DEAD.contains(&i) || tr.model().alpha_logits[i * T..(i + 1) * T] != before.alpha_logits[i * T..(i + 1) * T]
         })
         .collect();
     assert!(reset.len() > DEAD.len(), "some sources were split");
     let pos = &tr.adam()[group::POSITION];
-    for i in 0..tr.model.len() {
+    for i in 0..tr.model().len() {
         let zero = pos.m[i * 3..(i + 1) * 3].iter().all(|&x| x == 0.0) && pos.steps[i] == 0;
         // Dense Adam: after 3 steps every row has moments (the SH / opacity terms reach all rows
         // only through the regulariser; positions of unseen rows may be zero, so check only the
@@ -201,7 +210,7 @@ fn relocation_resets_the_moments_of_sources_and_dead_slots_only() {
         }
     }
     let alpha_group = &tr.adam()[group::ALPHA];
-    let untouched = (0..tr.model.len()).find(|i| !reset.contains(i)).unwrap();
+    let untouched = (0..tr.model().len()).find(|i| !reset.contains(i)).unwrap();
     assert!(alpha_group.steps[untouched] > 0, "untouched rows keep their state");
 }
 
