@@ -18,10 +18,8 @@
 //! no texel sums at all.
 
 use super::ForwardState;
-use super::forward::{
-    Candidate, PairOrder, RenderOutput, TileBlended, TileCandidates, prefetch, prefetch_lines, prefetch_record,
-    prefetch_ref, prefetch_taps, split_by_lengths, tile_pixels,
-};
+use super::forward::{Candidate, PairOrder, RenderOutput, TileBlended, TileCandidates, split_by_lengths, tile_pixels};
+use super::prefetch::{prefetch, prefetch_lines, prefetch_record, prefetch_ref, prefetch_taps};
 use super::preprocess::Prepared;
 use super::schedule::map_heaviest_first;
 use super::tile_backward::{EntryScratch, backward_tile_by_entry};

@@ -24,6 +24,7 @@ pub mod backward;
 pub mod binning;
 pub mod forward;
 pub mod lanes;
+pub(crate) mod prefetch;
 pub mod preprocess;
 pub mod reference;
 pub(crate) mod row_spans;

@@ -90,14 +90,14 @@ impl BillboardRows {
     /// 2026-11-28: one more prefetch per billboard.)
     #[inline]
     pub(crate) fn prefetch(&self, b: usize) {
-        super::forward::prefetch_steps(self.of(b));
+        super::prefetch::prefetch_steps(self.of(b));
     }
 
     /// Hints the CPU to fetch where billboard `b`'s rows are (no effect on values), so that
     /// [`BillboardRows::prefetch`] of it later finds them without a wait.
     #[inline]
     pub(crate) fn prefetch_range(&self, b: usize) {
-        super::forward::prefetch_ptr(self.ranges[b..].as_ptr().cast());
+        super::prefetch::prefetch_ptr(self.ranges[b..].as_ptr().cast());
     }
 
     /// The rows of billboard `b`, from its box's first row (empty when its spans are its box).

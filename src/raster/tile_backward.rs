@@ -17,7 +17,8 @@
 //! the gradients are the same bits (checksums of `raster_stats`; the raster tests).
 
 use super::backward::{EMPTY_RECORD, EntryRecord, OwnedRows, TexelSums, TileTexels, add_texel, add_transform};
-use super::forward::{EntryPair, PairOrder, RenderOutput, prefetch_record, tile_pixels};
+use super::forward::{EntryPair, PairOrder, RenderOutput, tile_pixels};
+use super::prefetch::prefetch_record;
 use super::preprocess::Prepared;
 #[cfg(target_arch = "x86_64")]
 use super::tile_backward_avx2::{add_lanes_in_order, chunk_backward, chunk_lanes};

@@ -13,9 +13,8 @@
 //! Per (entry, pixel) pair, work stops as soon as the pixel has stopped compositing
 //! (transmittance threshold), which the pixel-by-pixel walk also did.
 
-use super::forward::{
-    EntryPair, EntrySpans, PairOrder, TileBlended, TileSpans, prefetch_ptr, prefetch_ptr_l2, prefetch_record,
-};
+use super::forward::{EntryPair, EntrySpans, PairOrder, TileBlended, TileSpans};
+use super::prefetch::{prefetch_ptr, prefetch_ptr_l2, prefetch_record};
 use super::preprocess::Prepared;
 use super::{ActivatedRef, RenderSettings};
 use crate::camera::Camera;

@@ -10,7 +10,8 @@
 //! the same); the choice is made per tile ([`composite_tile`](super::tile_forward::composite_tile))
 //! and tested in `tests/suite/raster_lanes.rs`.
 
-use super::forward::{CANDIDATE_CHUNK, PairOrder, TileBlended, TileSpans, prefetch_record, prefetch_taps};
+use super::forward::{CANDIDATE_CHUNK, PairOrder, TileBlended, TileSpans};
+use super::prefetch::{prefetch_record, prefetch_taps};
 use super::preprocess::Prepared;
 use super::tile_forward::{FORWARD_FEATURES, PixelOut, TileInputs};
 use super::{ActivatedRef, RenderSettings};
