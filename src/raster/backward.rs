@@ -19,17 +19,17 @@
 
 use super::ForwardState;
 use super::forward::{Candidate, PairOrder, RenderOutput, TileBlended, TileCandidates, split_by_lengths, tile_pixels};
+use super::input::ActivatedRef;
 use super::prefetch::{prefetch, prefetch_lines, prefetch_record, prefetch_ref, prefetch_taps};
 use super::preprocess::Prepared;
 use super::schedule::map_heaviest_first;
 use super::tile_backward::{EntryScratch, backward_tile_by_entry};
-use super::{ActivatedRef, SH_FLOATS};
 use crate::camera::offset_from;
 use crate::stages::bilinear::BilinearTaps;
 use crate::stages::composite::{Blend, CompositeBackState, Step, classify};
 use crate::stages::depth_distortion::{DistortionTotals, depth_gradient, mapped_depth, weight_gradient};
 use crate::stages::ray_plane::{intersect_vjp_with, pixel_ray};
-use crate::stages::sh::sh_colour_vjp_clamped;
+use crate::stages::sh::{SH_FLOATS, sh_colour_vjp_clamped};
 use crate::stages::splat_transform::{CameraGrads, SplatTransform, camera_vjp, project_splat_vjp_visible};
 use glam::{DVec2, DVec3, Vec2, Vec3, Vec4};
 use rayon::prelude::*;

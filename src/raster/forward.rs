@@ -1,13 +1,14 @@
 //! Tiled forward pass: front-to-back compositing of every pixel over its tile's list.
 
+use super::TILE_SIZE;
 use super::binning::{BinScratch, TileBins, bin_into};
+use super::input::{ActivatedRef, RenderSettings};
 use super::prefetch::{prefetch_record, prefetch_taps};
 use super::preprocess::{Prepared, preprocess_into};
 use super::row_spans::{BillboardRows, is_wide};
 use super::schedule::map_heaviest_first;
 use super::tile_forward::{PixelOut, TileComposite, composite_tile};
 use super::tile_forward_pixels::{PixelWalk, composite_tile_by_pixel};
-use super::{ActivatedRef, RenderSettings, TILE_SIZE};
 use crate::camera::Camera;
 use crate::memory::{refill, resize_for_overwrite};
 use crate::stages::bilinear::{self, BilinearTaps};

@@ -16,14 +16,15 @@
 //! pixel-by-pixel walk (`backward_tile`, which still serves the normal and distortion maps), so
 //! the gradients are the same bits (checksums of `raster_stats`; the raster tests).
 
+use super::backward::ImageGradients;
 use super::backward::{EMPTY_RECORD, EntryRecord, OwnedRows, TexelSums, TileTexels, add_texel, add_transform};
 use super::forward::{EntryPair, PairOrder, RenderOutput, tile_pixels};
+use super::input::ActivatedRef;
 use super::prefetch::prefetch_record;
 use super::preprocess::Prepared;
 #[cfg(target_arch = "x86_64")]
 use super::tile_backward_avx2::{add_lanes_in_order, chunk_backward, chunk_lanes};
 use super::tile_forward::{TexelRect, prefetch_texel_rect, prefetch_texel_rect_l2, texel_footprint};
-use super::{ActivatedRef, backward::ImageGradients};
 use crate::stages::bilinear::RowTaps;
 use crate::stages::composite::{CompositeBackState, Step, classify};
 use crate::stages::ray_plane::{LANES, intersect_lanes, intersect_vjp_lanes};

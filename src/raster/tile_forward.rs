@@ -14,9 +14,9 @@
 //! (transmittance threshold), which the pixel-by-pixel walk also did.
 
 use super::forward::{EntryPair, EntrySpans, PairOrder, TileBlended, TileSpans};
+use super::input::{ActivatedRef, RenderSettings};
 use super::prefetch::{prefetch_ptr, prefetch_ptr_l2, prefetch_record};
 use super::preprocess::Prepared;
-use super::{ActivatedRef, RenderSettings};
 use crate::camera::Camera;
 use crate::stages::bilinear::RowTaps;
 use crate::stages::composite::{CompositeState, Step};

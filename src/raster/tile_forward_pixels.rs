@@ -11,10 +11,10 @@
 //! and tested in `tests/suite/raster_lanes.rs`.
 
 use super::forward::{CANDIDATE_CHUNK, PairOrder, TileBlended, TileSpans};
+use super::input::{ActivatedRef, RenderSettings};
 use super::prefetch::{prefetch_record, prefetch_taps};
 use super::preprocess::Prepared;
 use super::tile_forward::{FORWARD_FEATURES, PixelOut, TileInputs};
-use super::{ActivatedRef, RenderSettings};
 use crate::camera::Camera;
 use crate::memory::resize_for_overwrite;
 use crate::stages::bilinear::{self, SampleTaps};
