@@ -240,8 +240,8 @@ pub mod model_file {
 /// Rasterizer internals (`raster`).
 pub mod raster {
     use crate::camera::Camera;
-    use crate::raster::binning::{BinScratch, TileBins, bin_into};
-    use crate::raster::forward::{TileSpans, box_meets_tile, entry_spans_direct, local_spans, tile_pixels};
+    use crate::raster::binning::{BinScratch, TileBins, bin_into, tile_pixels};
+    use crate::raster::forward::{TileSpans, box_meets_tile, entry_spans_direct, local_spans};
     use crate::raster::preprocess::Prepared;
     use crate::raster::preprocess::preprocess_into;
     use crate::raster::row_spans::BillboardRows;

@@ -18,11 +18,12 @@
 //! no texel sums at all.
 
 use super::ForwardState;
-use super::forward::{Candidate, PairOrder, RenderOutput, TileBlended, TileCandidates, split_by_lengths, tile_pixels};
+use super::binning::tile_pixels;
+use super::forward::{Candidate, PairOrder, RenderOutput, TileBlended, TileCandidates};
 use super::input::ActivatedRef;
 use super::prefetch::{prefetch, prefetch_lines, prefetch_record, prefetch_ref, prefetch_taps};
 use super::preprocess::Prepared;
-use super::schedule::map_heaviest_first;
+use super::schedule::{map_heaviest_first, split_by_lengths};
 use super::tile_backward::{EntryScratch, backward_tile_by_entry};
 use crate::camera::offset_from;
 use crate::stages::bilinear::BilinearTaps;

@@ -1,12 +1,11 @@
 //! Tiled forward pass: front-to-back compositing of every pixel over its tile's list.
 
-use super::TILE_SIZE;
-use super::binning::{BinScratch, TileBins, bin_into};
+use super::binning::{BinScratch, TILE_SIZE, TileBins, bin_into, tile_pixels};
 use super::input::{ActivatedRef, RenderSettings};
 use super::prefetch::{prefetch_record, prefetch_taps};
 use super::preprocess::{Prepared, preprocess_into};
 use super::row_spans::{BillboardRows, is_wide};
-use super::schedule::map_heaviest_first;
+use super::schedule::{map_heaviest_first, split_by_lengths};
 use super::tile_forward::{PixelOut, TileComposite, composite_tile};
 use super::tile_forward_pixels::{PixelWalk, composite_tile_by_pixel};
 use crate::camera::Camera;
@@ -553,26 +552,6 @@ struct TileScratch {
 /// (`docs/perf.md`, 2026-11-28 seventh session). The threshold had been 4, which left random
 /// scenes of 4-11 pixels per entry on the slower walk (400²/50k 1.6 times as long).
 pub const SMALL_ENTRY_PIXELS: usize = 12;
-
-/// Splits `data` into consecutive mutable chunks of the given lengths.
-pub(crate) fn split_by_lengths<T>(mut data: &mut [T], lengths: impl Iterator<Item = usize>) -> Vec<&mut [T]> {
-    let mut out = Vec::new();
-    for len in lengths {
-        let (head, tail) = data.split_at_mut(len);
-        out.push(head);
-        data = tail;
-    }
-    out
-}
-
-/// The pixel rectangle of tile `t`: `(i0, j0, i1, j1)`, exclusive ends.
-pub(crate) fn tile_pixels(bins: &TileBins, t: usize, width: u32, height: u32) -> (u32, u32, u32, u32) {
-    let tx = t as u32 % bins.tiles_x;
-    let ty = t as u32 / bins.tiles_x;
-    let i0 = tx * TILE_SIZE;
-    let j0 = ty * TILE_SIZE;
-    (i0, j0, (i0 + TILE_SIZE).min(width), (j0 + TILE_SIZE).min(height))
-}
 
 /// Renders the billboards seen by `camera`.
 ///

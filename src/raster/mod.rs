@@ -38,29 +38,12 @@ mod tile_forward_pixels;
 pub mod workload;
 
 pub use backward::{RenderGradients, render_backward};
+pub use binning::TILE_SIZE;
 pub use forward::{
     ForwardState, PairOrder, RenderBuffers, RenderOutput, RenderStats, TileBlended, render, render_with,
 };
 pub use input::{ActivatedRef, RenderSettings};
 pub use workload::WorkloadStats;
-
-/// Side of a square screen tile in pixels.
-///
-/// The images do not depend on it (every pixel composites the same billboards in the same
-/// order); the gradients do, through the order of the per-billboard sums (pixel order within a
-/// tile, then tile order): against 16, about 3 % of a trained-like scene's gradients differ, by
-/// 1e-7 of their size at the median and 1.4e-6 at the 99th percentile.
-///
-/// 48 rather than the reference's 16: the per-entry work (records, prefetches, texel-sum
-/// read-outs) is shared by more pixels and the lanes of a billboard's rows are fuller. Measured in docs/perf.md (2026-11-27 evening, criterion,
-/// interleaved with the 16-px code): forward + backward 0.87 (object) and 0.91 (capture) of
-/// the time on the trained-like scenes, the training step 0.88, the 256²/50k scene unchanged;
-/// 64 was slower on the latter.
-pub const TILE_SIZE: u32 = 48;
-
-// Tile-local columns and rows are kept as `u8` (`EntryPair`, `EntrySpans`), tile-local pixel
-// indices and span pixel counts as `u16`: both fit while the side is at most 255.
-const _: () = assert!(TILE_SIZE >= 1 && TILE_SIZE <= 255, "tile coordinates must fit u8");
 
 /// SH storage per billboard: 16 coefficients × 3 channels, `[coeff][rgb]` (defined by the SH stage).
 pub use crate::stages::sh::{SH_COEFFS, SH_FLOATS};

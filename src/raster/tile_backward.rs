@@ -18,7 +18,8 @@
 
 use super::backward::ImageGradients;
 use super::backward::{EMPTY_RECORD, EntryRecord, OwnedRows, TexelSums, TileTexels, add_texel, add_transform};
-use super::forward::{EntryPair, PairOrder, RenderOutput, tile_pixels};
+use super::binning::tile_pixels;
+use super::forward::{EntryPair, PairOrder, RenderOutput};
 use super::input::ActivatedRef;
 use super::prefetch::prefetch_record;
 use super::preprocess::Prepared;

@@ -27,7 +27,7 @@
 
 #![cfg(target_arch = "x86_64")]
 
-use super::TILE_SIZE;
+use super::binning::TILE_SIZE;
 use super::forward::{EntryPair, PairOrder, TileBlended};
 use super::tile_forward::{FORWARD_FEATURES, PixelOut, TexelPrefetch, TileInputs};
 use crate::camera::Camera;
