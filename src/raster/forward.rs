@@ -15,6 +15,11 @@ use crate::stages::ray_plane::{intersect_with, pixel_ray};
 use crate::stages::splat_transform::{ROW_LANES, pixel_range, support_quad};
 use rayon::prelude::*;
 
+// The forward's two size thresholds, defined where they are used (the tile-walk choice, the
+// rows of a wide box), also at their paths here.
+pub use super::lanes::SMALL_ENTRY_PIXELS;
+pub use super::row_spans::QUAD_MIN_COLUMNS;
+
 /// Everything the backward pass needs from the forward pass.
 #[derive(Clone, Debug)]
 pub struct ForwardState {
@@ -410,9 +415,6 @@ impl TileSpans {
     }
 }
 
-/// Boxes narrower than this many pixel columns are not culled row by row (nothing to gain).
-pub const QUAD_MIN_COLUMNS: u32 = 4;
-
 /// The [`EntrySpans`] of a tile's entries, written to `spans` (its old contents replaced, its
 /// storage reused): the billboard's pixel box clamped to the tile and, when the box is at least
 /// [`QUAD_MIN_COLUMNS`] wide and [`support_quad`] gives the projected support square, each row
@@ -540,18 +542,6 @@ struct TileScratch {
     composite: TileComposite,
     walk: PixelWalk,
 }
-
-/// A tile whose entries cover fewer pixels than this on average (their span pixels, a little
-/// more than the pixels they are evaluated at) is composited pixel by pixel
-/// (`composite_tile_by_pixel`), others billboard by billboard (`composite_tile`); its backward
-/// walks it the same way. With each walk forced on every tile of random scenes of 2 to 34
-/// evaluated pixels per entry (0.8 to 7.6 per pixel) and of the trained-like scenes (63 to 223
-/// per entry, 16 to 23 per pixel), the pixel walk took 12-45 % less time up to 9-11 pixels per
-/// entry (one scene at 9.6 excepted: 12 % more) and the entry walk 2-38 % less from 16 on,
-/// whatever the depth; the trained-like scenes took 2.1-3.2 times as long by pixel
-/// (`docs/perf.md`, 2026-11-28 seventh session). The threshold had been 4, which left random
-/// scenes of 4-11 pixels per entry on the slower walk (400²/50k 1.6 times as long).
-pub const SMALL_ENTRY_PIXELS: usize = 12;
 
 /// Renders the billboards seen by `camera`.
 ///

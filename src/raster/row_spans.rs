@@ -17,11 +17,13 @@
 //! columns end at `n₁ ≤ pixel_max + 1 = n₂` whenever the box overlaps the tile; a tile whose
 //! rectangle the box misses (not binned there, kept exact anyway) takes the per-entry path.
 
-use super::forward::QUAD_MIN_COLUMNS;
 use super::preprocess::Prepared;
 use crate::memory::resize_for_overwrite;
 use crate::stages::splat_transform::{ROW_LANES, pixel_range, support_quad};
 use rayon::prelude::*;
+
+/// Boxes narrower than this many pixel columns are not culled row by row (nothing to gain).
+pub const QUAD_MIN_COLUMNS: u32 = 4;
 
 /// Billboards per parallel task of [`BillboardRows::build`].
 const BUILD_BLOCK: usize = 256;
