@@ -241,10 +241,10 @@ pub mod model_file {
 pub mod raster {
     use crate::camera::Camera;
     use crate::raster::binning::{BinScratch, TileBins, bin_into, tile_pixels};
-    use crate::raster::forward::{TileSpans, box_meets_tile, entry_spans_direct, local_spans};
     use crate::raster::preprocess::Prepared;
     use crate::raster::preprocess::preprocess_into;
     use crate::raster::row_spans::BillboardRows;
+    use crate::raster::tile_spans::{TileSpans, box_meets_tile, entry_spans_direct, local_spans};
     use crate::raster::{ActivatedRef, RenderSettings};
     use crate::stages::splat_transform::support_half_side;
 

@@ -35,6 +35,7 @@ mod tile_backward_avx2;
 mod tile_forward;
 pub(crate) mod tile_forward_avx2;
 mod tile_forward_pixels;
+pub(crate) mod tile_spans;
 pub mod workload;
 
 pub use backward::{RenderGradients, render_backward};

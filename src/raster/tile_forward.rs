@@ -13,10 +13,11 @@
 //! Per (entry, pixel) pair, work stops as soon as the pixel has stopped compositing
 //! (transmittance threshold), which the pixel-by-pixel walk also did.
 
-use super::forward::{EntryPair, EntrySpans, PairOrder, TileBlended, TileSpans};
+use super::forward::{EntryPair, PairOrder, TileBlended};
 use super::input::{ActivatedRef, RenderSettings};
 use super::prefetch::{prefetch_ptr, prefetch_ptr_l2, prefetch_record};
 use super::preprocess::Prepared;
+use super::tile_spans::{EntrySpans, TileSpans};
 use crate::camera::Camera;
 use crate::stages::bilinear::RowTaps;
 use crate::stages::composite::{CompositeState, Step};
