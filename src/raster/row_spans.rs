@@ -2,7 +2,7 @@
 //! hit, computed once per billboard and view and cut to each tile the billboard is listed in.
 //!
 //! The forward pass narrows every tile entry's pixels to the rows' spans of the billboard's
-//! projected support quad ([`local_spans`](super::forward::local_spans)). Computed per tile
+//! projected support quad ([`local_spans`](super::tile_spans::local_spans)). Computed per tile
 //! entry, each image row of a billboard is found again in every tile column the billboard
 //! crosses, and its quad is projected again in every tile (a trained scene's billboard is
 //! listed in about five tiles). [`BillboardRows`] computes each row once, for the whole width of
