@@ -19,12 +19,13 @@
 
 use super::ForwardState;
 use super::binning::tile_pixels;
-use super::forward::{Candidate, PairOrder, RenderOutput, TileBlended, TileCandidates};
+use super::forward::{Candidate, RenderOutput, TileCandidates};
 use super::input::ActivatedRef;
 use super::prefetch::{prefetch, prefetch_lines, prefetch_record, prefetch_ref, prefetch_taps};
 use super::preprocess::Prepared;
 use super::schedule::{map_heaviest_first, split_by_lengths};
 use super::tile_backward::{EntryScratch, backward_tile_by_entry};
+use super::tile_types::{PairOrder, TileBlended};
 use crate::camera::offset_from;
 use crate::stages::bilinear::BilinearTaps;
 use crate::stages::composite::{Blend, CompositeBackState, Step, classify};

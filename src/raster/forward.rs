@@ -6,9 +6,10 @@ use super::prefetch::prefetch_taps;
 use super::preprocess::{Prepared, preprocess_into};
 use super::row_spans::BillboardRows;
 use super::schedule::{map_heaviest_first, split_by_lengths};
-use super::tile_forward::{PixelOut, TileComposite, composite_tile};
+use super::tile_forward::{TileComposite, composite_tile};
 use super::tile_forward_pixels::{PixelWalk, composite_tile_by_pixel};
 use super::tile_spans::{TileSpans, local_spans};
+use super::tile_types::PixelOut;
 use crate::camera::Camera;
 use crate::memory::{refill, resize_for_overwrite};
 use crate::stages::bilinear::{self, BilinearTaps};
@@ -19,6 +20,8 @@ use rayon::prelude::*;
 // rows of a wide box), also at their paths here.
 pub use super::lanes::SMALL_ENTRY_PIXELS;
 pub use super::row_spans::QUAD_MIN_COLUMNS;
+// The tile types of the forward's output, at their paths here too.
+pub use super::tile_types::{PairOrder, TileBlended};
 
 /// Everything the backward pass needs from the forward pass.
 #[derive(Clone, Debug)]
@@ -39,135 +42,6 @@ pub struct ForwardState {
     pub tiles: Vec<TileBlended>,
     /// The forward pass's temporaries, kept for [`RenderOutput::into_buffers`].
     pub(crate) spare: ForwardSpare,
-}
-
-/// How the blended pairs of a tile are grouped in its [`TileBlended`]: in the order the
-/// forward's walk of that tile found them. The backward walks the tile the same way (pixel by
-/// pixel when it also has normal or distortion gradients), so neither pass regroups them.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum PairOrder {
-    /// Pixel by pixel (tile-local row-major), front to back within a pixel: the tile was
-    /// walked pixel by pixel.
-    #[default]
-    ByPixel,
-    /// Entry by entry (tile-list order, front to back), pixel order within an entry: the tile
-    /// was walked billboard by billboard.
-    ByEntry,
-}
-
-/// One blended pair of a tile walked entry by entry: the tile-local pixel (its index, column
-/// and row, so that the backward divides nothing) and the transmittance in front of the entry
-/// there. Laid out as C lays it out (pixel, column, row and transmittance at bytes 0, 2, 3 and
-/// 4), so that the AVX2 forward writes the pairs of a run of lanes as two vectors
-/// (`tile_forward_avx2::push_pairs`).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[repr(C)]
-pub(crate) struct EntryPair {
-    pub(crate) pixel: u16,
-    pub(crate) x: u8,
-    pub(crate) y: u8,
-    pub(crate) transmittance: f32,
-}
-
-const _: () = {
-    assert!(size_of::<EntryPair>() == 8);
-    assert!(std::mem::offset_of!(EntryPair, pixel) == 0);
-    assert!(std::mem::offset_of!(EntryPair, x) == 2);
-    assert!(std::mem::offset_of!(EntryPair, y) == 3);
-    assert!(std::mem::offset_of!(EntryPair, transmittance) == 4);
-};
-
-/// The blended (entry, pixel) pairs of one tile, grouped as [`TileBlended::order`] says, with
-/// the transmittance in front of each entry where it was blended (`Tᵢ`), which lets the
-/// backward pass visit a tile's entries back to front without replaying each pixel's
-/// compositing from the front. [`TileBlended::pairs_by_pixel`] lists them in one canonical
-/// order whatever the grouping.
-#[derive(Clone, Debug, Default)]
-pub struct TileBlended {
-    pub(crate) order: PairOrder,
-    /// [`PairOrder::ByPixel`]: per pair, its tile-list slot (an index into the tile's
-    /// [`TileBins::tile_range`] of [`TileBins::entries`]). Empty otherwise.
-    pub(crate) slots: Vec<u32>,
-    /// [`PairOrder::ByPixel`]: per pair, the transmittance in front of it. Empty otherwise.
-    pub(crate) transmittance: Vec<f32>,
-    /// [`PairOrder::ByEntry`]: the pairs. Empty otherwise.
-    pub(crate) entry_pairs: Vec<EntryPair>,
-    /// The pairs of group `g` (tile-local pixel `g` by pixel, slot `g` by entry) are
-    /// `offsets[g]..offsets[g + 1]`; `offsets[0] = 0`.
-    pub(crate) offsets: Vec<u32>,
-}
-
-impl TileBlended {
-    /// Empties every list (keeping their storage) for a tile whose pairs will be grouped as
-    /// `order` says: the one start of every forward tile walk.
-    pub(crate) fn start(&mut self, order: PairOrder) {
-        self.order = order;
-        self.slots.clear();
-        self.transmittance.clear();
-        self.entry_pairs.clear();
-        self.offsets.clear();
-    }
-
-    /// How the pairs are grouped.
-    pub fn order(&self) -> PairOrder {
-        self.order
-    }
-
-    /// Number of blended pairs.
-    pub fn len(&self) -> usize {
-        match self.order {
-            PairOrder::ByPixel => self.slots.len(),
-            PairOrder::ByEntry => self.entry_pairs.len(),
-        }
-    }
-
-    /// True when no pixel of the tile blended anything.
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
-    /// Every pair as `(tile-local pixel, slot, transmittance in front)`, pixel by pixel and
-    /// front to back within a pixel, whatever [`TileBlended::order`] is.
-    ///
-    /// ```
-    /// use bbsplat::billboards::{RandomSceneConfig, random_scene, random_scene_camera};
-    /// use bbsplat::raster::{RenderSettings, render};
-    /// let scene = random_scene(&RandomSceneConfig::benchmark(300, 48, 48));
-    /// let out = render(&scene.borrowed(), &random_scene_camera(48, 48), &RenderSettings::default());
-    /// let mut pairs = 0;
-    /// for tile in &out.state.tiles {
-    ///     let listed = tile.pairs_by_pixel();
-    ///     // Pixel by pixel, and nearer entries (lower slots) first within a pixel.
-    ///     assert!(listed.windows(2).all(|w| (w[0].0, w[0].1) < (w[1].0, w[1].1)));
-    ///     pairs += listed.len();
-    /// }
-    /// assert_eq!(pairs as u64, out.stats.blended_pairs);
-    /// ```
-    pub fn pairs_by_pixel(&self) -> Vec<(u32, u32, f32)> {
-        match self.order {
-            PairOrder::ByPixel => (0..self.offsets.len().saturating_sub(1))
-                .flat_map(|q| {
-                    let r = self.offsets[q] as usize..self.offsets[q + 1] as usize;
-                    self.slots[r.clone()]
-                        .iter()
-                        .zip(&self.transmittance[r])
-                        .map(move |(&slot, &t)| (q as u32, slot, t))
-                })
-                .collect(),
-            PairOrder::ByEntry => {
-                let mut pairs: Vec<(u32, u32, f32)> = (0..self.offsets.len().saturating_sub(1))
-                    .flat_map(|k| {
-                        self.entry_pairs[self.offsets[k] as usize..self.offsets[k + 1] as usize]
-                            .iter()
-                            .map(move |pair| (u32::from(pair.pixel), k as u32, pair.transmittance))
-                    })
-                    .collect();
-                // Stable: slots stay in list (front-to-back) order within a pixel.
-                pairs.sort_by_key(|&(q, _, _)| q);
-                pairs
-            }
-        }
-    }
 }
 
 /// The images and per-billboard statistics of a render.

@@ -30,20 +30,21 @@ pub mod preprocess;
 pub mod reference;
 pub(crate) mod row_spans;
 pub(crate) mod schedule;
+mod texel_prefetch;
 mod tile_backward;
 mod tile_backward_avx2;
 mod tile_forward;
 pub(crate) mod tile_forward_avx2;
 mod tile_forward_pixels;
 pub(crate) mod tile_spans;
+mod tile_types;
 pub mod workload;
 
 pub use backward::{RenderGradients, render_backward};
 pub use binning::TILE_SIZE;
-pub use forward::{
-    ForwardState, PairOrder, RenderBuffers, RenderOutput, RenderStats, TileBlended, render, render_with,
-};
+pub use forward::{ForwardState, RenderBuffers, RenderOutput, RenderStats, render, render_with};
 pub use input::{ActivatedRef, RenderSettings};
+pub use tile_types::{PairOrder, TileBlended};
 pub use workload::WorkloadStats;
 
 /// SH storage per billboard: 16 coefficients × 3 channels, `[coeff][rgb]` (defined by the SH stage).

@@ -19,13 +19,14 @@
 use super::backward::ImageGradients;
 use super::backward::{EMPTY_RECORD, EntryRecord, OwnedRows, TexelSums, TileTexels, add_texel, add_transform};
 use super::binning::tile_pixels;
-use super::forward::{EntryPair, PairOrder, RenderOutput};
+use super::forward::RenderOutput;
 use super::input::ActivatedRef;
 use super::prefetch::prefetch_record;
 use super::preprocess::Prepared;
+use super::texel_prefetch::{TexelRect, prefetch_texel_rect, prefetch_texel_rect_l2, texel_footprint};
 #[cfg(target_arch = "x86_64")]
 use super::tile_backward_avx2::{add_lanes_in_order, chunk_backward, chunk_lanes};
-use super::tile_forward::{TexelRect, prefetch_texel_rect, prefetch_texel_rect_l2, texel_footprint};
+use super::tile_types::{EntryPair, PairOrder};
 use crate::stages::bilinear::RowTaps;
 use crate::stages::composite::{CompositeBackState, Step, classify};
 use crate::stages::ray_plane::{LANES, intersect_lanes, intersect_vjp_lanes};

@@ -22,9 +22,9 @@
 
 #![cfg(target_arch = "x86_64")]
 
-use super::forward::EntryPair;
 use super::tile_backward::{CHANNELS, PixelBack, TexelTarget};
 use super::tile_forward_avx2::{Thresholds, decide, sample_lanes_with_texels, store, transpose_four};
+use super::tile_types::EntryPair;
 use crate::stages::bilinear::RowTaps;
 use crate::stages::composite::{ClampGradient, CompositeParams};
 use crate::stages::ray_plane::{LANES, LaneTransforms, RowHits};

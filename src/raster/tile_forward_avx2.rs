@@ -28,8 +28,8 @@
 #![cfg(target_arch = "x86_64")]
 
 use super::binning::TILE_SIZE;
-use super::forward::{EntryPair, PairOrder, TileBlended};
-use super::tile_forward::{FORWARD_FEATURES, PixelOut, TexelPrefetch, TileInputs};
+use super::texel_prefetch::TexelPrefetch;
+use super::tile_types::{EntryPair, FORWARD_FEATURES, PairOrder, PixelOut, TileBlended, TileInputs};
 use crate::camera::Camera;
 use crate::stages::bilinear::RowTaps;
 #[cfg(feature = "testing")]

@@ -10,12 +10,12 @@
 //! the same); the choice is made per tile ([`composite_tile`](super::tile_forward::composite_tile))
 //! and tested in `tests/suite/raster_lanes.rs`.
 
-use super::forward::{CANDIDATE_CHUNK, PairOrder, TileBlended};
+use super::forward::CANDIDATE_CHUNK;
 use super::input::{ActivatedRef, RenderSettings};
 use super::prefetch::{prefetch_record, prefetch_taps};
 use super::preprocess::Prepared;
-use super::tile_forward::{FORWARD_FEATURES, PixelOut, TileInputs};
 use super::tile_spans::TileSpans;
+use super::tile_types::{FORWARD_FEATURES, PairOrder, PixelOut, TileBlended, TileInputs};
 use crate::camera::Camera;
 use crate::memory::resize_for_overwrite;
 use crate::stages::bilinear::{self, SampleTaps};
