@@ -17,10 +17,10 @@
 //! row after it, in tile order (see `OwnedRows`); a billboard with a single tile entry thus has
 //! no texel sums at all.
 
-use super::ForwardState;
 use super::binning::tile_pixels;
-use super::forward::{Candidate, RenderOutput, TileCandidates};
+use super::candidates::{Candidate, TileCandidates};
 use super::input::ActivatedRef;
+use super::output::{ForwardState, RenderOutput};
 use super::prefetch::{prefetch, prefetch_lines, prefetch_record, prefetch_ref, prefetch_taps};
 use super::preprocess::Prepared;
 use super::schedule::{map_heaviest_first, split_by_lengths};

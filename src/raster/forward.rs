@@ -1,19 +1,14 @@
 //! Tiled forward pass: front-to-back compositing of every pixel over its tile's list.
 
-use super::binning::{BinScratch, TILE_SIZE, TileBins, bin_into, tile_pixels};
+use super::binning::{TILE_SIZE, bin_into, tile_pixels};
 use super::input::{ActivatedRef, RenderSettings};
-use super::prefetch::prefetch_taps;
-use super::preprocess::{Prepared, preprocess_into};
-use super::row_spans::BillboardRows;
+use super::preprocess::preprocess_into;
 use super::schedule::{map_heaviest_first, split_by_lengths};
 use super::tile_forward::{TileComposite, composite_tile};
 use super::tile_forward_pixels::{PixelWalk, composite_tile_by_pixel};
 use super::tile_spans::{TileSpans, local_spans};
-use super::tile_types::PixelOut;
 use crate::camera::Camera;
 use crate::memory::{refill, resize_for_overwrite};
-use crate::stages::bilinear::{self, BilinearTaps};
-use crate::stages::ray_plane::{intersect_with, pixel_ray};
 use rayon::prelude::*;
 
 // The forward's two size thresholds, defined where they are used (the tile-walk choice, the
@@ -22,183 +17,8 @@ pub use super::lanes::SMALL_ENTRY_PIXELS;
 pub use super::row_spans::QUAD_MIN_COLUMNS;
 // The tile types of the forward's output, at their paths here too.
 pub use super::tile_types::{PairOrder, TileBlended};
-
-/// Everything the backward pass needs from the forward pass.
-#[derive(Clone, Debug)]
-pub struct ForwardState {
-    /// The camera that was rendered.
-    pub camera: Camera,
-    /// The settings of the render.
-    pub settings: RenderSettings,
-    /// Per billboard: its prepared data, `None` when culled.
-    pub prepared: Vec<Option<Prepared>>,
-    /// Tile lists.
-    pub bins: TileBins,
-    /// Per pixel: transmittance left after the last blended billboard.
-    pub final_transmittance: Vec<f32>,
-    /// Per tile (the index of [`TileBins::tile_range`]): the entries its pixels blended
-    /// ([`TileBlended`]). Kept where each tile's task wrote them, so that the backward pass
-    /// reads them without a copy into one image-wide list.
-    pub tiles: Vec<TileBlended>,
-    /// The forward pass's temporaries, kept for [`RenderOutput::into_buffers`].
-    pub(crate) spare: ForwardSpare,
-}
-
-/// The images and per-billboard statistics of a render.
-#[derive(Clone, Debug)]
-pub struct RenderOutput {
-    /// Image width in pixels.
-    pub width: u32,
-    /// Image height in pixels.
-    pub height: u32,
-    /// Colour, interleaved RGB row-major: `Σ c·α·T + T_final·background`. Not clamped.
-    pub rgb: Vec<f32>,
-    /// Accumulated opacity `1 − T_final` per pixel (computed as `Σ α·T`).
-    pub alpha: Vec<f32>,
-    /// Alpha-weighted depth `Σ α·T·z` per pixel, z the view depth of the hit. Divide by
-    /// [`RenderOutput::alpha`] for the expected depth of the visible surface.
-    pub depth: Vec<f32>,
-    /// Median depth per pixel: view depth of the last blended hit with `T > 0.5` before it and
-    /// `α > 0.05` (the reference's rule); 0 where there is none. Not differentiable.
-    pub median_depth: Vec<f32>,
-    /// Alpha-weighted view-space normal `Σ α·T·n`, interleaved xyz, normals facing the camera.
-    pub normal: Vec<f32>,
-    /// Depth-distortion map per pixel ([`crate::stages::depth_distortion`]) when
-    /// [`RenderSettings::distortion`] asked for it; empty otherwise.
-    pub distortion: Vec<f32>,
-    /// Per billboard: `Σ α·T` over all pixels of this view (the "impact"); 0 when culled.
-    pub impact: Vec<f32>,
-    /// Per billboard: true when it was not culled by preprocessing (it touches the screen).
-    pub visible: Vec<bool>,
-    /// Work counters of this render.
-    pub stats: RenderStats,
-    /// What the backward pass needs.
-    pub state: ForwardState,
-}
-
-/// Work counters of one render, for performance reports.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct RenderStats {
-    /// (tile, billboard) entries after binning.
-    pub tile_entries: u64,
-    /// (pixel, billboard) pairs whose ray-plane intersection was evaluated (the pixel centre was
-    /// inside the billboard's screen box and, for billboards with a support quad, inside its
-    /// row span).
-    pub evaluated_pairs: u64,
-    /// (pixel, billboard) pairs that were blended.
-    pub blended_pairs: u64,
-    /// Billboards with a non-finite position, log-scale or quaternion component: culled (they
-    /// have no place on screen), and counted here so that a caller can tell them from billboards
-    /// that are merely out of view. Non-finite SH coefficients or colour texels are not counted:
-    /// they make the pixels the billboard covers NaN.
-    pub non_finite_billboards: u64,
-    /// (pixel, billboard) pairs whose sampled alpha was NaN: skipped, as the compositing stage
-    /// skips NaN alphas, and counted here.
-    pub nan_alpha_pairs: u64,
-}
-
-/// One (pixel, entry) pair of a tile whose ray hits the billboard's texture support: the entry's
-/// slot in the tile list, the view depth of the hit and the bilinear taps.
-#[derive(Clone, Copy)]
-pub(crate) struct Candidate {
-    pub(crate) slot: u32,
-    pub(crate) depth: f32,
-    pub(crate) taps: BilinearTaps,
-}
-
-/// The candidates of a run of pixels of a tile (the backward pass's walk; the forward pass samples
-/// entry by entry, [`TileSamples`](super::tile_forward_pixels::TileSamples)), computed before they are used so that
-/// the texels they read can be prefetched: the texture reads are scattered over the whole texture
-/// arrays (one random cache line per tap row and channel), and issuing them up front lets the
-/// misses overlap instead of stalling the compositing loop one at a time. A run is cut once it
-/// holds [`CANDIDATE_CHUNK`] candidates, so that the prefetched lines are still in cache when
-/// they are read, whatever the overlap per pixel. The candidates of tile-local pixel `q`
-/// (row-major over the tile's own width) are `items[offsets[q - first]..offsets[q - first + 1]]`,
-/// in list (depth) order. Same arithmetic as evaluating them inside the compositing loop.
-#[derive(Default)]
-pub(crate) struct TileCandidates {
-    first: usize,
-    offsets: Vec<u32>,
-    items: Vec<Candidate>,
-}
-
-/// Candidates per run of [`TileCandidates`]: 256 candidates prefetch at most 4096 lines
-/// (256 KiB), which stay in a 512 KiB L2 until they are composited.
-pub(crate) const CANDIDATE_CHUNK: usize = 256;
-
-impl TileCandidates {
-    /// Fills the candidates of the tile-local pixels `first..` of the tile `(i0, j0, i1, j1)`,
-    /// stopping after the pixel that brings the run to [`CANDIDATE_CHUNK`] candidates or at the
-    /// tile's end; returns the end of the run (exclusive). Pixel `q` considers the tile-list
-    /// slots `slots(q)`, in order. `also(slot, taps)` is called for every candidate, where its
-    /// texels are prefetched (the backward pass prefetches gradient rows there; it must not
-    /// change any value).
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn build<'a>(
-        &mut self,
-        camera: &Camera,
-        set: &ActivatedRef<'_>,
-        prepared: &[Option<Prepared>],
-        list: &[u32],
-        (i0, j0, i1, j1): (u32, u32, u32, u32),
-        first: usize,
-        slots: impl Fn(usize) -> &'a [u32],
-        also: impl Fn(u32, &BilinearTaps),
-    ) -> usize {
-        let ts = set.texture_size;
-        let tw = (i1 - i0) as usize;
-        let n = tw * (j1 - j0) as usize;
-        self.first = first;
-        self.offsets.clear();
-        self.items.clear();
-        self.offsets.push(0);
-        let mut q = first;
-        // The pixel of `q`, advanced row-major (no division per pixel).
-        let (mut i, mut j) = (i0 + (first % tw) as u32, j0 + (first / tw) as u32);
-        while q < n && self.items.len() < CANDIDATE_CHUNK {
-            let (px, py) = (i as f32 + 0.5, j as f32 + 0.5);
-            let ray = pixel_ray(camera, px, py);
-            for &k in slots(q) {
-                let b = list[k as usize] as usize;
-                let Some(p) = prepared[b].as_ref() else {
-                    continue;
-                };
-                // Hit depths by the plane equation (see `ViewPlane`), as the backward's near-plane
-                // test takes them.
-                let plane = p.view_plane();
-                let Some(hit) = intersect_with(&p.transform, px, py, |_, _| plane.depth(ray)) else {
-                    continue;
-                };
-                let Some(taps) = bilinear::taps(hit.u, hit.v, ts) else {
-                    continue;
-                };
-                // One 16-byte RGBA texel per tap: the two taps of a row share a cache line unless
-                // they straddle a 64-byte boundary (one row pair in four).
-                prefetch_taps(set.texture_of(b).as_ptr(), taps.indices());
-                also(k, &taps);
-                self.items.push(Candidate {
-                    slot: k,
-                    depth: hit.depth,
-                    taps,
-                });
-            }
-            self.offsets.push(self.items.len() as u32);
-            q += 1;
-            i += 1;
-            if i == i1 {
-                (i, j) = (i0, j + 1);
-            }
-        }
-        q
-    }
-
-    /// The candidates of tile-local pixel `q` (within the last run built).
-    #[inline]
-    pub(crate) fn of(&self, q: usize) -> &[Candidate] {
-        let r = q - self.first;
-        &self.items[self.offsets[r] as usize..self.offsets[r + 1] as usize]
-    }
-}
+// What a render returns, at its paths here too.
+pub use super::output::{ForwardState, RenderBuffers, RenderOutput, RenderStats};
 
 /// Reusable per-task scratch of the forward tile pass (every field is rebuilt per tile).
 #[derive(Default)]
@@ -218,65 +38,6 @@ struct TileScratch {
 /// When the slices of `set` have inconsistent lengths (see [`ActivatedRef::assert_consistent`]).
 pub fn render(set: &ActivatedRef<'_>, camera: &Camera, settings: &RenderSettings) -> RenderOutput {
     render_with(set, camera, settings, RenderBuffers::default())
-}
-
-/// The storage of a [`RenderOutput`] and of the forward pass's temporaries, handed back by
-/// [`RenderOutput::into_buffers`] for the next [`render_with`] call.
-///
-/// Holds no result: every value a render produces is written afresh, so recycling changes no
-/// bit of any output (tested). What it saves is fresh allocations: the per-billboard records,
-/// tile lists and images of a render are several megabytes, and whether the allocator keeps
-/// freed memory between calls or returns it to the kernel (a page fault and a page clear per
-/// 4 KiB on the next call) depends on the process: measured about 2000 faults per call in one
-/// harness and none in another (`docs/perf-log.md`). Recycled buffers do not fault in either.
-#[derive(Clone, Debug, Default)]
-pub struct RenderBuffers {
-    /// rgb, alpha, depth, median depth, normal, final transmittance, distortion.
-    images: [Vec<f32>; 7],
-    impact: Vec<f32>,
-    visible: Vec<bool>,
-    prepared: Vec<Option<Prepared>>,
-    bins: TileBins,
-    tiles: Vec<TileBlended>,
-    spare: ForwardSpare,
-}
-
-/// Temporaries of the forward pass, kept with its output so that [`RenderBuffers`] can hand
-/// them to the next render.
-#[derive(Clone, Debug, Default)]
-pub(crate) struct ForwardSpare {
-    bin_scratch: BinScratch,
-    entry_impact: Vec<f32>,
-    /// Per tile: its pixels' outputs.
-    tile_outputs: Vec<Vec<PixelOut>>,
-    /// Per tile: its pixels' distortion (empty unless [`RenderSettings::distortion`]).
-    tile_distortion: Vec<Vec<f32>>,
-    /// Per billboard: the columns of its box's rows that its support quad can reach.
-    billboard_rows: BillboardRows,
-}
-
-impl RenderOutput {
-    /// The output's storage, for the next [`render_with`]; its values are discarded.
-    pub fn into_buffers(self) -> RenderBuffers {
-        let state = self.state;
-        RenderBuffers {
-            images: [
-                self.rgb,
-                self.alpha,
-                self.depth,
-                self.median_depth,
-                self.normal,
-                state.final_transmittance,
-                self.distortion,
-            ],
-            impact: self.impact,
-            visible: self.visible,
-            prepared: state.prepared,
-            bins: state.bins,
-            tiles: state.tiles,
-            spare: state.spare,
-        }
-    }
 }
 
 /// [`render`] into recycled storage (see [`RenderBuffers`]): bit-identical outputs, fewer

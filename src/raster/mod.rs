@@ -22,9 +22,11 @@
 
 pub mod backward;
 pub mod binning;
+mod candidates;
 pub mod forward;
 mod input;
 pub mod lanes;
+mod output;
 pub(crate) mod prefetch;
 pub mod preprocess;
 pub mod reference;
@@ -42,8 +44,9 @@ pub mod workload;
 
 pub use backward::{RenderGradients, render_backward};
 pub use binning::TILE_SIZE;
-pub use forward::{ForwardState, RenderBuffers, RenderOutput, RenderStats, render, render_with};
+pub use forward::{render, render_with};
 pub use input::{ActivatedRef, RenderSettings};
+pub use output::{ForwardState, RenderBuffers, RenderOutput, RenderStats};
 pub use tile_types::{PairOrder, TileBlended};
 pub use workload::WorkloadStats;
 

@@ -19,8 +19,8 @@
 use super::backward::ImageGradients;
 use super::backward::{EMPTY_RECORD, EntryRecord, OwnedRows, TexelSums, TileTexels, add_texel, add_transform};
 use super::binning::tile_pixels;
-use super::forward::RenderOutput;
 use super::input::ActivatedRef;
+use super::output::RenderOutput;
 use super::prefetch::prefetch_record;
 use super::preprocess::Prepared;
 use super::texel_prefetch::{TexelRect, prefetch_texel_rect, prefetch_texel_rect_l2, texel_footprint};

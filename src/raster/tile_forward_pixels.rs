@@ -10,7 +10,7 @@
 //! the same); the choice is made per tile ([`composite_tile`](super::tile_forward::composite_tile))
 //! and tested in `tests/suite/raster_lanes.rs`.
 
-use super::forward::CANDIDATE_CHUNK;
+use super::candidates::CANDIDATE_CHUNK;
 use super::input::{ActivatedRef, RenderSettings};
 use super::prefetch::{prefetch_record, prefetch_taps};
 use super::preprocess::Prepared;
