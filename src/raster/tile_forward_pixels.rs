@@ -138,7 +138,7 @@ pub(crate) struct SampledCandidate {
 /// record, plane and texture are loaded once for all the pixels of its span (its texels stay in
 /// L1 while its pixels are sampled), instead of once per pixel as a pixel-by-pixel walk over 10-60
 /// billboards would. Per pixel the candidates come out in tile-list (depth) order, since the
-/// entries are visited in that order. Same arithmetic per pair as [`TileCandidates`](super::forward::TileCandidates) followed by
+/// entries are visited in that order. Same arithmetic per pair as [`TileCandidates`](super::candidates::TileCandidates) followed by
 /// [`BilinearTaps::sample_rgba`](bilinear::BilinearTaps::sample_rgba) (whose [`SampleTaps`] part it keeps), so the forward pass's outputs are unchanged bit for bit.
 /// The candidates of tile-local pixel `q` are `items[offsets[q]..ends[q]]`.
 #[derive(Default)]
@@ -152,7 +152,7 @@ pub(crate) struct TileSamples {
     entry_features: Vec<[Vec3; 2]>,
     items: Vec<SampledCandidate>,
     /// Candidates whose texels are being prefetched: (item, billboard, taps), sampled in runs of
-    /// [`CANDIDATE_CHUNK`] (see [`TileCandidates`](super::forward::TileCandidates) for why the reads are issued ahead).
+    /// [`CANDIDATE_CHUNK`] (see [`TileCandidates`](super::candidates::TileCandidates) for why the reads are issued ahead).
     pending: Vec<(u32, u32, SampleTaps)>,
 }
 
@@ -251,7 +251,7 @@ impl TileSamples {
 }
 
 /// Per-pixel entry lists of one tile (per-pixel culling): the entries of tile-local pixel `q`
-/// (row-major over the tile's own width, as [`TileCandidates`](super::forward::TileCandidates) numbers them) are
+/// (row-major over the tile's own width, as [`TileCandidates`](super::candidates::TileCandidates) numbers them) are
 /// `items[offsets[q]..offsets[q + 1]]`, in tile-list (depth) order. Built by a counting sort over
 /// the entries' spans, `O(entries + pairs)`, so that a pixel visits only the billboards whose
 /// span contains it.
