@@ -1,5 +1,6 @@
 //! What a render reads: the activated billboard set, borrowed ([`ActivatedRef`]), and the
-//! settings of the render ([`RenderSettings`]).
+//! settings of the render ([`RenderSettings`]); and the planar copy of its textures
+//! ([`planar_textures`], the layout of the model's logits).
 
 use crate::stages::composite::CompositeParams;
 use crate::stages::sh::SH_FLOATS;
@@ -96,4 +97,23 @@ impl Default for RenderSettings {
             distortion: false,
         }
     }
+}
+
+/// Planar copies of RGBA texels (`texels = TS²` per billboard): alpha `[billboard][texel]` and
+/// colour `[billboard][channel][texel]`, the layout of [`crate::model::RawBillboards`]'s logits
+/// (from the layout of [`ActivatedRef::textures`]).
+///
+/// ```
+/// let tex = [[0.1, 0.2, 0.3, 0.9], [0.4, 0.5, 0.6, 0.8]];
+/// let (alpha, colour) = bbsplat::billboards::planar_textures(&tex, 2);
+/// assert_eq!(alpha, [0.9, 0.8]);
+/// assert_eq!(colour, [0.1, 0.4, 0.2, 0.5, 0.3, 0.6]);
+/// ```
+pub fn planar_textures(textures: &[[f32; 4]], texels: usize) -> (Vec<f32>, Vec<f32>) {
+    let alpha = textures.iter().map(|t| t[3]).collect();
+    let colour = textures
+        .chunks(texels.max(1))
+        .flat_map(|row| (0..3).flat_map(move |c| row.iter().map(move |t| t[c])))
+        .collect();
+    (alpha, colour)
 }

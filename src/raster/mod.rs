@@ -25,7 +25,7 @@ pub mod binning;
 mod candidates;
 pub mod forward;
 mod gradients;
-mod input;
+pub(crate) mod input;
 pub mod lanes;
 mod output;
 pub(crate) mod prefetch;
