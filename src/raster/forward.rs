@@ -7,6 +7,7 @@ use super::schedule::{map_heaviest_first, split_by_lengths};
 use super::tile_forward::{TileComposite, composite_tile};
 use super::tile_forward_pixels::{PixelWalk, composite_tile_by_pixel};
 use super::tile_spans::{TileSpans, local_spans};
+use super::tile_types::TileInputs;
 use crate::camera::Camera;
 use crate::memory::{refill, resize_for_overwrite};
 use rayon::prelude::*;
@@ -115,7 +116,15 @@ pub fn render_with(
             let rect @ (i0, j0, _, _) = tile_pixels(&bins, t, w, h);
             let TileScratch { spans, composite, walk } = scratch;
             local_spans(&prepared, billboard_rows, list, (i0, j0), half_side, spans);
-            let tile = (camera, set, settings, &*prepared, list, rect, &*spans);
+            let tile = TileInputs {
+                camera,
+                set,
+                settings,
+                prepared: &prepared,
+                list,
+                rect,
+                spans,
+            };
             let blended = &mut *blended_pairs;
             // Tiles of small billboards go pixel by pixel (the same bits; see
             // `tile_forward_pixels`).

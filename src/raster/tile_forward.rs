@@ -101,7 +101,15 @@ pub(crate) fn composite_tile<const DISTORTION: bool>(
 #[inline(always)]
 fn composite_tile_body<const DISTORTION: bool>(
     scratch: &mut TileComposite,
-    (camera, set, settings, prepared, list, (i0, j0, i1, j1), spans): TileInputs<'_, '_>,
+    TileInputs {
+        camera,
+        set,
+        settings,
+        prepared,
+        list,
+        rect: (i0, j0, i1, j1),
+        spans,
+    }: TileInputs<'_, '_>,
     impact: &mut [f32],
     pixels: &mut Vec<PixelOut>,
     out: &mut TileBlended,

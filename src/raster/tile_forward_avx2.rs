@@ -1060,7 +1060,15 @@ impl EntryRun<'_> {
 #[inline(always)]
 unsafe fn composite_tile_lanes<const DISTORTION: bool>(
     states: &mut LaneStates,
-    (camera, set, settings, prepared, list, (i0, j0, i1, j1), spans): TileInputs<'_, '_>,
+    TileInputs {
+        camera,
+        set,
+        settings,
+        prepared,
+        list,
+        rect: (i0, j0, i1, j1),
+        spans,
+    }: TileInputs<'_, '_>,
     impact: &mut [f32],
     pixels: &mut Vec<PixelOut>,
     out: &mut TileBlended,

@@ -36,7 +36,15 @@ pub(crate) struct PixelWalk {
 /// blended pairs are grouped pixel by pixel ([`PairOrder::ByPixel`]).
 pub(crate) fn composite_tile_by_pixel<const DISTORTION: bool>(
     scratch: &mut PixelWalk,
-    (camera, set, settings, prepared, list, rect @ (i0, j0, i1, j1), spans): TileInputs<'_, '_>,
+    TileInputs {
+        camera,
+        set,
+        settings,
+        prepared,
+        list,
+        rect: rect @ (i0, j0, i1, j1),
+        spans,
+    }: TileInputs<'_, '_>,
     impact: &mut [f32],
     pixels: &mut Vec<PixelOut>,
     blended: &mut TileBlended,

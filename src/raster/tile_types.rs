@@ -186,14 +186,16 @@ impl PixelOut {
     }
 }
 
-/// What [`composite_tile`](super::tile_forward::composite_tile) reads: the camera, the set, the settings, the prepared records, the
+/// What a forward tile walk ([`composite_tile`](super::tile_forward::composite_tile) and its
+/// builds, the pixel walk) reads: the camera, the set, the settings, the prepared records, the
 /// tile's list, its pixel rectangle `(i0, j0, i1, j1)` (exclusive ends) and its entries' spans.
-pub(crate) type TileInputs<'a, 's> = (
-    &'a Camera,
-    &'a ActivatedRef<'s>,
-    &'a RenderSettings,
-    &'a [Option<Prepared>],
-    &'a [u32],
-    (u32, u32, u32, u32),
-    &'a TileSpans,
-);
+#[derive(Clone, Copy)]
+pub(crate) struct TileInputs<'a, 's> {
+    pub(crate) camera: &'a Camera,
+    pub(crate) set: &'a ActivatedRef<'s>,
+    pub(crate) settings: &'a RenderSettings,
+    pub(crate) prepared: &'a [Option<Prepared>],
+    pub(crate) list: &'a [u32],
+    pub(crate) rect: (u32, u32, u32, u32),
+    pub(crate) spans: &'a TileSpans,
+}
