@@ -24,7 +24,8 @@ use super::schedule::{map_heaviest_first, split_by_lengths};
 use super::tile_backward::{EntryScratch, backward_tile_by_entry};
 use super::tile_backward_pixels::{PixelScratch, backward_tile_by_pixel};
 use super::tile_gradients::{
-    EMPTY_RECORD, EntryRecord, OwnedRows, TexelSums, TileTexels, ZERO_TRANSFORM, add_transform,
+    BackwardInputs, EMPTY_RECORD, EntryRecord, OwnedRows, TexelSums, TileOutputs, TileTexels, ZERO_TRANSFORM,
+    add_transform,
 };
 use super::tile_types::PairOrder;
 use crate::camera::offset_from;
@@ -213,6 +214,12 @@ pub fn render_backward(
         .zip(split_by_lengths(normal_records, normal_lengths))
         .zip(tile_texels.iter_mut())
         .collect();
+    let inputs = BackwardInputs {
+        set,
+        out,
+        grads: image_grads,
+        owned_rows: &owned_rows,
+    };
     let backgrounds: Vec<Vec3> = map_heaviest_first(
         tile_work,
         |t| (state.tiles[t].len() + bins.tile_range(t).len()) as u64,
@@ -221,31 +228,16 @@ pub fn render_backward(
             TEXEL_SUMS.with_borrow_mut(|sums| {
                 // Each tile is walked as its forward walked it (the grouping of its pairs), and
                 // pixel by pixel for the normal and distortion maps; the same bits either way.
+                let outputs = TileOutputs {
+                    records,
+                    normals,
+                    texels,
+                    sums,
+                };
                 if aux || state.tiles[t].order == PairOrder::ByPixel {
-                    backward_tile_by_pixel(
-                        set,
-                        out,
-                        image_grads,
-                        t,
-                        records,
-                        normals,
-                        &owned_rows,
-                        &mut scratch.by_pixel,
-                        sums,
-                        texels,
-                    )
+                    backward_tile_by_pixel(&inputs, t, outputs, &mut scratch.by_pixel)
                 } else {
-                    backward_tile_by_entry(
-                        set,
-                        out,
-                        image_grads,
-                        t,
-                        records,
-                        &owned_rows,
-                        &mut scratch.by_entry,
-                        sums,
-                        texels,
-                    )
+                    backward_tile_by_entry(&inputs, t, outputs, &mut scratch.by_entry)
                 }
             })
         },

@@ -17,16 +17,13 @@
 //! the gradients are the same bits (checksums of `raster_stats`; the raster tests).
 
 use super::binning::tile_pixels;
-use super::gradients::ImageGradients;
-use super::input::ActivatedRef;
-use super::output::RenderOutput;
 use super::prefetch::prefetch_record;
 use super::preprocess::Prepared;
 use super::texel_prefetch::{TexelRect, prefetch_texel_rect, prefetch_texel_rect_l2, texel_footprint};
 #[cfg(target_arch = "x86_64")]
 use super::tile_backward_avx2::{add_lanes_in_order, chunk_backward, chunk_lanes};
 use super::tile_gradients::{
-    EMPTY_RECORD, EntryRecord, OwnedRows, PixelBack, TexelSums, TexelTarget, TileTexels, add_transform,
+    BackwardInputs, EMPTY_RECORD, EntryRecord, PixelBack, TexelTarget, TileOutputs, add_transform,
 };
 use super::tile_types::{EntryPair, PairOrder};
 use crate::stages::bilinear::RowTaps;
@@ -45,29 +42,23 @@ pub(super) struct EntryScratch {
     row_flags: Vec<u8>,
 }
 
-/// The backward pass of tile `tile` without the normal and distortion maps: fills `records`
-/// (the tile's entries) and `texels` (the texel sums of the entries that do not own their
-/// billboard's row) and returns the tile's background gradient; texel gradients of owning
-/// entries go straight to their rows through `owned_rows`. Bit for bit what the
+/// The backward pass of tile `tile` without the normal and distortion maps: fills the tile's
+/// entry records and the texel sums of the entries that do not own their billboard's row in
+/// `outputs` and returns the tile's background gradient; texel gradients of owning entries go
+/// straight to their rows through `inputs.owned_rows`. Bit for bit what the
 /// pixel-by-pixel walk gives.
-#[allow(clippy::too_many_arguments)]
 pub(super) fn backward_tile_by_entry(
-    set: &ActivatedRef<'_>,
-    out: &RenderOutput,
-    grads_in: &ImageGradients<'_>,
+    inputs: &BackwardInputs<'_, '_>,
     tile: usize,
-    records: &mut [EntryRecord],
-    owned_rows: &OwnedRows<'_>,
+    outputs: TileOutputs<'_>,
     scratch: &mut EntryScratch,
-    sums: &mut TexelSums,
-    texels: &mut TileTexels,
 ) -> Vec3 {
     #[cfg(target_arch = "x86_64")]
     if super::lanes::wide_lanes() {
         // SAFETY: the CPU has AVX2 and FMA (checked at run time by `wide_lanes`).
-        return unsafe { by_entry_avx2(set, out, grads_in, tile, records, owned_rows, scratch, sums, texels) };
+        return unsafe { by_entry_avx2(inputs, tile, outputs, scratch) };
     }
-    by_entry_body::<false>(set, out, grads_in, tile, records, owned_rows, scratch, sums, texels)
+    by_entry_body::<false>(inputs, tile, outputs, scratch)
 }
 
 /// [`by_entry_body`] compiled for AVX2 and FMA, with each chunk's compositing backward in
@@ -77,19 +68,13 @@ pub(super) fn backward_tile_by_entry(
 /// The CPU must support AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-#[allow(clippy::too_many_arguments)]
 unsafe fn by_entry_avx2(
-    set: &ActivatedRef<'_>,
-    out: &RenderOutput,
-    grads_in: &ImageGradients<'_>,
+    inputs: &BackwardInputs<'_, '_>,
     tile: usize,
-    records: &mut [EntryRecord],
-    owned_rows: &OwnedRows<'_>,
+    outputs: TileOutputs<'_>,
     scratch: &mut EntryScratch,
-    sums: &mut TexelSums,
-    texels: &mut TileTexels,
 ) -> Vec3 {
-    by_entry_body::<true>(set, out, grads_in, tile, records, owned_rows, scratch, sums, texels)
+    by_entry_body::<true>(inputs, tile, outputs, scratch)
 }
 
 /// The body of [`backward_tile_by_entry`], inlined into each instruction-set variant; with
@@ -97,18 +82,28 @@ unsafe fn by_entry_avx2(
 /// explicit AVX2 ([`super::tile_backward_avx2::chunk_backward`]), else pair by pair with the
 /// stages' code below (the reference).
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
 fn by_entry_body<const WIDE: bool>(
-    set: &ActivatedRef<'_>,
-    out: &RenderOutput,
-    grads_in: &ImageGradients<'_>,
+    inputs: &BackwardInputs<'_, '_>,
     tile: usize,
-    records: &mut [EntryRecord],
-    owned_rows: &OwnedRows<'_>,
+    outputs: TileOutputs<'_>,
     scratch: &mut EntryScratch,
-    sums: &mut TexelSums,
-    texels: &mut TileTexels,
 ) -> Vec3 {
+    let BackwardInputs {
+        set,
+        out,
+        grads: grads_in,
+        owned_rows,
+    } = *inputs;
+    let TileOutputs {
+        records,
+        normals,
+        texels,
+        sums,
+    } = outputs;
+    debug_assert!(
+        normals.is_empty(),
+        "the entry walk takes no normal or distortion gradients"
+    );
     let state = &out.state;
     let bins = &state.bins;
     let range = bins.tile_range(tile);

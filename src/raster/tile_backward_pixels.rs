@@ -6,12 +6,12 @@
 
 use super::binning::tile_pixels;
 use super::candidates::{Candidate, TileCandidates};
-use super::gradients::ImageGradients;
 use super::input::ActivatedRef;
-use super::output::RenderOutput;
 use super::prefetch::{prefetch_record, prefetch_taps};
 use super::preprocess::Prepared;
-use super::tile_gradients::{EMPTY_RECORD, EntryRecord, OwnedRows, TexelSums, TileTexels, add_transform};
+use super::tile_gradients::{
+    BackwardInputs, EMPTY_RECORD, EntryRecord, OwnedRows, TexelSums, TileOutputs, add_transform,
+};
 use super::tile_types::{PairOrder, TileBlended};
 use crate::stages::bilinear::BilinearTaps;
 use crate::stages::composite::{Blend, CompositeBackState, Step, classify};
@@ -137,23 +137,28 @@ impl PairSinks<'_, '_> {
 }
 
 /// The backward pass of tile `tile` walked pixel by pixel (see the module documentation): fills
-/// `records` (and `normal_records`, with normal or distortion gradients) for the tile's entries and
-/// `texels` with the texel sums of the entries that do not own their billboard's row, and returns
-/// the tile's background gradient; texel gradients of owning entries go straight to their rows
-/// through `owned_rows`.
-#[allow(clippy::too_many_arguments)]
+/// the tile's entry records (and their normal gradients, with normal or distortion gradients)
+/// and the texel sums of the entries that do not own their billboard's row in `outputs`, and
+/// returns the tile's background gradient; texel gradients of owning entries go straight to
+/// their rows through `inputs.owned_rows`.
 pub(super) fn backward_tile_by_pixel(
-    set: &ActivatedRef<'_>,
-    out: &RenderOutput,
-    grads_in: &ImageGradients<'_>,
+    inputs: &BackwardInputs<'_, '_>,
     tile: usize,
-    records: &mut [EntryRecord],
-    normal_records: &mut [Vec3],
-    owned_rows: &OwnedRows<'_>,
+    outputs: TileOutputs<'_>,
     scratch: &mut PixelScratch,
-    sums: &mut TexelSums,
-    texels: &mut TileTexels,
 ) -> Vec3 {
+    let BackwardInputs {
+        set,
+        out,
+        grads: grads_in,
+        owned_rows,
+    } = *inputs;
+    let TileOutputs {
+        records,
+        normals: normal_records,
+        texels,
+        sums,
+    } = outputs;
     let state = &out.state;
     let bins = &state.bins;
     let range = bins.tile_range(tile);

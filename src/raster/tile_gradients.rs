@@ -1,15 +1,40 @@
-//! Where the backward tile walks put their gradients: each tile entry's record
-//! ([`EntryRecord`]), the per-(entry, texel) sums of the entries that do not own their
-//! billboard's gradient row ([`TexelSums`], read out as [`TileTexels`]), and the rows the owning
-//! entries write directly ([`OwnedRows`]); with the back-to-front state of a pixel
+//! What the backward tile walks share: what every tile task of a pass reads
+//! ([`BackwardInputs`]), and where a tile puts its gradients ([`TileOutputs`]): each tile
+//! entry's record ([`EntryRecord`]), the per-(entry, texel) sums of the entries that do not own
+//! their billboard's gradient row ([`TexelSums`], read out as [`TileTexels`]), and the rows the
+//! owning entries write directly ([`OwnedRows`]); with the back-to-front state of a pixel
 //! ([`PixelBack`]) and the texel target ([`TexelTarget`]) the entry walk and its AVX2 chunks
 //! share.
 
+use super::gradients::ImageGradients;
+use super::input::ActivatedRef;
+use super::output::RenderOutput;
 use super::prefetch::prefetch_taps;
 use crate::stages::bilinear::BilinearTaps;
 use crate::stages::composite::CompositeBackState;
 use crate::stages::splat_transform::SplatTransform;
 use glam::{Vec3, Vec4};
+
+/// What every tile task of one backward pass reads: the billboards, the forward's output, the
+/// loss's image gradients, and the texture-gradient rows the owning entries write.
+#[derive(Clone, Copy)]
+pub(super) struct BackwardInputs<'a, 's> {
+    pub(super) set: &'a ActivatedRef<'s>,
+    pub(super) out: &'a RenderOutput,
+    pub(super) grads: &'a ImageGradients<'a>,
+    pub(super) owned_rows: &'a OwnedRows<'a>,
+}
+
+/// What the backward of one tile writes: its entries' records, their normal gradients (one per
+/// entry with normal or distortion gradients, which only the pixel walk takes; else empty), the
+/// texel sums of the entries that do not own their row (for the reduction), and the thread's
+/// texel-sum cells it adds them in.
+pub(super) struct TileOutputs<'a> {
+    pub(super) records: &'a mut [EntryRecord],
+    pub(super) normals: &'a mut [Vec3],
+    pub(super) texels: &'a mut TileTexels,
+    pub(super) sums: &'a mut TexelSums,
+}
 
 /// What the tile pass leaves for one entry (one (tile, billboard) pair), stored at the entry's
 /// global index so that the per-billboard reduction reaches it with one read (one cache line)
