@@ -30,7 +30,7 @@ use super::tile_gradients::{
 use super::tile_types::PairOrder;
 use crate::camera::offset_from;
 use crate::stages::sh::{SH_FLOATS, sh_colour_vjp_clamped};
-use crate::stages::splat_transform::{camera_vjp, project_splat_vjp_visible};
+use crate::stages::splat_transform::{SplatTransform, camera_vjp, project_splat_vjp_visible};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -141,6 +141,37 @@ pub fn render_backward(
     image_grads: &ImageGradients<'_>,
     grads: &mut RenderGradients,
 ) -> Vec<u32> {
+    check_inputs(set, out, image_grads, grads);
+    // The records and texel lists of the last call on this thread, reused (every tile task
+    // resets its own records and texel list).
+    let mut storage = BACKWARD_STORAGE.take();
+    let backgrounds = tile_pass(set, out, image_grads, &mut grads.textures, &mut storage);
+    for &background in &backgrounds {
+        grads.background += background;
+    }
+    let reduction = Reduction {
+        set,
+        state: &out.state,
+        records: &storage.records,
+        normal_records: &storage.normal_records,
+        tile_texels: &storage.tile_texels,
+        aux: image_grads.has_aux(),
+        camera_gradient: image_grads.camera,
+        centre: out.state.camera.centre_f64(),
+        texels: set.texels(),
+    };
+    let chunks = reduction.reduce(grads);
+    BACKWARD_STORAGE.set(storage);
+    let mut touched = Vec::new();
+    for (t, d_camera) in &chunks {
+        touched.extend_from_slice(t);
+        grads.camera += *d_camera;
+    }
+    touched
+}
+
+/// The checks of [`render_backward`]'s arguments (see its panics).
+fn check_inputs(set: &ActivatedRef<'_>, out: &RenderOutput, image_grads: &ImageGradients<'_>, grads: &RenderGradients) {
     let n_pix = (out.width * out.height) as usize;
     assert_eq!(image_grads.rgb.len(), 3 * n_pix, "one RGB gradient per pixel");
     assert!(
@@ -164,29 +195,15 @@ pub fn render_backward(
         set.len(),
         "gradient buffers must match the billboard set"
     );
-    let state = &out.state;
-    let bins = &state.bins;
-    let n_tiles = bins.tile_count();
-    // The records and texel lists of the last call on this thread, reused (every tile task
-    // resets its own records and texel list).
-    let mut storage = BACKWARD_STORAGE.take();
-    let BackwardStorage {
-        records,
-        normal_records,
-        tile_texels,
-        entry_pairs,
-        owners,
-    } = &mut storage;
-    crate::memory::resize_for_overwrite(records, bins.entries.len(), EMPTY_RECORD);
-    tile_texels.resize_with(n_tiles, Vec::new);
-    let texels = set.texels();
     assert_eq!(
         grads.textures.len(),
-        set.len() * texels,
+        set.len() * set.texels(),
         "gradient buffers must match the billboard set"
     );
     // The tile tasks write the rows of the entries that own them themselves; that each row has
     // one writer rests on the tiles' entry ranges being disjoint (`OwnedRows::owns`).
+    let bins = &out.state.bins;
+    let n_tiles = bins.tile_count();
     assert!(
         bins.tile_offsets.len() == n_tiles + 1
             && bins.tile_offsets[0] == 0
@@ -194,11 +211,36 @@ pub fn render_backward(
             && bins.tile_offsets[n_tiles] as usize == bins.entries.len(),
         "the tiles' entry ranges must partition the entries in order"
     );
+}
+
+/// The tile pass: every tile's backward, heaviest tiles first, each walked as its forward
+/// walked it. Fills `storage`'s entry records, normal records and tile texel lists (and the
+/// rows of `textures`, the texture gradients, that owning entries write) and returns each
+/// tile's background gradient, in tile order.
+fn tile_pass(
+    set: &ActivatedRef<'_>,
+    out: &RenderOutput,
+    image_grads: &ImageGradients<'_>,
+    textures: &mut [[f32; 4]],
+    storage: &mut BackwardStorage,
+) -> Vec<Vec3> {
+    let state = &out.state;
+    let bins = &state.bins;
+    let n_tiles = bins.tile_count();
+    let BackwardStorage {
+        records,
+        normal_records,
+        tile_texels,
+        entry_pairs,
+        owners,
+    } = storage;
+    crate::memory::resize_for_overwrite(records, bins.entries.len(), EMPTY_RECORD);
+    tile_texels.resize_with(n_tiles, Vec::new);
     row_owners(state, entry_pairs, owners);
     assert_eq!(owners.len(), set.len(), "one owner per billboard");
     let owned_rows = OwnedRows {
-        rows: grads.textures.as_mut_ptr(),
-        texels,
+        rows: textures.as_mut_ptr(),
+        texels: set.texels(),
         len: set.len(),
         owners,
     };
@@ -220,7 +262,7 @@ pub fn render_backward(
         grads: image_grads,
         owned_rows: &owned_rows,
     };
-    let backgrounds: Vec<Vec3> = map_heaviest_first(
+    map_heaviest_first(
         tile_work,
         |t| (state.tiles[t].len() + bins.tile_range(t).len()) as u64,
         Scratch::default,
@@ -241,161 +283,231 @@ pub fn render_backward(
                 }
             })
         },
-    );
-    for &background in &backgrounds {
-        grads.background += background;
+    )
+}
+
+/// Billboards per task of the reduction, each chunk in index order.
+const CHUNK: usize = 256;
+/// How far ahead the reduction fetches a billboard's SH coefficients and gradients.
+const SH_AHEAD: usize = 8;
+
+/// The per-billboard reduction after the tile pass: each billboard's entries summed in tile
+/// order, then chained through its projection and SH colour to its parameters (and to the
+/// camera). Reads the tile pass's records, normal records and texel lists.
+struct Reduction<'a, 's> {
+    set: &'a ActivatedRef<'s>,
+    state: &'a ForwardState,
+    records: &'a [EntryRecord],
+    normal_records: &'a [Vec3],
+    tile_texels: &'a [TileTexels],
+    /// Normal or distortion gradients were given (the entries have normal gradients).
+    aux: bool,
+    /// Camera gradients were asked for ([`ImageGradients::camera`]).
+    camera_gradient: bool,
+    /// The camera centre in f64 (for the SH view direction).
+    centre: glam::DVec3,
+    /// Texels per billboard (`TS²`).
+    texels: usize,
+}
+
+impl Reduction<'_, '_> {
+    /// Reduces every billboard into `grads` (its rows; the camera's gradient is returned), in
+    /// chunks of [`CHUNK`] billboards, each chunk in index order by one task: per chunk, the
+    /// billboards that received a gradient and the chunk's camera gradient.
+    fn reduce(&self, grads: &mut RenderGradients) -> Vec<(Vec<u32>, CameraGradient)> {
+        let texels = self.texels;
+        (
+            grads.positions.par_chunks_mut(CHUNK),
+            grads.quaternions.par_chunks_mut(CHUNK),
+            grads.log_scales.par_chunks_mut(CHUNK),
+            grads.sh.par_chunks_mut(CHUNK * SH_FLOATS),
+            grads.textures.par_chunks_mut(CHUNK * texels),
+        )
+            .into_par_iter()
+            .enumerate()
+            .map(|(c, (d_pos, d_quat, d_scale, d_sh, d_tex))| {
+                let b0 = c * CHUNK;
+                let len = d_pos.len();
+                let mut touched = Vec::new();
+                let mut d_camera = CameraGradient::default();
+                for lb in 0..len {
+                    self.prefetch_ahead(b0, lb, len, d_sh, d_tex);
+                    let b = b0 + lb;
+                    let Some((d_t, d_rgb)) = self.entry_sums(b, &mut d_tex[lb * texels..(lb + 1) * texels]) else {
+                        continue;
+                    };
+                    let rows = BillboardRows {
+                        d_pos: &mut d_pos[lb],
+                        d_scale: &mut d_scale[lb],
+                        d_quat: &mut d_quat[lb],
+                        d_sh: &mut d_sh[lb * SH_FLOATS..(lb + 1) * SH_FLOATS],
+                    };
+                    if let Some(cg) = self.chain(b, &d_t, d_rgb, rows) {
+                        d_camera += cg;
+                    }
+                    touched.push(b as u32);
+                }
+                (touched, d_camera)
+            })
+            .collect()
     }
-    let (records, normal_records, tile_texels) = (&storage.records, &storage.normal_records, &storage.tile_texels);
-    let camera = &state.camera;
-    let centre = camera.centre_f64();
-    let degree = state.settings.sh_degree;
-    // The records of the entries of billboard `b`, in tile order.
-    let entry_records = |b: usize| {
+
+    /// The records of the entries of billboard `b`, in tile order.
+    #[inline]
+    fn entry_records(&self, b: usize) -> impl Iterator<Item = &EntryRecord> {
+        let bins = &self.state.bins;
         let r = bins.billboard_offsets[b] as usize..bins.billboard_offsets[b + 1] as usize;
-        bins.billboard_entries[r].iter().map(|&e| &records[e as usize])
-    };
-    // `∂L/∂normal_view` of billboard `b`: its entries' normal gradients summed in tile order
-    // (zero without a normal or distortion gradient).
-    let normal_gradient = |b: usize| {
-        if !aux {
+        bins.billboard_entries[r].iter().map(|&e| &self.records[e as usize])
+    }
+
+    /// `∂L/∂normal_view` of billboard `b`: its entries' normal gradients summed in tile order
+    /// (zero without a normal or distortion gradient).
+    #[inline]
+    fn normal_gradient(&self, b: usize) -> Vec3 {
+        if !self.aux {
             return Vec3::ZERO;
         }
+        let bins = &self.state.bins;
         let r = bins.billboard_offsets[b] as usize..bins.billboard_offsets[b + 1] as usize;
         bins.billboard_entries[r]
             .iter()
-            .fold(Vec3::ZERO, |acc, &e| acc + normal_records[e as usize])
-    };
-    let texels_of = |rec: &EntryRecord| &tile_texels[rec.tile as usize][rec.texels.0 as usize..rec.texels.1 as usize];
-    // Billboards are reduced in chunks, each chunk in index order by one task. The entry records
-    // and gradient rows a billboard reads are scattered (billboards are not in screen order), so
-    // each step prefetches them a few billboards ahead: the entry records 12 ahead, the texel
-    // lists 8 ahead, the texture-gradient cells of the texel lists 4 ahead. The SH coefficients
-    // and gradients are read in order but are most of the bytes: all their lines `SH_AHEAD`
-    // ahead. Prefetches change no value.
-    const CHUNK: usize = 256;
-    const SH_AHEAD: usize = 8;
-    let has_entries = |b: usize| bins.billboard_offsets[b + 1] > bins.billboard_offsets[b];
-    let rotation_cw = camera.rotation;
-    let chunks: Vec<(Vec<u32>, CameraGradient)> = (
-        grads.positions.par_chunks_mut(CHUNK),
-        grads.quaternions.par_chunks_mut(CHUNK),
-        grads.log_scales.par_chunks_mut(CHUNK),
-        grads.sh.par_chunks_mut(CHUNK * SH_FLOATS),
-        grads.textures.par_chunks_mut(CHUNK * texels),
-    )
-        .into_par_iter()
-        .enumerate()
-        .map(|(c, (d_pos, d_quat, d_scale, d_sh, d_tex))| {
-            let b0 = c * CHUNK;
-            let len = d_pos.len();
-            let mut touched = Vec::new();
-            let mut d_camera = CameraGradient::default();
-            for lb in 0..len {
-                if lb + 12 < len {
-                    for rec in entry_records(b0 + lb + 12) {
-                        prefetch_ref(rec);
-                    }
-                }
-                if lb + 8 < len {
-                    for rec in entry_records(b0 + lb + 8) {
-                        let tex = texels_of(rec);
-                        if let (Some(first), Some(last)) = (tex.first(), tex.last()) {
-                            prefetch_ref(first);
-                            prefetch_ref(last);
-                        }
-                    }
-                }
-                // The SH coefficients and their gradient row, every line of both (192 bytes
-                // each, over three or four lines), of a billboard with tile entries: read in
-                // order, but their stream is the reduction's main memory traffic.
-                if lb + SH_AHEAD < len && has_entries(b0 + lb + SH_AHEAD) {
-                    let la = lb + SH_AHEAD;
-                    prefetch_lines(set.sh_of(b0 + la));
-                    prefetch_lines(&d_sh[la * SH_FLOATS..(la + 1) * SH_FLOATS]);
-                }
-                if lb + 4 < len {
-                    let la = lb + 4;
-                    for rec in entry_records(b0 + la) {
-                        for &(idx, _) in texels_of(rec) {
-                            prefetch(d_tex, la * texels + idx as usize);
-                        }
-                    }
-                }
-                let b = b0 + lb;
-                let d_tex = &mut d_tex[lb * texels..(lb + 1) * texels];
-                let mut d_t = ZERO_TRANSFORM;
-                let mut d_rgb = Vec3::ZERO;
-                let mut any = false;
-                for rec in entry_records(b) {
-                    if !rec.blended {
-                        continue;
-                    }
-                    let tex = texels_of(rec);
-                    any = true;
-                    add_transform(&mut d_t, &rec.transform);
-                    d_rgb += rec.rgb;
-                    for &(idx, v) in tex {
-                        let d = &mut d_tex[idx as usize];
-                        for c in 0..4 {
-                            d[c] += v[c];
-                        }
-                    }
-                }
-                if !any {
-                    continue;
-                }
-                // An entry exists only for a billboard its forward prepared (not culled).
-                let prepared = state.prepared[b]
-                    .as_ref()
-                    .expect("a billboard with tile entries was prepared");
-                let normal_sign = if prepared.normal_flipped { -1.0 } else { 1.0 };
-                let sg = project_splat_vjp_visible(
-                    set.log_scales[b],
-                    set.quaternions[b],
-                    normal_sign,
-                    camera,
-                    &d_t,
-                    normal_gradient(b),
-                );
-                let d_sh = &mut d_sh[lb * SH_FLOATS..(lb + 1) * SH_FLOATS];
-                let d_pos_sh = sh_colour_vjp_clamped(
-                    degree,
-                    set.sh_of(b),
-                    offset_from(centre, set.positions[b]),
-                    prepared.sh_clamped,
-                    d_rgb,
-                    d_sh,
-                );
-                d_pos[lb] += sg.d_position + d_pos_sh;
-                d_scale[lb] += sg.d_log_scales;
-                for (q, dq) in d_quat[lb].iter_mut().zip(sg.d_quaternion) {
-                    *q += dq;
-                }
-                if !image_grads.camera {
-                    touched.push(b as u32);
-                    continue;
-                }
-                let mut cg = camera_vjp(
-                    set.positions[b],
-                    set.log_scales[b],
-                    set.quaternions[b],
-                    camera,
-                    &d_t,
-                    normal_gradient(b),
-                );
-                // The SH direction `p − centre` follows the centre, which δ moves by `−R_cwᵀ·δ`.
-                cg.translation += rotation_cw * d_pos_sh;
-                d_camera += CameraGradient::from(cg);
-                touched.push(b as u32);
-            }
-            (touched, d_camera)
-        })
-        .collect();
-    BACKWARD_STORAGE.set(storage);
-    let mut touched = Vec::new();
-    for (t, d_camera) in &chunks {
-        touched.extend_from_slice(t);
-        grads.camera += *d_camera;
+            .fold(Vec3::ZERO, |acc, &e| acc + self.normal_records[e as usize])
     }
-    touched
+
+    /// The texel sums an entry left for the reduction (empty for an owning entry).
+    #[inline]
+    fn texels_of(&self, rec: &EntryRecord) -> &[(u32, [f32; 4])] {
+        &self.tile_texels[rec.tile as usize][rec.texels.0 as usize..rec.texels.1 as usize]
+    }
+
+    /// Billboard `b` has tile entries.
+    #[inline]
+    fn has_entries(&self, b: usize) -> bool {
+        let bins = &self.state.bins;
+        bins.billboard_offsets[b + 1] > bins.billboard_offsets[b]
+    }
+
+    /// The prefetches before billboard `lb` of the chunk starting at billboard `b0` (`len`
+    /// billboards; `d_sh` and `d_tex` its gradient rows). The entry records and gradient rows a
+    /// billboard reads are scattered (billboards are not in screen order), so each step
+    /// prefetches them a few billboards ahead: the entry records 12 ahead, the texel lists 8
+    /// ahead, the texture-gradient cells of the texel lists 4 ahead. The SH coefficients and
+    /// gradients are read in order but are most of the bytes: all their lines [`SH_AHEAD`]
+    /// ahead. Prefetches change no value.
+    #[inline(always)]
+    fn prefetch_ahead(&self, b0: usize, lb: usize, len: usize, d_sh: &[f32], d_tex: &[[f32; 4]]) {
+        let texels = self.texels;
+        if lb + 12 < len {
+            for rec in self.entry_records(b0 + lb + 12) {
+                prefetch_ref(rec);
+            }
+        }
+        if lb + 8 < len {
+            for rec in self.entry_records(b0 + lb + 8) {
+                let tex = self.texels_of(rec);
+                if let (Some(first), Some(last)) = (tex.first(), tex.last()) {
+                    prefetch_ref(first);
+                    prefetch_ref(last);
+                }
+            }
+        }
+        // The SH coefficients and their gradient row, every line of both (192 bytes
+        // each, over three or four lines), of a billboard with tile entries: read in
+        // order, but their stream is the reduction's main memory traffic.
+        if lb + SH_AHEAD < len && self.has_entries(b0 + lb + SH_AHEAD) {
+            let la = lb + SH_AHEAD;
+            prefetch_lines(self.set.sh_of(b0 + la));
+            prefetch_lines(&d_sh[la * SH_FLOATS..(la + 1) * SH_FLOATS]);
+        }
+        if lb + 4 < len {
+            let la = lb + 4;
+            for rec in self.entry_records(b0 + la) {
+                for &(idx, _) in self.texels_of(rec) {
+                    prefetch(d_tex, la * texels + idx as usize);
+                }
+            }
+        }
+    }
+
+    /// Billboard `b`'s blended entries summed in tile order: their transform and colour
+    /// gradients (returned; `None` when no entry was blended) and their texel sums, added to
+    /// `d_tex`, the billboard's texture-gradient row.
+    #[inline(always)]
+    fn entry_sums(&self, b: usize, d_tex: &mut [[f32; 4]]) -> Option<(SplatTransform, Vec3)> {
+        let mut d_t = ZERO_TRANSFORM;
+        let mut d_rgb = Vec3::ZERO;
+        let mut any = false;
+        for rec in self.entry_records(b) {
+            if !rec.blended {
+                continue;
+            }
+            let tex = self.texels_of(rec);
+            any = true;
+            add_transform(&mut d_t, &rec.transform);
+            d_rgb += rec.rgb;
+            for &(idx, v) in tex {
+                let d = &mut d_tex[idx as usize];
+                for c in 0..4 {
+                    d[c] += v[c];
+                }
+            }
+        }
+        any.then_some((d_t, d_rgb))
+    }
+
+    /// The chain of billboard `b` from its summed transform and colour gradients (`d_t`,
+    /// `d_rgb`) through its projection and SH colour to its parameters, added to `rows`; the
+    /// billboard's camera gradient when camera gradients were asked for.
+    #[inline(always)]
+    fn chain(&self, b: usize, d_t: &SplatTransform, d_rgb: Vec3, rows: BillboardRows<'_>) -> Option<CameraGradient> {
+        let (set, camera) = (self.set, &self.state.camera);
+        // An entry exists only for a billboard its forward prepared (not culled).
+        let prepared = self.state.prepared[b]
+            .as_ref()
+            .expect("a billboard with tile entries was prepared");
+        let normal_sign = if prepared.normal_flipped { -1.0 } else { 1.0 };
+        let sg = project_splat_vjp_visible(
+            set.log_scales[b],
+            set.quaternions[b],
+            normal_sign,
+            camera,
+            d_t,
+            self.normal_gradient(b),
+        );
+        let d_pos_sh = sh_colour_vjp_clamped(
+            self.state.settings.sh_degree,
+            set.sh_of(b),
+            offset_from(self.centre, set.positions[b]),
+            prepared.sh_clamped,
+            d_rgb,
+            rows.d_sh,
+        );
+        *rows.d_pos += sg.d_position + d_pos_sh;
+        *rows.d_scale += sg.d_log_scales;
+        for (q, dq) in rows.d_quat.iter_mut().zip(sg.d_quaternion) {
+            *q += dq;
+        }
+        if !self.camera_gradient {
+            return None;
+        }
+        let mut cg = camera_vjp(
+            set.positions[b],
+            set.log_scales[b],
+            set.quaternions[b],
+            camera,
+            d_t,
+            self.normal_gradient(b),
+        );
+        // The SH direction `p − centre` follows the centre, which δ moves by `−R_cwᵀ·δ`.
+        cg.translation += camera.rotation * d_pos_sh;
+        Some(CameraGradient::from(cg))
+    }
+}
+
+/// One billboard's gradient rows of the geometry and SH colour.
+struct BillboardRows<'a> {
+    d_pos: &'a mut Vec3,
+    d_scale: &'a mut glam::Vec2,
+    d_quat: &'a mut [f32; 4],
+    d_sh: &'a mut [f32],
 }
