@@ -15,6 +15,11 @@
 //! [`reference`](mod@reference) holds a plain brute-force renderer (every pixel against every billboard) that
 //! the tiled renderer is tested against.
 //!
+//! Files: [`forward`] and [`backward`] are the drivers; the tile walks (`tile_forward*.rs`,
+//! `tile_backward*.rs`) import only the leaves below them (the shared tile types, spans,
+//! prefetches and gradient sinks), and this file only declares and re-exports: no file imports
+//! a file that imports it (ARCHITECTURE.md, "Module layering"; `tests/suite/layering.rs`).
+//!
 //! Conventions: camera and pixel conventions of [`crate::camera`]; textures are *activated*
 //! values (colour and alpha in `[0, 1]`), `TS × TS` RGBA texels `[r, g, b, alpha]` per billboard,
 //! row-major (`[billboard][row][col]`); SH coefficients `[coeff][rgb]`, 48 floats per billboard.
