@@ -6,11 +6,13 @@
 
 use super::binning::tile_pixels;
 use super::candidates::{Candidate, TileCandidates};
+use super::gradients::ImageGradients;
 use super::input::ActivatedRef;
+use super::output::RenderOutput;
 use super::prefetch::{prefetch_record, prefetch_taps};
 use super::preprocess::Prepared;
 use super::tile_gradients::{
-    BackwardInputs, EMPTY_RECORD, EntryRecord, OwnedRows, TexelSums, TileOutputs, add_transform,
+    BackwardInputs, EMPTY_RECORD, EntryRecord, OwnedRows, TexelSums, TileOutputs, TileTexels, add_transform,
 };
 use super::tile_types::{PairOrder, TileBlended};
 use crate::stages::bilinear::BilinearTaps;
@@ -155,10 +157,30 @@ pub(super) fn backward_tile_by_pixel(
     } = *inputs;
     let TileOutputs {
         records,
-        normals: normal_records,
+        normals,
         texels,
         sums,
     } = outputs;
+    by_pixel(
+        set, out, grads_in, tile, records, normals, owned_rows, scratch, sums, texels,
+    )
+}
+
+/// The body of [`backward_tile_by_pixel`], its inputs and outputs as separate parameters, which
+/// the compiler may assume alias nothing (see `tile_backward::by_entry`).
+#[allow(clippy::too_many_arguments)]
+fn by_pixel(
+    set: &ActivatedRef<'_>,
+    out: &RenderOutput,
+    grads_in: &ImageGradients<'_>,
+    tile: usize,
+    records: &mut [EntryRecord],
+    normal_records: &mut [Vec3],
+    owned_rows: &OwnedRows<'_>,
+    scratch: &mut PixelScratch,
+    sums: &mut TexelSums,
+    texels: &mut TileTexels,
+) -> Vec3 {
     let state = &out.state;
     let bins = &state.bins;
     let range = bins.tile_range(tile);
