@@ -16,6 +16,10 @@
 //! gradient row as the pixels produce it, and the reduction adds the other entries' sums to the
 //! row after it, in tile order (see `OwnedRows`); a billboard with a single tile entry thus has
 //! no texel sums at all.
+//!
+//! This file is the pass's driver: [`render_backward`] checks its inputs, runs the tile pass
+//! (each tile walked by `tile_backward.rs`, entry by entry, or by `tile_backward_pixels.rs`,
+//! pixel by pixel, as its forward walked it) and then the per-billboard reduction.
 
 use super::input::ActivatedRef;
 use super::output::{ForwardState, RenderOutput};

@@ -1,4 +1,9 @@
 //! Tiled forward pass: front-to-back compositing of every pixel over its tile's list.
+//!
+//! This file is the pass's driver: [`render_with`] preprocesses and bins the billboards, cuts
+//! each tile's spans (`tile_spans.rs`), composites the tiles heaviest first (each billboard by
+//! billboard, `tile_forward.rs`, or pixel by pixel, `tile_forward_pixels.rs`, as
+//! [`SMALL_ENTRY_PIXELS`] decides) and assembles the images and per-billboard impact.
 
 use super::binning::{TILE_SIZE, bin_into, tile_pixels};
 use super::input::{ActivatedRef, RenderSettings};
