@@ -240,11 +240,11 @@ pub mod model_file {
 /// Rasterizer internals (`raster`).
 pub mod raster {
     use crate::camera::Camera;
-    use crate::raster::binning::{BinScratch, TileBins, bin_into};
-    use crate::raster::forward::{TileSpans, box_meets_tile, entry_spans_direct, local_spans, tile_pixels};
+    use crate::raster::binning::{BinScratch, TileBins, bin_into, tile_pixels};
     use crate::raster::preprocess::Prepared;
     use crate::raster::preprocess::preprocess_into;
     use crate::raster::row_spans::BillboardRows;
+    use crate::raster::tile_spans::{TileSpans, box_meets_tile, entry_spans_direct, local_spans};
     use crate::raster::{ActivatedRef, RenderSettings};
     use crate::stages::splat_transform::support_half_side;
 
@@ -350,7 +350,7 @@ pub mod raster {
     /// The backward pass's per-tile texture-gradient accumulator, with a texel list it reuses
     /// across tiles as the backward does.
     #[derive(Default)]
-    pub struct TexelSums(crate::raster::backward::TexelSums, Vec<(u32, [f32; 4])>);
+    pub struct TexelSums(crate::raster::tile_gradients::TexelSums, Vec<(u32, [f32; 4])>);
 
     impl TexelSums {
         /// Prepares for a tile of `slots` entries with `texels` texels per channel.
@@ -381,7 +381,7 @@ pub mod raster {
         /// Whether every cell and every slot is marked untouched and every cell holds `−0.0`
         /// in each channel (the state `finish` must leave for the next tile).
         pub fn is_clean(&self) -> bool {
-            use crate::raster::backward::UNTOUCHED;
+            use crate::raster::tile_gradients::UNTOUCHED;
             let sums = &self.0;
             sums.touched.iter().all(|&t| t == 0)
                 && sums.slot_touched.iter().all(|&t| !t)

@@ -19,6 +19,9 @@ pub use trained_like::{TrainedLikeConfig, trained_like_scene};
 
 use crate::camera::Camera;
 use crate::raster::{ActivatedRef, SH_FLOATS};
+
+// The texture layout conversion, defined next to the layout it reads (`raster::ActivatedRef`).
+pub use crate::raster::input::planar_textures;
 use crate::rng::Rng;
 use glam::{Vec2, Vec3};
 
@@ -113,24 +116,6 @@ impl ActivatedBillboards {
         }
         out
     }
-}
-
-/// Planar copies of RGBA texels (`texels = TS²` per billboard): alpha `[billboard][texel]` and
-/// colour `[billboard][channel][texel]`, the layout of [`crate::model::RawBillboards`]'s logits.
-///
-/// ```
-/// let tex = [[0.1, 0.2, 0.3, 0.9], [0.4, 0.5, 0.6, 0.8]];
-/// let (alpha, colour) = bbsplat::billboards::planar_textures(&tex, 2);
-/// assert_eq!(alpha, [0.9, 0.8]);
-/// assert_eq!(colour, [0.1, 0.4, 0.2, 0.5, 0.3, 0.6]);
-/// ```
-pub fn planar_textures(textures: &[[f32; 4]], texels: usize) -> (Vec<f32>, Vec<f32>) {
-    let alpha = textures.iter().map(|t| t[3]).collect();
-    let colour = textures
-        .chunks(texels.max(1))
-        .flat_map(|row| (0..3).flat_map(move |c| row.iter().map(move |t| t[c])))
-        .collect();
-    (alpha, colour)
 }
 
 /// Settings of [`random_scene`].

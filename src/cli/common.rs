@@ -142,11 +142,25 @@ pub fn split_views(scene: &Scene, split: Split) -> &[View] {
     }
 }
 
+/// Largest `--threads`.
+pub const MAX_THREADS: usize = 4096;
+
+/// `--threads`: 1 to [`MAX_THREADS`].
+pub fn check_threads(n: Option<usize>) -> Result<()> {
+    if let Some(n) = n {
+        anyhow::ensure!(
+            (1..=MAX_THREADS).contains(&n),
+            "--threads must be between 1 and {MAX_THREADS} (got {n})"
+        );
+    }
+    Ok(())
+}
+
 /// Starts the global rayon pool with `threads` workers (all cores when `None`); returns the
 /// number of workers.
 pub fn start_threads(threads: Option<usize>) -> Result<usize> {
     if let Some(n) = threads {
-        super::validate::threads(Some(n))?;
+        check_threads(Some(n))?;
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build_global()

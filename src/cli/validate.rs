@@ -10,9 +10,6 @@ use bbsplat::memory::{available_bytes, human_bytes};
 /// ([`bbsplat::model_file::MAX_TEXTURE_SIZE`]): larger would train and then fail to save.
 pub use bbsplat::model_file::MAX_TEXTURE_SIZE;
 
-/// Largest `--threads`.
-pub const MAX_THREADS: usize = 4096;
-
 /// Largest `render --orbit` (frames; an hour of video at 30 frames a second is 108 000).
 pub const MAX_ORBIT_FRAMES: usize = 100_000;
 
@@ -65,16 +62,8 @@ pub fn billboards(n: usize) -> Result<()> {
     Ok(())
 }
 
-/// `--threads`: 1 to [`MAX_THREADS`].
-pub fn threads(n: Option<usize>) -> Result<()> {
-    if let Some(n) = n {
-        anyhow::ensure!(
-            (1..=MAX_THREADS).contains(&n),
-            "--threads must be between 1 and {MAX_THREADS} (got {n})"
-        );
-    }
-    Ok(())
-}
+/// `--threads` ([`super::common::check_threads`], checked where the pool starts).
+pub use super::common::check_threads as threads;
 
 /// Every numeric flag of `bbsplat train`: the library's ranges of the request they make
 /// ([`bbsplat::plan::TrainRequest::check`], named by their flags), then `--threads`,

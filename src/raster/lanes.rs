@@ -3,7 +3,7 @@
 //!
 //! **Tile walk.** A tile is composited billboard by billboard (each entry applied to its pixels,
 //! `tile_forward.rs` / `tile_backward.rs`) unless its entries cover fewer than
-//! [`crate::raster::forward::SMALL_ENTRY_PIXELS`] pixels on average, when it is walked pixel by
+//! [`SMALL_ENTRY_PIXELS`] pixels on average, when it is walked pixel by
 //! pixel (`tile_forward_pixels.rs`, and the backward's pixel walk, which also serves the normal
 //! and distortion maps). The forward's walk leaves the tile's blended pairs grouped its way
 //! ([`crate::raster::forward::PairOrder`]) and the backward walks the tile the same way, so
@@ -35,6 +35,18 @@ static FORCE_BASELINE: AtomicBool = AtomicBool::new(false);
 static FORCE_AVX2: AtomicBool = AtomicBool::new(false);
 static TILE_WALK: AtomicU8 = AtomicU8::new(TileWalk::Auto as u8);
 
+/// A tile whose entries cover fewer pixels than this on average (their span pixels, a little
+/// more than the pixels they are evaluated at) is composited pixel by pixel
+/// (`composite_tile_by_pixel`), others billboard by billboard (`composite_tile`); its backward
+/// walks it the same way. With each walk forced on every tile of random scenes of 2 to 34
+/// evaluated pixels per entry (0.8 to 7.6 per pixel) and of the trained-like scenes (63 to 223
+/// per entry, 16 to 23 per pixel), the pixel walk took 12-45 % less time up to 9-11 pixels per
+/// entry (one scene at 9.6 excepted: 12 % more) and the entry walk 2-38 % less from 16 on,
+/// whatever the depth; the trained-like scenes took 2.1-3.2 times as long by pixel
+/// (`docs/perf.md`, 2026-11-28 seventh session). The threshold had been 4, which left random
+/// scenes of 4-11 pixels per entry on the slower walk (400²/50k 1.6 times as long).
+pub const SMALL_ENTRY_PIXELS: usize = 12;
+
 /// How tiles are walked ([`force_tile_walk`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(u8)]
@@ -61,7 +73,7 @@ pub(crate) fn walk_by_pixel(pixels: usize, entries: usize) -> bool {
     match TILE_WALK.load(Ordering::Relaxed) {
         1 => false,
         2 => true,
-        _ => pixels < super::forward::SMALL_ENTRY_PIXELS * entries,
+        _ => pixels < SMALL_ENTRY_PIXELS * entries,
     }
 }
 

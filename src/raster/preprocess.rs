@@ -1,6 +1,6 @@
 //! Per-billboard preprocessing: transform, normal, depth, SH colour and a tight screen box.
 
-use super::{ActivatedRef, RenderSettings};
+use super::input::{ActivatedRef, RenderSettings};
 use crate::camera::{Camera, offset_from};
 use crate::memory::resize_for_overwrite;
 use crate::stages::ray_plane::ViewPlane;

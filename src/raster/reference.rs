@@ -6,8 +6,7 @@
 //! renderer is tested against it; any contribution lost to binning or per-pixel culling shows
 //! up as a difference.
 
-use super::{ActivatedRef, RenderSettings};
-use crate::billboards::planar_textures;
+use super::input::{ActivatedRef, RenderSettings, planar_textures};
 use crate::camera::Camera;
 use crate::stages::bilinear;
 use crate::stages::composite::composite;

@@ -2,7 +2,7 @@
 //! hit, computed once per billboard and view and cut to each tile the billboard is listed in.
 //!
 //! The forward pass narrows every tile entry's pixels to the rows' spans of the billboard's
-//! projected support quad ([`local_spans`](super::forward::local_spans)). Computed per tile
+//! projected support quad ([`local_spans`](super::tile_spans::local_spans)). Computed per tile
 //! entry, each image row of a billboard is found again in every tile column the billboard
 //! crosses, and its quad is projected again in every tile (a trained scene's billboard is
 //! listed in about five tiles). [`BillboardRows`] computes each row once, for the whole width of
@@ -17,11 +17,13 @@
 //! columns end at `n₁ ≤ pixel_max + 1 = n₂` whenever the box overlaps the tile; a tile whose
 //! rectangle the box misses (not binned there, kept exact anyway) takes the per-entry path.
 
-use super::forward::QUAD_MIN_COLUMNS;
 use super::preprocess::Prepared;
 use crate::memory::resize_for_overwrite;
 use crate::stages::splat_transform::{ROW_LANES, pixel_range, support_quad};
 use rayon::prelude::*;
+
+/// Boxes narrower than this many pixel columns are not culled row by row (nothing to gain).
+pub const QUAD_MIN_COLUMNS: u32 = 4;
 
 /// Billboards per parallel task of [`BillboardRows::build`].
 const BUILD_BLOCK: usize = 256;
@@ -90,14 +92,14 @@ impl BillboardRows {
     /// 2026-11-28: one more prefetch per billboard.)
     #[inline]
     pub(crate) fn prefetch(&self, b: usize) {
-        super::forward::prefetch_steps(self.of(b));
+        super::prefetch::prefetch_steps(self.of(b));
     }
 
     /// Hints the CPU to fetch where billboard `b`'s rows are (no effect on values), so that
     /// [`BillboardRows::prefetch`] of it later finds them without a wait.
     #[inline]
     pub(crate) fn prefetch_range(&self, b: usize) {
-        super::forward::prefetch_ptr(self.ranges[b..].as_ptr().cast());
+        super::prefetch::prefetch_ptr(self.ranges[b..].as_ptr().cast());
     }
 
     /// The rows of billboard `b`, from its box's first row (empty when its spans are its box).

@@ -22,9 +22,9 @@
 
 #![cfg(target_arch = "x86_64")]
 
-use super::forward::EntryPair;
-use super::tile_backward::{CHANNELS, PixelBack, TexelTarget};
 use super::tile_forward_avx2::{Thresholds, decide, sample_lanes_with_texels, store, transpose_four};
+use super::tile_gradients::{CHANNELS, PixelBack, TexelTarget};
+use super::tile_types::EntryPair;
 use crate::stages::bilinear::RowTaps;
 use crate::stages::composite::{ClampGradient, CompositeParams};
 use crate::stages::ray_plane::{LANES, LaneTransforms, RowHits};
@@ -328,7 +328,7 @@ pub(super) unsafe fn chunk_backward(
     }
 }
 
-/// `acc += d.lane(l)` for the lanes `l = 0..n` in order ([`super::backward::add_transform`]
+/// `acc += d.lane(l)` for the lanes `l = 0..n` in order ([`super::tile_gradients::add_transform`]
 /// lane after lane, the same bits): the first eight of the nine components of every lane are
 /// turned from one vector per component into one vector per lane by an 8×8 transpose (24
 /// shuffles, where reading each lane's components one by one took 56 inserts) and added to

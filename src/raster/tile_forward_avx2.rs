@@ -27,9 +27,9 @@
 
 #![cfg(target_arch = "x86_64")]
 
-use super::TILE_SIZE;
-use super::forward::{EntryPair, PairOrder, TileBlended};
-use super::tile_forward::{FORWARD_FEATURES, PixelOut, TexelPrefetch, TileInputs};
+use super::binning::TILE_SIZE;
+use super::texel_prefetch::TexelPrefetch;
+use super::tile_types::{EntryPair, FORWARD_FEATURES, PairOrder, PixelOut, TileBlended, TileInputs};
 use crate::camera::Camera;
 use crate::stages::bilinear::RowTaps;
 #[cfg(feature = "testing")]
@@ -1060,7 +1060,15 @@ impl EntryRun<'_> {
 #[inline(always)]
 unsafe fn composite_tile_lanes<const DISTORTION: bool>(
     states: &mut LaneStates,
-    (camera, set, settings, prepared, list, (i0, j0, i1, j1), spans): TileInputs<'_, '_>,
+    TileInputs {
+        camera,
+        set,
+        settings,
+        prepared,
+        list,
+        rect: (i0, j0, i1, j1),
+        spans,
+    }: TileInputs<'_, '_>,
     impact: &mut [f32],
     pixels: &mut Vec<PixelOut>,
     out: &mut TileBlended,

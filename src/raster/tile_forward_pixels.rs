@@ -10,10 +10,12 @@
 //! the same); the choice is made per tile ([`composite_tile`](super::tile_forward::composite_tile))
 //! and tested in `tests/suite/raster_lanes.rs`.
 
-use super::forward::{CANDIDATE_CHUNK, PairOrder, TileBlended, TileSpans, prefetch_record, prefetch_taps};
+use super::candidates::CANDIDATE_CHUNK;
+use super::input::{ActivatedRef, RenderSettings};
+use super::prefetch::{prefetch_record, prefetch_taps};
 use super::preprocess::Prepared;
-use super::tile_forward::{FORWARD_FEATURES, PixelOut, TileInputs};
-use super::{ActivatedRef, RenderSettings};
+use super::tile_spans::TileSpans;
+use super::tile_types::{FORWARD_FEATURES, PairOrder, PixelOut, TileBlended, TileInputs};
 use crate::camera::Camera;
 use crate::memory::resize_for_overwrite;
 use crate::stages::bilinear::{self, SampleTaps};
@@ -34,7 +36,15 @@ pub(crate) struct PixelWalk {
 /// blended pairs are grouped pixel by pixel ([`PairOrder::ByPixel`]).
 pub(crate) fn composite_tile_by_pixel<const DISTORTION: bool>(
     scratch: &mut PixelWalk,
-    (camera, set, settings, prepared, list, rect @ (i0, j0, i1, j1), spans): TileInputs<'_, '_>,
+    TileInputs {
+        camera,
+        set,
+        settings,
+        prepared,
+        list,
+        rect: rect @ (i0, j0, i1, j1),
+        spans,
+    }: TileInputs<'_, '_>,
     impact: &mut [f32],
     pixels: &mut Vec<PixelOut>,
     blended: &mut TileBlended,
@@ -136,7 +146,7 @@ pub(crate) struct SampledCandidate {
 /// record, plane and texture are loaded once for all the pixels of its span (its texels stay in
 /// L1 while its pixels are sampled), instead of once per pixel as a pixel-by-pixel walk over 10-60
 /// billboards would. Per pixel the candidates come out in tile-list (depth) order, since the
-/// entries are visited in that order. Same arithmetic per pair as [`TileCandidates`](super::forward::TileCandidates) followed by
+/// entries are visited in that order. Same arithmetic per pair as [`TileCandidates`](super::candidates::TileCandidates) followed by
 /// [`BilinearTaps::sample_rgba`](bilinear::BilinearTaps::sample_rgba) (whose [`SampleTaps`] part it keeps), so the forward pass's outputs are unchanged bit for bit.
 /// The candidates of tile-local pixel `q` are `items[offsets[q]..ends[q]]`.
 #[derive(Default)]
@@ -150,7 +160,7 @@ pub(crate) struct TileSamples {
     entry_features: Vec<[Vec3; 2]>,
     items: Vec<SampledCandidate>,
     /// Candidates whose texels are being prefetched: (item, billboard, taps), sampled in runs of
-    /// [`CANDIDATE_CHUNK`] (see [`TileCandidates`](super::forward::TileCandidates) for why the reads are issued ahead).
+    /// [`CANDIDATE_CHUNK`] (see [`TileCandidates`](super::candidates::TileCandidates) for why the reads are issued ahead).
     pending: Vec<(u32, u32, SampleTaps)>,
 }
 
@@ -249,7 +259,7 @@ impl TileSamples {
 }
 
 /// Per-pixel entry lists of one tile (per-pixel culling): the entries of tile-local pixel `q`
-/// (row-major over the tile's own width, as [`TileCandidates`](super::forward::TileCandidates) numbers them) are
+/// (row-major over the tile's own width, as [`TileCandidates`](super::candidates::TileCandidates) numbers them) are
 /// `items[offsets[q]..offsets[q + 1]]`, in tile-list (depth) order. Built by a counting sort over
 /// the entries' spans, `O(entries + pairs)`, so that a pixel visits only the billboards whose
 /// span contains it.

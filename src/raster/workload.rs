@@ -4,7 +4,8 @@
 //! like the work it stands for"); `examples/model_stats.rs` prints them for trained models and
 //! `benches/raster.rs` for its generated scenes.
 
-use super::{ActivatedRef, RenderOutput};
+use super::input::ActivatedRef;
+use super::output::RenderOutput;
 
 /// Statistics of one render (see the [module documentation](self)). Quantiles are nearest-rank.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

@@ -28,6 +28,7 @@ mod init_fibonacci;
 mod init_fps;
 mod init_hull;
 mod init_scene;
+mod layering;
 mod loss_normal_consistency;
 mod loss_ssim;
 mod memory;
