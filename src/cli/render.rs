@@ -142,7 +142,9 @@ pub fn render(args: RenderArgs) -> Result<()> {
         report.mean_ssim,
         report.mean_render_ms
     );
-    output.map(OutputDir::keep);
+    if let Some(output) = output {
+        output.keep();
+    }
     Ok(())
 }
 
