@@ -15,7 +15,7 @@
 //! `tests/suite/plan.rs`).
 //!
 //! The background is chosen when the scene is loaded, from the data (white for NeRF-synthetic
-//! images with alpha, black otherwise): load with [`load_with_data_background`] and pass its
+//! images with alpha, black otherwise): load with [`crate::scene::data_background::load_with_data_background`] and pass its
 //! [`BackgroundChoice`] so that the choice is recorded with the others.
 //!
 //! ```no_run
@@ -45,7 +45,6 @@ use crate::model_file::MAX_TEXTURE_SIZE;
 use crate::report::AutoChoice;
 use crate::scene::Scene;
 use crate::scene::data_background::BackgroundChoice;
-pub use crate::scene::data_background::load_with_data_background;
 use crate::train::footprint::training_bytes;
 use crate::train::geometry::GeometryRegularisers;
 use crate::train::resolution::ResolutionSchedule;
@@ -299,7 +298,7 @@ fn choice(setting: &str, value: impl ToString, reason: impl Into<String>) -> Aut
 impl TrainPlan {
     /// Plans a run on `scene` as `request` asks, choosing what it leaves open. `background` is
     /// how the scene's background was chosen when it was loaded
-    /// ([`load_with_data_background`]), recorded as a choice; `None` when the caller chose it.
+    /// ([`crate::scene::data_background::load_with_data_background`]), recorded as a choice; `None` when the caller chose it.
     ///
     /// # Errors
     /// A setting of `request` out of range ([`TrainRequest::check`]).

@@ -188,35 +188,38 @@ pub fn write_png_atomic(path: &Path, rgb: &[f32], width: u32, height: u32) -> Re
     Ok(())
 }
 
-/// An output folder a command creates: removed, with what the command wrote into it, unless
-/// [`OutputDir::keep`] is called, so that a command that fails leaves no empty or half-filled
-/// folder behind. A folder that already existed is left alone.
+/// An output folder a command creates: removed, with what the command wrote into it and the
+/// parent folders it had to create, unless [`OutputDir::keep`] is called, so that a command
+/// that fails leaves no empty or half-filled folder behind. Folders that already existed are
+/// left alone.
 pub struct OutputDir {
-    path: std::path::PathBuf,
-    created: bool,
+    /// The outermost folder this created (`None`: the folder existed).
+    created: Option<std::path::PathBuf>,
 }
 
 impl OutputDir {
     /// Creates `path` (and missing parents) if it does not exist.
     pub fn create(path: &Path) -> Result<Self> {
-        let created = !path.exists();
+        let mut created = None;
+        let mut missing = Some(path);
+        while let Some(p) = missing.filter(|p| !p.as_os_str().is_empty() && !p.exists()) {
+            created = Some(p.to_path_buf());
+            missing = p.parent();
+        }
         std::fs::create_dir_all(path).with_context(|| format!("creating {}", path.display()))?;
-        Ok(Self {
-            path: path.to_path_buf(),
-            created,
-        })
+        Ok(Self { created })
     }
 
     /// The command succeeded: the folder stays.
     pub fn keep(mut self) {
-        self.created = false;
+        self.created = None;
     }
 }
 
 impl Drop for OutputDir {
     fn drop(&mut self) {
-        if self.created {
-            let _ = std::fs::remove_dir_all(&self.path);
+        if let Some(dir) = &self.created {
+            let _ = std::fs::remove_dir_all(dir);
         }
     }
 }

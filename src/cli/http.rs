@@ -71,41 +71,49 @@ pub fn serve(listener: TcpListener, handler: Arc<Handler>) -> Result<()> {
             let _ = write_response(&mut stream, &Response::empty("503 Service Unavailable"), false);
             continue;
         }
-        let (active, handler) = (Arc::clone(&active), Arc::clone(&handler));
+        let (slot, handler) = (Arc::clone(&active), Arc::clone(&handler));
         let spawned = std::thread::Builder::new().name("bbsplat-http".into()).spawn(move || {
             answer(stream, &*handler);
-            active.fetch_sub(1, Ordering::SeqCst);
+            slot.fetch_sub(1, Ordering::SeqCst);
         });
         if spawned.is_err() {
-            // The thread could not start: the connection was dropped with its closure.
-            continue;
+            // No thread to serve it: the connection is dropped with the closure, and its slot is
+            // given back here.
+            active.fetch_sub(1, Ordering::SeqCst);
         }
     }
     Ok(())
 }
 
+/// Why a request head was not read.
+enum HeadError {
+    /// The client closed or broke the connection: nobody to answer.
+    Gone,
+    /// Answer with this status.
+    Status(&'static str),
+}
+
 /// Reads the request line and headers of `stream` within the deadline and the size bound.
-/// `Err` carries the status to answer.
-fn read_head(stream: &mut TcpStream) -> Result<Vec<u8>, &'static str> {
+fn read_head(stream: &mut TcpStream) -> Result<Vec<u8>, HeadError> {
     let start = Instant::now();
     let mut head = Vec::with_capacity(1024);
     let mut chunk = [0u8; 2048];
     loop {
         let left = REQUEST_DEADLINE.saturating_sub(start.elapsed());
         if left.is_zero() {
-            return Err("408 Request Timeout");
+            return Err(HeadError::Status("408 Request Timeout"));
         }
         stream
             .set_read_timeout(Some(left))
-            .map_err(|_| "500 Internal Server Error")?;
+            .map_err(|_| HeadError::Status("500 Internal Server Error"))?;
         let n = match stream.read(&mut chunk) {
-            Ok(0) => return Err(""),
+            Ok(0) => return Err(HeadError::Gone),
             Ok(n) => n,
             Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {
-                return Err("408 Request Timeout");
+                return Err(HeadError::Status("408 Request Timeout"));
             }
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-            Err(_) => return Err(""),
+            Err(_) => return Err(HeadError::Gone),
         };
         let searched_from = head.len().saturating_sub(3);
         head.extend_from_slice(&chunk[..n]);
@@ -114,7 +122,7 @@ fn read_head(stream: &mut TcpStream) -> Result<Vec<u8>, &'static str> {
             return Ok(head);
         }
         if head.len() > MAX_REQUEST_BYTES {
-            return Err("431 Request Header Fields Too Large");
+            return Err(HeadError::Status("431 Request Header Fields Too Large"));
         }
     }
 }
@@ -123,28 +131,24 @@ fn read_head(stream: &mut TcpStream) -> Result<Vec<u8>, &'static str> {
 /// `[::1]`, with or without a port.
 pub fn is_loopback_host(host: &str) -> bool {
     let host = host.trim();
-    let name = if let Some(rest) = host.strip_prefix('[') {
-        match rest.split_once(']') {
-            Some((inside, port)) if port.is_empty() || port.starts_with(':') => {
-                return inside == "::1" && valid_port(port);
-            }
-            _ => return false,
-        }
-    } else {
-        match host.split_once(':') {
-            Some((name, port)) if valid_port(&format!(":{port}")) => name,
-            Some(_) => return false,
-            None => host,
-        }
+    // The name and what follows it: nothing, or `:port`.
+    let (name, rest) = match host.strip_prefix('[') {
+        Some(bracketed) => match bracketed.split_once(']') {
+            Some((inside, rest)) => (inside, rest),
+            None => return false,
+        },
+        None => host.find(':').map_or((host, ""), |i| host.split_at(i)),
     };
-    name.eq_ignore_ascii_case("localhost") || name == "127.0.0.1"
-}
-
-fn valid_port(colon_port: &str) -> bool {
-    match colon_port.strip_prefix(':') {
-        None => colon_port.is_empty(),
+    let port_ok = match rest.strip_prefix(':') {
+        None => rest.is_empty(),
         Some(p) => !p.is_empty() && p.len() <= 5 && p.bytes().all(|b| b.is_ascii_digit()),
-    }
+    };
+    let loopback = if host.starts_with('[') {
+        name == "::1"
+    } else {
+        name.eq_ignore_ascii_case("localhost") || name == "127.0.0.1"
+    };
+    port_ok && loopback
 }
 
 /// The response to a request head (request line and headers, without the blank line).
@@ -195,9 +199,8 @@ fn answer(mut stream: TcpStream, handler: &Handler) {
     }
     let (response, head_only) = match read_head(&mut stream) {
         Ok(head) => respond(&head, handler),
-        // The client closed or broke the connection: nobody to answer.
-        Err("") => return,
-        Err(status) => (Response::empty(status), false),
+        Err(HeadError::Gone) => return,
+        Err(HeadError::Status(status)) => (Response::empty(status), false),
     };
     let _ = write_response(&mut stream, &response, head_only);
     let _ = stream.shutdown(std::net::Shutdown::Both);

@@ -5,7 +5,7 @@ use super::signals::Signals;
 use super::train_args::{InitArg, TrainArgs};
 use super::{preflight, resume, validate};
 use anyhow::{Context, Result};
-use bbsplat::plan::TrainPlan;
+use bbsplat::plan::{RunLength, TrainPlan};
 use bbsplat::report::RunReport;
 use bbsplat::train::RunError;
 use bbsplat::train::footprint::{output_bytes, training_bytes};
@@ -91,22 +91,20 @@ pub fn run(args: TrainArgs) -> Result<()> {
                     path.display(),
                     plan.budget_seconds / 60.0
                 ),
-                None => {
-                    let iterations = args.iterations.unwrap_or(bbsplat::plan::DEFAULT_STEPS);
-                    anyhow::ensure!(
-                        args.minutes.is_none(),
+                None => match request.length {
+                    RunLength::Minutes(_) => anyhow::bail!(
                         "{}: the checkpoint is of a {}-step run, not of a --minutes run",
                         path.display(),
                         t.config().iterations
-                    );
-                    anyhow::ensure!(
+                    ),
+                    RunLength::Steps(iterations) => anyhow::ensure!(
                         t.config().iterations == iterations,
                         "{}: the checkpoint is of a {}-step run, not --iterations {}",
                         path.display(),
                         t.config().iterations,
                         iterations
-                    );
-                }
+                    ),
+                },
             }
             if let Some(note) = resume::check(path, t.run_record(), &record)? {
                 eprintln!("{note}");

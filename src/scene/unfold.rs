@@ -157,6 +157,61 @@ fn best_turn(axis: DVec3, m: DMat3) -> f64 {
     cross.atan2(trace - aa).rem_euclid(std::f64::consts::TAU)
 }
 
+/// The passes of `poses` (capture order): a new one starts after every turn of more than
+/// [`super::registration::SHARP_TURN_DEG`] between consecutive frames.
+pub fn passes(poses: &[Pose]) -> Vec<Range<usize>> {
+    let rotations: Vec<DMat3> = poses.iter().map(|p| p.rotation).collect();
+    let starts = super::registration::sharp_turns_of(&rotations)
+        .into_iter()
+        .map(|t| t.index + 1);
+    let bounds: Vec<usize> = std::iter::once(0).chain(starts).chain([poses.len()]).collect();
+    bounds.windows(2).map(|w| w[0]..w[1]).collect()
+}
+
+/// How one pass moves from frame to frame: its sharpest turn between consecutive frames and
+/// its longest step over its median step, each with the frame that starts it (indices into
+/// the pass).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PassMotion {
+    /// The largest turn between consecutive frames (degrees) and the frame before it.
+    pub sharpest_turn: (f64, usize),
+    /// The longest step over the median step (0 for a pass of fewer than three frames) and the
+    /// frame before it.
+    pub longest_step: (f64, usize),
+}
+
+/// The [`PassMotion`] of `frames` (one pass, capture order).
+pub fn pass_motion(frames: &[Pose]) -> PassMotion {
+    let largest = |values: &[f64]| {
+        values
+            .iter()
+            .copied()
+            .enumerate()
+            .fold((0.0, 0), |best, (i, v)| if v > best.0 { (v, i) } else { best })
+    };
+    let turns: Vec<f64> = frames
+        .windows(2)
+        .map(|w| angle_of(w[0].rotation * w[1].rotation.transpose()).to_degrees())
+        .collect();
+    let steps: Vec<f64> = frames
+        .windows(2)
+        .map(|w| (w[1].centre - w[0].centre).length())
+        .collect();
+    let longest_step = if steps.len() < 2 {
+        (0.0, 0)
+    } else {
+        let mut sorted = steps.clone();
+        sorted.sort_by(f64::total_cmp);
+        let median = sorted[sorted.len() / 2].max(f64::MIN_POSITIVE);
+        let (longest, at) = largest(&steps);
+        (longest / median, at)
+    };
+    PassMotion {
+        sharpest_turn: largest(&turns),
+        longest_step,
+    }
+}
+
 /// `Ok` when every pass of `poses` moves as frames of a video do (module documentation), else
 /// the first pass and step that does not.
 ///
@@ -164,34 +219,21 @@ fn best_turn(axis: DVec3, m: DMat3) -> f64 {
 /// The reason, naming the frames.
 pub fn video_evidence(poses: &[Pose], passes: &[Range<usize>]) -> Result<(), String> {
     for pass in passes {
-        let frames = &poses[pass.clone()];
-        let mut steps: Vec<f64> = frames
-            .windows(2)
-            .map(|w| (w[1].centre - w[0].centre).length())
-            .collect();
-        for (k, w) in frames.windows(2).enumerate() {
-            let turn = angle_of(w[0].rotation * w[1].rotation.transpose()).to_degrees();
-            if turn > MAX_VIDEO_TURN_DEG {
-                return Err(format!(
-                    "frames {} and {} turn by {turn:.0} deg: not neighbours in a video",
-                    pass.start + k,
-                    pass.start + k + 1
-                ));
-            }
-        }
-        if steps.len() < 2 {
-            continue;
-        }
-        let longest = steps.iter().copied().fold(0.0, f64::max);
-        let at = steps.iter().position(|&s| s == longest).unwrap_or(0);
-        steps.sort_by(f64::total_cmp);
-        let median = steps[steps.len() / 2];
-        if longest > MAX_VIDEO_STEP_RATIO * median {
+        let motion = pass_motion(&poses[pass.clone()]);
+        let (turn, k) = motion.sharpest_turn;
+        if turn > MAX_VIDEO_TURN_DEG {
             return Err(format!(
-                "frames {} and {} are {:.1} median steps apart: the images are not frames of a video in capture order",
-                pass.start + at,
-                pass.start + at + 1,
-                longest / median.max(f64::MIN_POSITIVE)
+                "frames {} and {} turn by {turn:.0} deg: not neighbours in a video",
+                pass.start + k,
+                pass.start + k + 1
+            ));
+        }
+        let (ratio, k) = motion.longest_step;
+        if ratio > MAX_VIDEO_STEP_RATIO {
+            return Err(format!(
+                "frames {} and {} are {ratio:.1} median steps apart: the images are not frames of a video in capture order",
+                pass.start + k,
+                pass.start + k + 1,
             ));
         }
     }
@@ -201,12 +243,7 @@ pub fn video_evidence(poses: &[Pose], passes: &[Range<usize>]) -> Result<(), Str
 /// Explains the sharp turns between consecutive `poses` (capture order) as folds of one orbit,
 /// or says why not. See the module documentation.
 pub fn plan(poses: &[Pose]) -> Plan {
-    let rotations: Vec<DMat3> = poses.iter().map(|p| p.rotation).collect();
-    let starts = super::registration::sharp_turns_of(&rotations)
-        .into_iter()
-        .map(|t| t.index + 1);
-    let bounds: Vec<usize> = std::iter::once(0).chain(starts).chain([poses.len()]).collect();
-    let passes: Vec<Range<usize>> = bounds.windows(2).map(|w| w[0]..w[1]).collect();
+    let passes = passes(poses);
     if passes.len() == 1 {
         return Plan::OnePass;
     }

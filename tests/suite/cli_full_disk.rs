@@ -74,11 +74,13 @@ fn render_and_orbit_on_a_full_disk_fail_and_leave_nothing_behind() {
     let Some(disk) = TinyDisk::mount("render_on_a_full_disk", 8) else {
         return;
     };
+    // Into a folder it creates, with a parent it creates too: both are removed.
     let out = disk.0.join("renders");
-    let (ok, err) = run(&["render", model_s, data_s, "-o", out.to_str().unwrap()]);
+    let nested = out.join("nested");
+    let (ok, err) = run(&["render", model_s, data_s, "-o", nested.to_str().unwrap()]);
     assert!(!ok, "render on a full disk exited 0");
     assert!(err.contains("No space left"), "{err}");
-    assert!(!out.exists(), "the folder render created is left: {:?}", files(&out));
+    assert!(!out.exists(), "the folders render created are left: {:?}", files(&out));
     // Into a folder that exists: the renders written before the disk filled are whole PNGs,
     // and nothing else is there.
     std::fs::create_dir(&out).unwrap();

@@ -126,6 +126,9 @@ fn the_viewer_server_cannot_be_stalled_flooded_or_read_from_another_origin() {
         format!("GET / HTTP/1.1\r\nHost: attacker.example:{port}\r\n\r\n"),
         "GET / HTTP/1.1\r\nHost: localhost.attacker.example\r\n\r\n".to_string(),
         "GET / HTTP/1.1\r\nHost: 127.0.0.1.nip.io\r\n\r\n".to_string(),
+        "GET / HTTP/1.1\r\nHost: [localhost]\r\n\r\n".to_string(),
+        "GET / HTTP/1.1\r\nHost: localhost:80x\r\n\r\n".to_string(),
+        "GET / HTTP/1.1\r\nHost: [::1]x\r\n\r\n".to_string(),
         "GET / HTTP/1.1\r\n\r\n".to_string(),
         "GET / HTTP/1.1\r\nHost: localhost\r\nHost: attacker.example\r\n\r\n".to_string(),
     ] {

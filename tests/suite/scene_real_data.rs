@@ -254,22 +254,11 @@ fn beer_colmap_is_unfolded_by_default() {
             centre: v.camera.centre_f64(),
         })
         .collect();
-    let rotations: Vec<glam::DMat3> = poses.iter().map(|p| p.rotation).collect();
-    let starts: Vec<usize> = bbsplat::scene::registration::sharp_turns_of(&rotations)
-        .iter()
-        .map(|t| t.index + 1)
-        .collect();
-    let bounds: Vec<usize> = std::iter::once(0).chain(starts).chain([poses.len()]).collect();
     let (mut worst_turn, mut worst_ratio) = (0.0f64, 0.0f64);
-    for w in bounds.windows(2) {
-        let pass = &poses[w[0]..w[1]];
-        let mut steps: Vec<f64> = pass.windows(2).map(|p| (p[1].centre - p[0].centre).length()).collect();
-        for p in pass.windows(2) {
-            worst_turn = worst_turn
-                .max(bbsplat::scene::unfold::angle_of(p[0].rotation * p[1].rotation.transpose()).to_degrees());
-        }
-        steps.sort_by(f64::total_cmp);
-        worst_ratio = worst_ratio.max(steps[steps.len() - 1] / steps[steps.len() / 2]);
+    for pass in bbsplat::scene::unfold::passes(&poses) {
+        let motion = bbsplat::scene::unfold::pass_motion(&poses[pass]);
+        worst_turn = worst_turn.max(motion.sharpest_turn.0);
+        worst_ratio = worst_ratio.max(motion.longest_step.0);
     }
     println!("beer passes: worst turn {worst_turn:.2} deg, worst step {worst_ratio:.2} median steps");
     assert!(worst_turn < 15.0 && worst_ratio < 2.5, "{worst_turn} {worst_ratio}");
