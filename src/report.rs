@@ -30,7 +30,8 @@ pub struct TrainSummary {
     pub sh_degree: u32,
     /// Training image width and height in pixels (of the first training view).
     pub resolution: [u32; 2],
-    /// Wall-clock seconds spent in training steps (excluding loading, evaluation and saving).
+    /// Wall-clock seconds spent in training steps (excluding loading, evaluation and saving), of
+    /// the whole run: a resumed run's earlier parts are included ([`crate::train::run_time`]).
     pub train_seconds: f64,
     /// Mean forward-only render time per test frame, milliseconds (NaN without test views).
     #[serde(deserialize_with = "nan_when_null")]

@@ -8,6 +8,7 @@ use anyhow::{Context, Result};
 use bbsplat::memory::human_bytes;
 use bbsplat::model_file::{META_FILE, PLY_FILE};
 use bbsplat::train::run::{CHECKPOINT_FILE, MODEL_DIR, SUMMARY_FILE};
+use bbsplat::train::run_time::RUN_TIME_FILE;
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 
@@ -75,7 +76,7 @@ pub fn output_folder(out: &Path, resume: Option<&Path>, overwrite: bool) -> Resu
             model.display()
         );
     }
-    for file in [CHECKPOINT_FILE, SUMMARY_FILE] {
+    for file in [CHECKPOINT_FILE, SUMMARY_FILE, RUN_TIME_FILE] {
         let path = out.join(file);
         if let Ok(meta) = std::fs::symlink_metadata(&path) {
             anyhow::ensure!(

@@ -9,6 +9,7 @@ use bbsplat::plan::{RunLength, TrainPlan};
 use bbsplat::report::RunReport;
 use bbsplat::train::RunError;
 use bbsplat::train::footprint::{output_bytes, training_bytes};
+use bbsplat::train::run_time;
 use bbsplat::train::{RunConfig, RunOutcome, StopReason, TrainEvent, TrainView, Trainer};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::time::Instant;
@@ -80,6 +81,9 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let request = args.request();
     let record = resume::record_of(&args, &scene);
     let mut automatic = Vec::new();
+    // The time of the run a checkpoint continues, or why it is not known.
+    let mut earlier_time = None;
+    let mut resume_warnings = Vec::new();
     let mut trainer = match &args.resume {
         Some(path) => {
             let t = Trainer::load_checkpoint(path).with_context(|| format!("resuming from {}", path.display()))?;
@@ -111,6 +115,13 @@ pub fn run(args: TrainArgs) -> Result<()> {
             }
             preflight::free_space(&args.output, output_bytes(t.model().len(), t.model().texture_size))?;
             println!("resuming at step {} from {}", t.step_index(), path.display());
+            match run_time::read_beside(path, t.step_index()) {
+                Ok(time) => earlier_time = Some(time),
+                Err(why) => {
+                    eprintln!("warning: {why}");
+                    resume_warnings.push(why);
+                }
+            }
             t
         }
         None => {
@@ -153,7 +164,8 @@ pub fn run(args: TrainArgs) -> Result<()> {
         }
     };
     // The views' 8-bit images move into the training views (converted to floats per step).
-    let scene_warnings = scene.warnings;
+    let mut scene_warnings = scene.warnings;
+    scene_warnings.extend(resume_warnings);
     let train: Vec<TrainView> = scene.train.into_iter().map(TrainView::from_owned_view).collect();
     let test: Vec<TrainView> = scene.test.into_iter().map(TrainView::from_owned_view).collect();
     // From here on a signal stops the run with a checkpoint instead of ending the process.
@@ -183,6 +195,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         command: std::env::args_os().map(|a| a.to_string_lossy().into_owned()).collect(),
         warnings: scene_warnings,
         automatic,
+        earlier_time,
     };
     let last_record = std::cell::RefCell::new(None::<RunReport>);
     let on_event = |event: &TrainEvent| match event {

@@ -40,6 +40,7 @@ pub mod resolution;
 pub mod row_sums;
 pub mod run;
 pub mod run_record;
+pub mod run_time;
 pub mod texture_step;
 pub mod time_budget;
 pub mod view_pixels;

@@ -69,6 +69,7 @@
 //! continued from its checkpoint writes the same files as one that was not.
 
 use super::resolution::{ResolutionSchedule, downscale_view};
+use super::run_time::RunTime;
 use super::{CheckpointError, NonFinite, ParamGroup, StepLog, TrainError, TrainView, Trainer};
 use crate::billboards::ActivatedBillboards;
 use crate::eval::{EvalView, evaluate_views};
@@ -122,6 +123,10 @@ pub struct RunConfig {
     pub warnings: Vec<String>,
     /// Settings chosen automatically by the caller and why, recorded in the summary.
     pub automatic: Vec<AutoChoice>,
+    /// The time already spent by the run a resumed trainer continues
+    /// ([`super::run_time::read_beside`]): the clocks start from it, so the summary reports the
+    /// whole run. `None` (the default): they start from zero.
+    pub earlier_time: Option<RunTime>,
 }
 
 impl Default for RunConfig {
@@ -137,6 +142,7 @@ impl Default for RunConfig {
             command: Vec::new(),
             warnings: Vec::new(),
             automatic: Vec::new(),
+            earlier_time: None,
         }
     }
 }
@@ -228,7 +234,7 @@ pub enum TrainEvent {
         running_psnr: f64,
         /// Billboards relocated so far in this call.
         relocated_total: usize,
-        /// Seconds spent in steps so far in this call.
+        /// Seconds spent in steps so far in the run (a resumed run's earlier parts included).
         train_seconds: f64,
     },
     /// An intermediate evaluation on the test subset.
@@ -239,7 +245,7 @@ pub enum TrainEvent {
         psnr: f64,
         /// Mean SSIM (8-bit images).
         ssim: f64,
-        /// Seconds spent in steps so far in this call.
+        /// Seconds spent in steps so far in the run (a resumed run's earlier parts included).
         seconds: f64,
         /// Views evaluated.
         views: usize,
@@ -497,7 +503,10 @@ struct RunState<'a> {
     /// The test views of the intermediate evaluations.
     eval_subset: Vec<&'a TrainView>,
     curve: Vec<CurvePoint>,
+    /// Seconds in steps, of the whole run (the earlier parts of a resumed run included).
     train_seconds: f64,
+    /// The time of the earlier parts of a resumed run (zero otherwise).
+    earlier: RunTime,
     running_psnr: f64,
     relocated_total: usize,
     /// The last checkpoint this call wrote (named by a failed step's error).
@@ -565,6 +574,7 @@ impl<'a> RunState<'a> {
             ..RenderSettings::default()
         };
         let eval_subset = evenly_spaced(test, config.eval_views);
+        let earlier = config.earlier_time.unwrap_or_default();
         Ok(Self {
             config,
             stop,
@@ -578,7 +588,8 @@ impl<'a> RunState<'a> {
             eval_settings,
             eval_subset,
             curve: Vec::new(),
-            train_seconds: 0.0,
+            train_seconds: earlier.train_seconds,
+            earlier,
             running_psnr: f64::NAN,
             relocated_total: 0,
             last_checkpoint: None,
@@ -602,11 +613,39 @@ impl<'a> RunState<'a> {
             return Ok(None);
         };
         trainer.save_checkpoint(path)?;
+        self.save_run_time(trainer, path)?;
         on_event(&TrainEvent::Checkpoint {
             step: trainer.step_index(),
             path: path.clone(),
         });
         Ok(Some(path.clone()))
+    }
+
+    /// Seconds outside steps so far, of the whole run.
+    fn other_seconds(&self) -> f64 {
+        let this_call = self.run_start.elapsed().as_secs_f64() - (self.train_seconds - self.earlier.train_seconds);
+        self.earlier.other_seconds + this_call.max(0.0)
+    }
+
+    /// The run's time so far beside the checkpoint just written at `checkpoint`
+    /// ([`super::run_time`]).
+    fn save_run_time(&self, trainer: &Trainer, checkpoint: &Path) -> Result<(), RunError> {
+        let io = |action| {
+            move |source| RunError::Io {
+                path: checkpoint.to_path_buf(),
+                action,
+                source,
+            }
+        };
+        let time = RunTime {
+            step: trainer.step_index(),
+            train_seconds: self.train_seconds,
+            other_seconds: self.other_seconds(),
+            checkpoint_checksum: super::run_time::checkpoint_checksum(checkpoint)
+                .map_err(io("reading the checksum back"))?,
+        };
+        let text = serde_json::to_string_pretty(&time).map_err(RunError::Summary)?;
+        write_text_atomic(&super::run_time::path_beside(checkpoint), &text)
     }
 
     /// One step on the coarse or full-size views, timed; the time recorded in the time plan,
@@ -803,6 +842,7 @@ impl<'a> RunState<'a> {
         let config = self.config;
         let tc = self.tc;
         let iterations = trainer.config().iterations;
+        let other_seconds = self.other_seconds();
         // The curve holds evaluations only: none without test views.
         if !test.is_empty() {
             self.curve.push(CurvePoint {
@@ -849,7 +889,7 @@ impl<'a> RunState<'a> {
                 alive: summary.alive,
                 cap: trainer.config().growth_cap,
             }),
-            other_seconds: (self.run_start.elapsed().as_secs_f64() - self.train_seconds).max(0.0),
+            other_seconds,
         };
         on_event(&TrainEvent::Record(Box::new(record.clone())));
         let summary = if let Some(dir) = config.output.as_deref() {

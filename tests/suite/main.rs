@@ -13,6 +13,7 @@ mod cli_export;
 mod cli_full_disk;
 #[cfg(feature = "cli")]
 mod cli_reliability;
+mod cli_resume_time;
 mod cli_serve;
 mod demo;
 mod eval;
