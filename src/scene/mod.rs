@@ -30,6 +30,7 @@ mod colmap_scene;
 pub mod colmap_text;
 pub mod data_background;
 pub mod distortion;
+pub mod duplicates;
 mod error;
 #[cfg(feature = "testing")]
 pub mod fuzz;
@@ -306,6 +307,7 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
         SceneFormat::NerfSynthetic => json_scene::load_nerf_synthetic(&source, options, &mut warnings)?,
         SceneFormat::Transforms => json_scene::load_transforms(&source, options, &mut warnings)?,
     };
+    duplicates::leave_out(&mut scene.train, &mut scene.test, &mut warnings);
     if scene.train.is_empty() {
         return Err(SceneError::Empty {
             path: source,

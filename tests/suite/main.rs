@@ -55,6 +55,7 @@ mod rng;
 mod scene_bad_input;
 mod scene_colmap_roundtrip;
 mod scene_distortion;
+mod scene_duplicates;
 mod scene_fuzz;
 mod scene_image_io;
 mod scene_load;

@@ -14,7 +14,26 @@ pub fn temp_dir(tag: &str) -> PathBuf {
     d
 }
 
-/// Writes an RGB PNG whose pixel (x, y) is `(8x, 8y, 100)` (mod 256).
+/// Two bytes that tell the images of a dataset apart (FNV-1a of the file name and its folder's
+/// name, so that two datasets written alike have the same images): the loader leaves out
+/// frames that are copies of each other ([`bbsplat::scene::duplicates`]).
+fn mark(path: &Path) -> [u8; 2] {
+    let tail: PathBuf = path
+        .iter()
+        .rev()
+        .take(2)
+        .collect::<Vec<_>>()
+        .into_iter()
+        .rev()
+        .collect();
+    let h = tail.to_string_lossy().bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+        (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3)
+    });
+    [(h >> 8) as u8, (h >> 16) as u8]
+}
+
+/// Writes an RGB PNG whose pixel (x, y) is `(8x, 8y, 100)` (mod 256), but for the bottom-right
+/// pixel, which holds a mark of the path (so that no two files are the same image).
 pub fn write_png(path: &Path, w: u32, h: u32) {
     let mut data = Vec::new();
     for y in 0..h {
@@ -22,12 +41,17 @@ pub fn write_png(path: &Path, w: u32, h: u32) {
             data.extend([(8 * x % 256) as u8, (8 * y % 256) as u8, 100]);
         }
     }
+    let [a, b] = mark(path);
+    let last = data.len() - 3;
+    data[last + 1] = a;
+    data[last + 2] = b;
     std::fs::create_dir_all(path.parent().unwrap()).unwrap();
     image::save_buffer(path, &data, w, h, image::ColorType::Rgb8).unwrap();
 }
 
 /// Writes an RGBA PNG: opaque red left half, fully transparent right half, half-transparent
-/// green bottom row.
+/// green bottom row; the last opaque pixel of the row above it holds a mark of the path (so that
+/// no two files are the same image).
 pub fn write_rgba_png(path: &Path, w: u32, h: u32) {
     let mut data = Vec::new();
     for y in 0..h {
@@ -40,6 +64,12 @@ pub fn write_rgba_png(path: &Path, w: u32, h: u32) {
                 data.extend([10, 20, 30, 0]);
             }
         }
+    }
+    if h >= 2 && w >= 2 {
+        let [a, b] = mark(path);
+        let i = (((h - 2) * w + w / 2 - 1) * 4) as usize;
+        data[i + 1] = a;
+        data[i + 2] = b;
     }
     std::fs::create_dir_all(path.parent().unwrap()).unwrap();
     image::save_buffer(path, &data, w, h, image::ColorType::Rgba8).unwrap();

@@ -1,0 +1,189 @@
+//! Duplicate frames: views whose images are the same, pixel for pixel (after undistortion,
+//! downscaling and background compositing). A copy among the training views trains its frame
+//! twice and skews the camera statistics; a test view that is also a training view inflates the
+//! test score. [`find`] names them, [`leave_out`] keeps the first of each set (a training view
+//! before a test view) and removes the others with a warning.
+//!
+//! Images of a single colour are not duplicates of each other (two empty frames from different
+//! poses are both true observations). Only exact copies are found: a re-encoded copy of a frame
+//! differs in its pixels and is not.
+//!
+//! Cost: one hash of at most [`SAMPLES`] bytes per view, then a full comparison only of the views
+//! whose sizes and hashes agree.
+
+use super::{Image, View};
+use std::collections::HashMap;
+
+/// Bytes of an image hashed to group candidate copies.
+pub const SAMPLES: usize = 4096;
+
+/// Which list a view is in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Split {
+    /// [`super::Scene::train`].
+    Train,
+    /// [`super::Scene::test`].
+    Test,
+}
+
+/// A view whose image is the same as an earlier one's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Duplicate {
+    /// The copy's list and index in it.
+    pub copy: (Split, usize),
+    /// The view it copies (the first of its set: a training view when there is one).
+    pub original: (Split, usize),
+}
+
+/// FNV-1a 64 of the size and of at most [`SAMPLES`] evenly spaced bytes of `image`.
+fn sample_hash(image: &Image) -> u64 {
+    let bytes = image.as_bytes();
+    let stride = bytes.len().div_ceil(SAMPLES).max(1);
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    let size = [image.width().to_le_bytes(), image.height().to_le_bytes()].concat();
+    for &b in size.iter().chain(bytes.iter().step_by(stride)) {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+/// True when every pixel of `image` has the first pixel's colour.
+fn single_colour(image: &Image) -> bool {
+    let bytes = image.as_bytes();
+    bytes.chunks_exact(3).all(|p| p == &bytes[..3])
+}
+
+/// Every view of `train` then `test` whose image equals an earlier one's, in that order.
+pub fn find(train: &[View], test: &[View]) -> Vec<Duplicate> {
+    let all: Vec<((Split, usize), &Image)> = train
+        .iter()
+        .enumerate()
+        .map(|(i, v)| ((Split::Train, i), &v.image))
+        .chain(test.iter().enumerate().map(|(i, v)| ((Split::Test, i), &v.image)))
+        .collect();
+    // Earlier views of each sample hash (the first seen of each distinct image).
+    let mut seen: HashMap<u64, Vec<usize>> = HashMap::new();
+    let mut out = Vec::new();
+    for (k, &(at, image)) in all.iter().enumerate() {
+        let firsts = seen.entry(sample_hash(image)).or_default();
+        let original = firsts.iter().copied().find(|&j| {
+            let other = all[j].1;
+            other.width() == image.width() && other.height() == image.height() && other.as_bytes() == image.as_bytes()
+        });
+        match original {
+            Some(j) if !single_colour(image) => out.push(Duplicate {
+                copy: at,
+                original: all[j].0,
+            }),
+            Some(_) => {}
+            None => firsts.push(k),
+        }
+    }
+    out
+}
+
+/// Removes every [`find`] copy from `train` and `test`, with a warning naming it and its
+/// original.
+pub(crate) fn leave_out(train: &mut Vec<View>, test: &mut Vec<View>, warnings: &mut Vec<String>) {
+    let found = find(train, test);
+    if found.is_empty() {
+        return;
+    }
+    let name = |(split, i): (Split, usize)| match split {
+        Split::Train => format!("training view {:?}", train[i].name),
+        Split::Test => format!("test view {:?}", test[i].name),
+    };
+    for d in &found {
+        let why = match (d.copy.0, d.original.0) {
+            (Split::Test, Split::Train) => {
+                "left out of the test views (a test view seen in training inflates the test score)"
+            }
+            (Split::Test, Split::Test) => "left out of the test views (it would count twice)",
+            _ => "left out of the training views (a copy trains its frame twice)",
+        };
+        warnings.push(format!(
+            "{} is the same image as {}: {why}",
+            name(d.copy),
+            name(d.original)
+        ));
+    }
+    let drop = |split: Split, views: &mut Vec<View>| {
+        let mut index = 0;
+        views.retain(|_| {
+            let keep = !found.iter().any(|d| d.copy == (split, index));
+            index += 1;
+            keep
+        });
+    };
+    drop(Split::Train, train);
+    drop(Split::Test, test);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::Camera;
+
+    fn view(name: &str, pixels: &[u8]) -> View {
+        View {
+            name: name.into(),
+            path: name.into(),
+            camera: Camera::identity(2, 1),
+            image: Image::new(2, 1, pixels.to_vec()).unwrap(),
+            coverage: None,
+        }
+    }
+
+    #[test]
+    fn copies_are_found_and_left_out_with_the_first_kept() {
+        let a = [1, 2, 3, 4, 5, 6];
+        let b = [9, 2, 3, 4, 5, 6];
+        let mut train = vec![view("a", &a), view("b", &b), view("a2", &a)];
+        let mut test = vec![
+            view("t", &b),
+            view("u", &[7, 7, 7, 1, 1, 1]),
+            view("u2", &[7, 7, 7, 1, 1, 1]),
+        ];
+        let found = find(&train, &test);
+        assert_eq!(
+            found,
+            vec![
+                Duplicate {
+                    copy: (Split::Train, 2),
+                    original: (Split::Train, 0)
+                },
+                Duplicate {
+                    copy: (Split::Test, 0),
+                    original: (Split::Train, 1)
+                },
+                Duplicate {
+                    copy: (Split::Test, 2),
+                    original: (Split::Test, 1)
+                },
+            ]
+        );
+        let mut warnings = Vec::new();
+        leave_out(&mut train, &mut test, &mut warnings);
+        let names = |v: &[View]| v.iter().map(|v| v.name.clone()).collect::<Vec<_>>();
+        assert_eq!(names(&train), ["a", "b"]);
+        assert_eq!(names(&test), ["u"]);
+        assert_eq!(warnings.len(), 3);
+        assert!(
+            warnings[1].contains("test view \"t\" is the same image as training view \"b\""),
+            "{warnings:?}"
+        );
+    }
+
+    #[test]
+    fn single_colour_frames_and_different_sizes_are_not_copies() {
+        let blank = [5, 5, 5, 5, 5, 5];
+        let train = vec![view("a", &blank), view("b", &blank)];
+        assert!(find(&train, &[]).is_empty());
+        let wide = View {
+            image: Image::new(1, 2, vec![1, 2, 3, 4, 5, 6]).unwrap(),
+            ..view("c", &[1, 2, 3, 4, 5, 6])
+        };
+        assert!(find(&[view("d", &[1, 2, 3, 4, 5, 6]), wide], &[]).is_empty());
+    }
+}
