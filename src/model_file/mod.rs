@@ -603,9 +603,19 @@ pub fn load_model(dir: &Path) -> Result<(RawBillboards, ModelMeta), ModelFileErr
     let ts = meta.texture_size;
     let t = ts * ts;
     let colour_path = dir.join(COLOUR_FILE);
-    let colour = npz::read_npz_u8(&colour_path, &read(&colour_path, file_io::MODEL_FILE)?, COLOUR_ARRAY, &[n, 3, ts, ts])?;
+    let colour = npz::read_npz_u8(
+        &colour_path,
+        &read(&colour_path, file_io::MODEL_FILE)?,
+        COLOUR_ARRAY,
+        &[n, 3, ts, ts],
+    )?;
     let alpha_path = dir.join(ALPHA_FILE);
-    let alpha = npz::read_npz_u8(&alpha_path, &read(&alpha_path, file_io::MODEL_FILE)?, ALPHA_ARRAY, &[n, ts, ts])?;
+    let alpha = npz::read_npz_u8(
+        &alpha_path,
+        &read(&alpha_path, file_io::MODEL_FILE)?,
+        ALPHA_ARRAY,
+        &[n, ts, ts],
+    )?;
 
     let mut model = RawBillboards {
         positions: Vec::with_capacity(n),
