@@ -126,6 +126,7 @@ pub mod export;
 pub mod fault;
 #[cfg(not(feature = "fault-injection"))]
 mod fault;
+pub mod file_io;
 #[cfg(feature = "testing")]
 pub mod gradcheck;
 pub mod init;

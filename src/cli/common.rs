@@ -170,9 +170,9 @@ pub fn start_threads(threads: Option<usize>) -> Result<usize> {
 }
 
 /// Writes an interleaved RGB float image as an 8-bit PNG, atomically
-/// ([`bbsplat::train::checkpoint::write_atomic`]: encoded in memory, written to a temporary file
-/// beside `path`, flushed to disk and renamed, so that a full disk fails the write instead of
-/// leaving an empty or cut PNG).
+/// ([`bbsplat::file_io::write_atomic`]: encoded in memory, written to a temporary file beside
+/// `path`, flushed to disk and renamed, so that a full disk fails the write instead of leaving an
+/// empty or cut PNG; through links, a device or a FIFO at `path` refused and left as it is).
 pub fn write_png_atomic(path: &Path, rgb: &[f32], width: u32, height: u32) -> Result<()> {
     let bytes: Vec<u8> = rgb.iter().map(|&c| bbsplat::loss::psnr::quantize_u8(c)).collect();
     let mut png = Vec::new();
@@ -184,7 +184,7 @@ pub fn write_png_atomic(path: &Path, rgb: &[f32], width: u32, height: u32) -> Re
         image::ExtendedColorType::Rgb8,
     )
     .with_context(|| format!("encoding {}", path.display()))?;
-    bbsplat::train::checkpoint::write_atomic(path, &png)?;
+    bbsplat::file_io::write_atomic(path, &png)?;
     Ok(())
 }
 
@@ -224,10 +224,11 @@ impl Drop for OutputDir {
     }
 }
 
-/// Writes `text` to `path` atomically ([`bbsplat::train::checkpoint::write_atomic`]: a temporary
-/// file in the same folder, flushed to disk, renamed over `path`).
+/// Writes `text` to `path` atomically ([`bbsplat::file_io::write_atomic`]: a temporary file in
+/// the same folder, flushed to disk, renamed over `path`; through links, a device or a FIFO at
+/// `path` refused).
 pub fn write_text_atomic(path: &Path, text: &str) -> Result<()> {
-    bbsplat::train::checkpoint::write_atomic(path, text.as_bytes())?;
+    bbsplat::file_io::write_atomic(path, text.as_bytes())?;
     Ok(())
 }
 

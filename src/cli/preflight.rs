@@ -5,6 +5,7 @@
 //! once the size of the outputs is known.
 
 use anyhow::{Context, Result};
+use bbsplat::file_io::{FileKind, kind_of};
 use bbsplat::memory::human_bytes;
 use bbsplat::model_file::{META_FILE, PLY_FILE};
 use bbsplat::train::run::{CHECKPOINT_FILE, MODEL_DIR, SUMMARY_FILE};
@@ -51,7 +52,7 @@ pub fn output_folder(out: &Path, resume: Option<&Path>, overwrite: bool) -> Resu
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the output folder", out.display()))?;
     remove_leftovers(out);
     let probe = out.join(PROBE_FILE);
-    bbsplat::train::checkpoint::write_atomic(&probe, b"probe")
+    bbsplat::file_io::write_atomic(&probe, b"probe")
         .with_context(|| format!("{}: the output folder is not writable", out.display()))?;
     let _ = std::fs::remove_file(&probe);
     let model = out.join(MODEL_DIR);
@@ -77,13 +78,15 @@ pub fn output_folder(out: &Path, resume: Option<&Path>, overwrite: bool) -> Resu
         );
     }
     for file in [CHECKPOINT_FILE, SUMMARY_FILE, RUN_TIME_FILE] {
+        // Links are written through (`bbsplat::file_io::write_atomic`): what they lead to counts.
         let path = out.join(file);
-        if let Ok(meta) = std::fs::symlink_metadata(&path) {
-            anyhow::ensure!(
-                meta.is_file(),
-                "{}: exists and is not a plain file; this run writes its {file} there",
+        match kind_of(&path) {
+            Ok(FileKind::Regular | FileKind::Missing | FileKind::DanglingLink) => {}
+            Ok(kind) => anyhow::bail!(
+                "{}: {kind}, not a plain file; this run writes its {file} there",
                 path.display()
-            );
+            ),
+            Err(e) => return Err(e).with_context(|| format!("{}: cannot check it", path.display())),
         }
     }
     if created {

@@ -187,62 +187,57 @@ fn render_orbit(args: &RenderArgs, frames: usize) -> Result<()> {
         ..RenderSettings::default()
     };
     let gif_path = args.output.join("orbit.gif");
-    let gif_tmp = args.output.join("orbit.gif.tmp");
-    let write_frames = || -> Result<()> {
-        let file = std::fs::File::create(&gif_tmp).with_context(|| format!("creating {}", gif_tmp.display()))?;
-        let mut writer = std::io::BufWriter::new(file);
-        {
-            let mut gif = GifEncoder::new_with_speed(&mut writer, 10);
-            gif.set_repeat(Repeat::Infinite)
-                .with_context(|| format!("writing {}", gif_tmp.display()))?;
-            let delay = image::Delay::from_numer_denom_ms(args.frame_ms, 1);
-            // The render's storage recycled from frame to frame (the same images, fewer fresh pages).
-            let mut buffers = bbsplat::raster::RenderBuffers::default();
-            for (k, camera) in path.iter().enumerate() {
-                let out = bbsplat::raster::render_with(
-                    &activated.borrowed(),
-                    camera,
-                    &settings,
-                    std::mem::take(&mut buffers),
-                );
-                write_png_atomic(
-                    &args.output.join(format!("orbit_{k:04}.png")),
-                    &out.rgb,
-                    out.width,
-                    out.height,
-                )?;
-                let rgba: Vec<u8> = out
-                    .rgb
-                    .chunks_exact(3)
-                    .flat_map(|c| {
-                        [c[0], c[1], c[2]]
-                            .map(bbsplat::loss::psnr::quantize_u8)
-                            .into_iter()
-                            .chain([255])
-                    })
-                    .collect();
-                let frame = image::RgbaImage::from_raw(out.width, out.height, rgba).context("frame size")?;
-                gif.encode_frame(image::Frame::from_parts(frame, 0, 0, delay))
-                    .with_context(|| format!("writing {}", gif_tmp.display()))?;
-                buffers = out.into_buffers();
-            }
-            // Dropping the encoder writes the GIF's trailer into `writer`.
+    // The frames go to a temporary file beside the GIF, renamed over it once complete
+    // ([`bbsplat::file_io::write_atomic_with`]); an error of a frame is kept here, the write
+    // told only that it failed.
+    let mut frame_error = None;
+    let write_frames = |writer: &mut std::io::BufWriter<&mut std::fs::File>| -> Result<()> {
+        let mut gif = GifEncoder::new_with_speed(writer, 10);
+        gif.set_repeat(Repeat::Infinite)
+            .with_context(|| format!("writing {}", gif_path.display()))?;
+        let delay = image::Delay::from_numer_denom_ms(args.frame_ms, 1);
+        // The render's storage recycled from frame to frame (the same images, fewer fresh pages).
+        let mut buffers = bbsplat::raster::RenderBuffers::default();
+        for (k, camera) in path.iter().enumerate() {
+            let out =
+                bbsplat::raster::render_with(&activated.borrowed(), camera, &settings, std::mem::take(&mut buffers));
+            write_png_atomic(
+                &args.output.join(format!("orbit_{k:04}.png")),
+                &out.rgb,
+                out.width,
+                out.height,
+            )?;
+            let rgba: Vec<u8> = out
+                .rgb
+                .chunks_exact(3)
+                .flat_map(|c| {
+                    [c[0], c[1], c[2]]
+                        .map(bbsplat::loss::psnr::quantize_u8)
+                        .into_iter()
+                        .chain([255])
+                })
+                .collect();
+            let frame = image::RgbaImage::from_raw(out.width, out.height, rgba).context("frame size")?;
+            gif.encode_frame(image::Frame::from_parts(frame, 0, 0, delay))
+                .with_context(|| format!("writing {}", gif_path.display()))?;
+            buffers = out.into_buffers();
         }
-        // Errors the buffer held back (a full disk) surface here, not in a silent drop.
-        let file = writer
-            .into_inner()
-            .map_err(|e| e.into_error())
-            .with_context(|| format!("writing {}", gif_tmp.display()))?;
-        file.sync_all()
-            .with_context(|| format!("flushing {} to disk", gif_tmp.display()))?;
-        std::fs::rename(&gif_tmp, &gif_path)
-            .with_context(|| format!("renaming {} to {}", gif_tmp.display(), gif_path.display()))?;
+        // Dropping the encoder writes the GIF's trailer into the writer.
         Ok(())
     };
-    if let Err(e) = write_frames() {
-        let _ = std::fs::remove_file(&gif_tmp);
+    let written = bbsplat::file_io::write_atomic_with(&gif_path, |file| {
+        let mut writer = std::io::BufWriter::new(file);
+        if let Err(e) = write_frames(&mut writer) {
+            frame_error = Some(e);
+            return Err(std::io::Error::other("an orbit frame failed"));
+        }
+        // Errors the buffer held back (a full disk) surface here, not in a silent drop.
+        std::io::Write::flush(&mut writer)
+    });
+    if let Some(e) = frame_error {
         return Err(e);
     }
+    written?;
     output.keep();
     println!(
         "wrote {frames} orbit frames and {} ({} bytes) to {}",

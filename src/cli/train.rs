@@ -71,6 +71,12 @@ pub fn run(args: TrainArgs) -> Result<()> {
         validate::memory(&format!("--hull-resolution {r}"), r.saturating_pow(3).saturating_mul(2))?;
     }
     preflight::output_folder(&args.output, args.resume.as_deref(), args.overwrite)?;
+    if let Some(path) = &args.resume {
+        // The checkpoint's kind and size before the scene loads (a link to a device, a FIFO, a
+        // file too large are refused now, not after minutes of loading); read after it.
+        bbsplat::file_io::check_readable(path, bbsplat::file_io::CHECKPOINT)
+            .with_context(|| format!("resuming from {}", path.display()))?;
+    }
     let threads = start_threads(args.threads)?;
     let (scene, background) = args.scene_args.load_for_training(&args.scene)?;
     anyhow::ensure!(

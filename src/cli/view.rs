@@ -4,7 +4,7 @@
 use super::common::SceneArgs;
 use super::common::read_model;
 use super::http;
-use anyhow::{Context, Result};
+use anyhow::Result;
 use bbsplat::camera::Camera;
 use bbsplat::export::viewer::{ViewerCamera, write_viewer};
 use clap::Args;
@@ -86,7 +86,12 @@ pub fn run(args: ViewArgs) -> Result<()> {
 /// Serves the file at `path` as `/` (and `/index.html`) on 127.0.0.1:`port` ([`super::http`]:
 /// clients served side by side, bounded and timed requests, loopback `Host` only).
 fn serve(path: &std::path::Path, port: u16) -> Result<()> {
-    let page = Arc::new(std::fs::read(path).with_context(|| format!("reading {}", path.display()))?);
+    let limit = bbsplat::file_io::Limit {
+        what: "viewer page",
+        plural: "viewer pages",
+        ..bbsplat::file_io::MODEL_FILE
+    };
+    let page = Arc::new(bbsplat::file_io::read_bounded(path, limit)?);
     let listener = http::bind(port)?;
     let address = listener.local_addr()?;
     println!("serving on http://{address}/ (Ctrl-C to stop)");

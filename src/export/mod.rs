@@ -83,24 +83,25 @@ pub enum ExportError {
     /// An orbit was asked with no camera to place it.
     #[error("an orbit needs at least one dataset camera and one frame")]
     NoOrbitCamera,
+    /// The output exists and is not a regular file (a folder, a device, a FIFO): it is left as
+    /// it is ([`crate::file_io::write_atomic`]).
+    #[error(transparent)]
+    File(crate::file_io::FileError),
+}
+
+/// An operating-system error is [`ExportError::Io`]; the rest is [`ExportError::File`].
+impl From<crate::file_io::FileError> for ExportError {
+    fn from(e: crate::file_io::FileError) -> Self {
+        match e {
+            crate::file_io::FileError::Io { path, source, .. } => ExportError::Io { path, source },
+            other => ExportError::File(other),
+        }
+    }
 }
 
 /// Writes `bytes` to `path` through a temporary file in the same folder renamed over it (a reader
-/// never sees half a file); the error names the file.
+/// never sees half a file; [`crate::file_io::write_atomic`]: through links, a device, a FIFO or
+/// a folder at `path` refused and left as it is); the error names the file.
 pub fn write_file(path: &Path, bytes: &[u8]) -> Result<(), ExportError> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
-    let io = |source| ExportError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    if let Err(e) = std::fs::write(&tmp, bytes) {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(io(e));
-    }
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        io(e)
-    })
+    Ok(crate::file_io::write_atomic(path, bytes)?)
 }

@@ -138,4 +138,18 @@ pub enum MeshError {
         /// The cause.
         source: std::io::Error,
     },
+    /// The output exists and is not a regular file (a folder, a device, a FIFO): it is left as
+    /// it is ([`crate::file_io::write_atomic`]).
+    #[error(transparent)]
+    File(crate::file_io::FileError),
+}
+
+/// An operating-system error is [`MeshError::Io`]; the rest is [`MeshError::File`].
+impl From<crate::file_io::FileError> for MeshError {
+    fn from(e: crate::file_io::FileError) -> Self {
+        match e {
+            crate::file_io::FileError::Io { path, source, .. } => MeshError::Io { path, source },
+            other => MeshError::File(other),
+        }
+    }
 }

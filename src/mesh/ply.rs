@@ -39,16 +39,15 @@ pub fn ply_bytes(mesh: &TriangleMesh) -> Vec<u8> {
     bytes
 }
 
-/// Writes `mesh` to `path` ([`ply_bytes`]); returns the file's size in bytes.
+/// Writes `mesh` to `path` ([`ply_bytes`]) atomically ([`crate::file_io::write_atomic`]: a
+/// temporary file beside it renamed over it, through links); returns the file's size in bytes.
 ///
 /// # Errors
 ///
-/// [`MeshError::Io`] naming the file when it cannot be written.
+/// [`MeshError::Io`] naming the file when it cannot be written; [`MeshError::File`] when it is
+/// a folder, a device or a FIFO (left as it is).
 pub fn write_ply(path: &Path, mesh: &TriangleMesh) -> Result<u64, MeshError> {
     let bytes = ply_bytes(mesh);
-    std::fs::write(path, &bytes).map_err(|source| MeshError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    crate::file_io::write_atomic(path, &bytes)?;
     Ok(bytes.len() as u64)
 }

@@ -21,7 +21,10 @@
 //! [`save_model`] is atomic: it writes a temporary sibling folder, then renames it into place; an
 //! existing model folder is moved aside only once the new one is complete and deleted after the
 //! rename; on any error the temporary folder is removed and the old model is left (or put back)
-//! in place.
+//! in place. A `dir` that is a symbolic link is written through: the folder it names is replaced
+//! and the link stays. [`load_model`] reads each file with [`file_io::read_bounded`]: a file that
+//! is not a regular file (a link to `/dev/zero`, a FIFO) or is larger than
+//! [`file_io::MODEL_FILE`] ([`file_io::JSON_FILE`] for `bbsplat.json`) is refused unread.
 //!
 //! ```
 //! use bbsplat::model::RawBillboards;
@@ -42,6 +45,7 @@
 pub(crate) mod npz;
 pub mod ply;
 
+use crate::file_io::{self, FileError};
 use crate::model::{RawBillboards, alpha_asset, logit, sigmoid, standard_alpha_mask};
 use crate::raster::SH_FLOATS;
 use glam::{Vec2, Vec3};
@@ -201,6 +205,25 @@ pub enum ModelFileError {
         /// The destination.
         path: PathBuf,
     },
+    /// A file of the folder is not a regular file (a device, a FIFO, a folder, a symlink loop)
+    /// or is larger than [`file_io::MODEL_FILE`] ([`file_io::JSON_FILE`] for [`META_FILE`]): it
+    /// is not read.
+    #[error(transparent)]
+    File(FileError),
+}
+
+/// A missing file is [`ModelFileError::MissingFile`], another operating-system error
+/// [`ModelFileError::Io`], the rest [`ModelFileError::File`].
+impl From<FileError> for ModelFileError {
+    fn from(e: FileError) -> Self {
+        match e {
+            e if e.is_not_found() => ModelFileError::MissingFile {
+                path: e.path().to_path_buf(),
+            },
+            FileError::Io { path, source, .. } => ModelFileError::Io { path, source },
+            other => ModelFileError::File(other),
+        }
+    }
 }
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> ModelFileError + '_ {
@@ -403,6 +426,9 @@ fn sibling(dir: &Path, tag: &str) -> PathBuf {
 /// empty and has neither `bbsplat.json` nor `point_cloud.ply`; [`ModelFileError::Io`] on
 /// file-system errors (the temporary folder is removed, the previous model stays in place).
 pub fn save_model(dir: &Path, model: &RawBillboards, meta: &ModelMeta) -> Result<u64, ModelFileError> {
+    // Through links: a link to a model folder stays a link, the folder it names is replaced.
+    let resolved = file_io::resolve_links(dir)?;
+    let dir = resolved.as_path();
     if dir.file_name().is_none() {
         return Err(ModelFileError::InvalidModel {
             path: dir.to_path_buf(),
@@ -512,7 +538,12 @@ fn write_folder(tmp: &Path, files: &[(&str, Vec<u8>)]) -> Result<u64, ModelFileE
     let mut total = 0u64;
     for (name, bytes) in files {
         let path = tmp.join(name);
-        let mut f = fs::File::create(&path).map_err(io_err(&path))?;
+        // A fresh folder: nothing is there to replace (`create_new` follows no planted link).
+        let mut f = fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&path)
+            .map_err(io_err(&path))?;
         f.write_all(bytes).map_err(io_err(&path))?;
         f.sync_all().map_err(io_err(&path))?;
         total += bytes.len() as u64;
@@ -528,16 +559,9 @@ fn sync_dir(dir: &Path) {
     }
 }
 
-fn read(path: &Path) -> Result<Vec<u8>, ModelFileError> {
-    fs::read(path).map_err(|e| {
-        if e.kind() == std::io::ErrorKind::NotFound {
-            ModelFileError::MissingFile {
-                path: path.to_path_buf(),
-            }
-        } else {
-            io_err(path)(e)
-        }
-    })
+/// The file `path` of a model folder, of at most `limit` bytes ([`file_io::read_bounded`]).
+fn read(path: &Path, limit: file_io::Limit) -> Result<Vec<u8>, ModelFileError> {
+    Ok(file_io::read_bounded(path, limit)?)
 }
 
 /// Loads the model folder `dir` written by [`save_model`] (or by the reference, plus a
@@ -546,16 +570,17 @@ fn read(path: &Path) -> Result<Vec<u8>, ModelFileError> {
 ///
 /// # Errors
 ///
-/// [`ModelFileError::MissingFile`] for an absent file; [`ModelFileError::Meta`] /
+/// [`ModelFileError::MissingFile`] for an absent file; [`ModelFileError::File`] for one that is
+/// not a regular file or is too large (not read); [`ModelFileError::Meta`] /
 /// [`ModelFileError::Version`] for a bad `bbsplat.json`; [`ModelFileError::Ply`] for a bad
 /// header, wrong fields or a wrong length; [`ModelFileError::CountMismatch`] when the metadata
 /// and the PLY disagree; [`ModelFileError::Npz`] / [`ModelFileError::Shape`] for bad texture
 /// archives. Never panics on malformed files.
 pub fn load_model(dir: &Path) -> Result<(RawBillboards, ModelMeta), ModelFileError> {
     let meta_path = dir.join(META_FILE);
-    let meta = parse_meta(&meta_path, &read(&meta_path)?)?;
+    let meta = parse_meta(&meta_path, &read(&meta_path, file_io::JSON_FILE)?)?;
     let ply_path = dir.join(PLY_FILE);
-    let rows = ply::parse(&ply_path, &read(&ply_path)?)?;
+    let rows = ply::parse(&ply_path, &read(&ply_path, file_io::MODEL_FILE)?)?;
     let n = rows.len() / ply::PLY_FLOATS;
     if let Some(k) = rows.iter().position(|x| !x.is_finite()) {
         return Err(ModelFileError::Ply {
@@ -578,9 +603,19 @@ pub fn load_model(dir: &Path) -> Result<(RawBillboards, ModelMeta), ModelFileErr
     let ts = meta.texture_size;
     let t = ts * ts;
     let colour_path = dir.join(COLOUR_FILE);
-    let colour = npz::read_npz_u8(&colour_path, &read(&colour_path)?, COLOUR_ARRAY, &[n, 3, ts, ts])?;
+    let colour = npz::read_npz_u8(
+        &colour_path,
+        &read(&colour_path, file_io::MODEL_FILE)?,
+        COLOUR_ARRAY,
+        &[n, 3, ts, ts],
+    )?;
     let alpha_path = dir.join(ALPHA_FILE);
-    let alpha = npz::read_npz_u8(&alpha_path, &read(&alpha_path)?, ALPHA_ARRAY, &[n, ts, ts])?;
+    let alpha = npz::read_npz_u8(
+        &alpha_path,
+        &read(&alpha_path, file_io::MODEL_FILE)?,
+        ALPHA_ARRAY,
+        &[n, ts, ts],
+    )?;
 
     let mut model = RawBillboards {
         positions: Vec::with_capacity(n),

@@ -18,6 +18,7 @@
 
 use super::distortion::Distortion;
 use super::error::{Location, SceneError};
+use crate::file_io::names_a_file;
 use std::collections::HashSet;
 use std::path::Path;
 
@@ -386,19 +387,22 @@ pub fn check_references(model: &ColmapModel, images_file: &Path) -> Result<(), S
 }
 
 /// Which files a model folder holds: `Some(true)` for binary (`cameras.bin`), `Some(false)`
-/// for text (`cameras.txt`), `None` for neither. Binary wins when both exist.
+/// for text (`cameras.txt`), `None` for neither. Binary wins when both exist. A `cameras` entry
+/// that is not a folder counts even when it is no regular file (a device, a FIFO, a symlink
+/// loop): reading it then says what it is, instead of "no dataset found".
 pub fn model_kind(dir: &Path) -> Option<bool> {
-    if dir.join("cameras.bin").is_file() {
+    if names_a_file(&dir.join("cameras.bin")) {
         Some(true)
-    } else if dir.join("cameras.txt").is_file() {
+    } else if names_a_file(&dir.join("cameras.txt")) {
         Some(false)
     } else {
         None
     }
 }
 
+/// A COLMAP file, read whole ([`crate::file_io::SCENE_FILE`] at most; regular files only).
 fn read_file(path: &Path) -> Result<Vec<u8>, SceneError> {
-    std::fs::read(path).map_err(|e| SceneError::io(path, e))
+    Ok(crate::file_io::read_bounded(path, crate::file_io::SCENE_FILE)?)
 }
 
 /// Reads only the images of the model in `dir` (binary or text).

@@ -357,7 +357,7 @@ pub fn write_model(model: &ColmapModel, dir: &Path) -> Result<(), SceneError> {
     ];
     for (name, bytes) in files {
         let path = dir.join(name);
-        std::fs::write(&path, bytes).map_err(|e| SceneError::io(&path, e))?;
+        crate::file_io::write_atomic(&path, &bytes)?;
     }
     Ok(())
 }

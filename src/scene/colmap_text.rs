@@ -328,7 +328,7 @@ pub fn write_model(model: &ColmapModel, dir: &Path) -> Result<(), SceneError> {
     ];
     for (name, text) in files {
         let path = dir.join(name);
-        std::fs::write(&path, text).map_err(|e| SceneError::io(&path, e))?;
+        crate::file_io::write_atomic(&path, text.as_bytes())?;
     }
     Ok(())
 }

@@ -4,6 +4,7 @@
 //! (a 1-based line of a text file, a record and byte offset of a binary file, or a path inside a
 //! JSON document), and says what is wrong. Messages are meant to be shown to users as they are.
 
+use crate::file_io::FileError;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
@@ -146,6 +147,22 @@ pub enum SceneError {
     /// An option of [`crate::scene::LoadOptions`] is invalid.
     #[error("invalid load option: {0}")]
     InvalidOption(String),
+    /// A file is not one to read: not a regular file (a device, a FIFO, a symlink loop, a link
+    /// to a missing file) or larger than its kind's limit ([`crate::file_io::SCENE_FILE`],
+    /// [`crate::file_io::JSON_FILE`], [`crate::file_io::IMAGE`]); or an output that exists and is
+    /// not a regular file.
+    #[error(transparent)]
+    File(FileError),
+}
+
+/// An operating-system error is [`SceneError::Io`]; the rest is [`SceneError::File`].
+impl From<FileError> for SceneError {
+    fn from(e: FileError) -> Self {
+        match e {
+            FileError::Io { path, source, .. } => SceneError::Io { path, source },
+            other => SceneError::File(other),
+        }
+    }
 }
 
 impl SceneError {

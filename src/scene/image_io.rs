@@ -24,7 +24,7 @@ pub(crate) fn decode_with_alpha(
     background: [f32; 3],
     allow_damaged: bool,
 ) -> Result<Decoded, SceneError> {
-    let bytes = std::fs::read(image_path).map_err(|e| SceneError::io(image_path, e))?;
+    let bytes = crate::file_io::read_bounded(image_path, crate::file_io::IMAGE)?;
     let error = |message| SceneError::ImageDecode {
         image: image_path.to_path_buf(),
         file: referenced_by.to_path_buf(),

@@ -5,18 +5,20 @@ use super::nerf_json::{TransformsFile, parse_transforms};
 use super::views::{self, CameraSpec, ViewSource};
 use super::{LoadOptions, Scene, SceneFormat, View, ply, split};
 use crate::camera::Camera;
+use crate::file_io::names_a_file;
 use glam::Mat3;
 use std::path::{Path, PathBuf};
 
 /// Extensions tried, in order, when a `file_path` does not name an existing file.
 const EXTENSIONS: [&str; 5] = ["png", "jpg", "jpeg", "PNG", "JPG"];
 
-/// Resolves a frame's image path relative to `dir`: the path itself when it is a file,
+/// Resolves a frame's image path relative to `dir`: the path itself when it names a file
+/// ([`crate::file_io::names_a_file`]: a device or a FIFO too, refused with what it is when read),
 /// otherwise with each of [`EXTENSIONS`] appended. `Err` holds the path reported as missing
 /// (with `.png` appended when the path had no extension).
 fn resolve_image(dir: &Path, file_path: &str) -> Result<PathBuf, PathBuf> {
     let base = dir.join(file_path);
-    if base.is_file() {
+    if names_a_file(&base) {
         return Ok(base);
     }
     for ext in EXTENSIONS {
@@ -24,7 +26,7 @@ fn resolve_image(dir: &Path, file_path: &str) -> Result<PathBuf, PathBuf> {
         s.push(".");
         s.push(ext);
         let p = PathBuf::from(s);
-        if p.is_file() {
+        if names_a_file(&p) {
             return Ok(p);
         }
     }
@@ -38,7 +40,7 @@ fn resolve_image(dir: &Path, file_path: &str) -> Result<PathBuf, PathBuf> {
 }
 
 fn read_transforms(file: &Path) -> Result<TransformsFile, SceneError> {
-    let bytes = std::fs::read(file).map_err(|e| SceneError::io(file, e))?;
+    let bytes = crate::file_io::read_bounded(file, crate::file_io::JSON_FILE)?;
     let text = super::colmap_text::decode_utf8(&bytes, file)?;
     parse_transforms(text, file)
 }
@@ -133,7 +135,7 @@ pub(crate) fn load_nerf_synthetic(
         .unwrap_or_else(|| "transforms_test.json".into());
     let test_file = train_file.with_file_name(test_name);
     let train_sources = sources_of(train_file, &train_json, false, warnings)?;
-    let (train, test) = if test_file.is_file() {
+    let (train, test) = if names_a_file(&test_file) {
         let test_json = read_transforms(&test_file)?;
         let test_sources = sources_of(&test_file, &test_json, false, warnings)?;
         (
@@ -181,8 +183,8 @@ pub(crate) fn load_transforms(
         None => None,
         Some(p) => {
             let path = file.parent().unwrap_or(Path::new(".")).join(p);
-            if path.is_file() {
-                let bytes = std::fs::read(&path).map_err(|e| SceneError::io(&path, e))?;
+            if names_a_file(&path) {
+                let bytes = crate::file_io::read_bounded(&path, crate::file_io::SCENE_FILE)?;
                 Some(ply::parse_point_cloud(&bytes, &path)?)
             } else {
                 warnings.push(format!(

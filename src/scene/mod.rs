@@ -48,6 +48,7 @@ pub use error::{Location, SceneError};
 pub use undistort::UndistortMode;
 
 use crate::camera::Camera;
+use crate::file_io::{FileKind, names_a_file};
 use glam::Vec3;
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -347,10 +348,16 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
 }
 
 /// Detects the format of `path` (or checks the forced one) and returns it with the file or
-/// model folder to read.
+/// model folder to read. A path that is neither a folder nor a regular file is refused saying
+/// what it is (a symlink loop, a link to a missing file, a FIFO, a device), not "does not exist".
 pub fn detect(path: &Path, forced: Option<SceneFormat>) -> Result<(SceneFormat, PathBuf), SceneError> {
-    if !path.exists() {
-        return Err(SceneError::io(path, std::io::Error::from(std::io::ErrorKind::NotFound)));
+    match crate::file_io::kind_of(path) {
+        Ok(FileKind::Regular | FileKind::Directory) => {}
+        Ok(FileKind::Missing) => {
+            return Err(SceneError::io(path, std::io::Error::from(std::io::ErrorKind::NotFound)));
+        }
+        Ok(kind) => return Err(crate::file_io::not_regular(path, "scene", kind).into()),
+        Err(e) => return Err(SceneError::io(path, e)),
     }
     if path.is_file() {
         let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
@@ -373,8 +380,8 @@ pub fn detect(path: &Path, forced: Option<SceneFormat>) -> Result<(SceneFormat, 
         Some(SceneFormat::NerfSynthetic) => return Ok((SceneFormat::NerfSynthetic, synthetic)),
         Some(SceneFormat::Transforms) => return Ok((SceneFormat::Transforms, transforms)),
         Some(SceneFormat::Colmap) => {}
-        None if synthetic.is_file() => return Ok((SceneFormat::NerfSynthetic, synthetic)),
-        None if transforms.is_file() => return Ok((SceneFormat::Transforms, transforms)),
+        None if names_a_file(&synthetic) => return Ok((SceneFormat::NerfSynthetic, synthetic)),
+        None if names_a_file(&transforms) => return Ok((SceneFormat::Transforms, transforms)),
         None => {}
     }
     match colmap_scene::find_model(path)? {

@@ -7,6 +7,7 @@ use super::nerf_json::IntrinsicFields;
 use super::undistort;
 use super::{LoadOptions, View, image_io};
 use crate::camera::Camera;
+use crate::file_io::{FileKind, kind_of, not_regular};
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 use std::path::PathBuf;
@@ -60,8 +61,11 @@ pub(crate) fn load_all(
     warnings: &mut Vec<String>,
 ) -> Result<Vec<View>, SceneError> {
     for s in &sources {
-        if !s.image_path.is_file() {
-            return Err(s.missing());
+        match kind_of(&s.image_path) {
+            Ok(FileKind::Regular) => {}
+            Ok(FileKind::Missing) => return Err(s.missing()),
+            Ok(kind) => return Err(not_regular(&s.image_path, crate::file_io::IMAGE.what, kind).into()),
+            Err(e) => return Err(SceneError::io(&s.image_path, e)),
         }
     }
     let results: Vec<Result<(View, Option<String>), SceneError>> =

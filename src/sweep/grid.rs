@@ -166,10 +166,7 @@ where
 impl SweepGrid {
     /// Reads a grid from a JSON file and validates it.
     pub fn from_json_file(path: &Path) -> Result<Self, SweepError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SweepError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::file_io::read_text_bounded(path, crate::file_io::JSON_FILE)?;
         let grid: SweepGrid = serde_json::from_str(&text).map_err(|source| SweepError::Json {
             path: path.to_path_buf(),
             source,

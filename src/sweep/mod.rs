@@ -132,6 +132,20 @@ pub enum SweepError {
     /// Any other runner failure (for runners other than [`SubprocessRunner`]).
     #[error("{0}")]
     Other(String),
+    /// A file is not a regular file (a folder, a device, a FIFO; an output is then left as it
+    /// is) or is larger than [`crate::file_io::JSON_FILE`].
+    #[error(transparent)]
+    File(crate::file_io::FileError),
+}
+
+/// An operating-system error is [`SweepError::Io`]; the rest is [`SweepError::File`].
+impl From<crate::file_io::FileError> for SweepError {
+    fn from(e: crate::file_io::FileError) -> Self {
+        match e {
+            crate::file_io::FileError::Io { path, source, .. } => SweepError::Io { path, source },
+            other => SweepError::File(other),
+        }
+    }
 }
 
 /// One finished run: its setting and what it produced.

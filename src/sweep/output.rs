@@ -22,20 +22,11 @@ pub struct SweepFiles {
     pub curves: PathBuf,
 }
 
-/// Writes `bytes` to `path` through `<path>.tmp` and a rename, so readers never see a partial
-/// file. Errors name the file that failed.
+/// Writes `bytes` to `path` through a temporary file beside it and a rename, so readers never
+/// see a partial file ([`crate::file_io::write_atomic`]: through links; a device, a FIFO or a
+/// folder at `path` is refused). Errors name the file that failed.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), SweepError> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
-    std::fs::write(&tmp, bytes).map_err(|source| SweepError::Io {
-        path: tmp.clone(),
-        source,
-    })?;
-    std::fs::rename(&tmp, path).map_err(|source| SweepError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+    Ok(crate::file_io::write_atomic(path, bytes)?)
 }
 
 /// Model size in bytes as a Pareto cost; 0 (the trainer saved no model) is unknown (NaN), so

@@ -129,10 +129,7 @@ impl SubprocessRunner {
 
 /// Reads a `summary.json` and checks it against the setting.
 fn read_summary(path: &Path, setting: &Setting) -> Result<TrainSummary, SweepError> {
-    let text = std::fs::read_to_string(path).map_err(|source| SweepError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let text = crate::file_io::read_text_bounded(path, crate::file_io::JSON_FILE)?;
     let summary: TrainSummary = serde_json::from_str(&text).map_err(|source| SweepError::Json {
         path: path.to_path_buf(),
         source,

@@ -64,6 +64,7 @@ use super::geometry::GeometryRegularisers;
 use super::run_record::RunRecord;
 use super::time_budget::TimePlan;
 use super::{AdamMode, ClampGradient, LearningRateScales, TextureMode, TrainConfig, Trainer, adam_groups, group};
+use crate::file_io::FileError;
 use crate::model::RawBillboards;
 use crate::raster::SH_FLOATS;
 use crate::rng::Rng;
@@ -146,6 +147,20 @@ pub enum CheckpointError {
         /// What is wrong.
         what: String,
     },
+    /// The file is not one to read or write: not a regular file (a device, a FIFO, a folder, a
+    /// symlink loop), or larger than [`crate::file_io::CHECKPOINT`].
+    #[error(transparent)]
+    File(FileError),
+}
+
+/// An operating-system error stays [`CheckpointError::Io`]; the rest is [`CheckpointError::File`].
+impl From<FileError> for CheckpointError {
+    fn from(e: FileError) -> Self {
+        match e {
+            FileError::Io { path, action, source } => CheckpointError::Io { path, action, source },
+            other => CheckpointError::File(other),
+        }
+    }
 }
 
 /// FNV-1a 64 offset basis (the hash of no bytes).
@@ -764,8 +779,10 @@ fn decode_record(r: &mut Reader<'_>, version: u32) -> Result<RunRecord, Checkpoi
     serde_json::from_slice::<RunRecord>(bytes).map_err(|e| r.inconsistent(format!("the run record is not valid: {e}")))
 }
 
-/// Writes `bytes` to `path` atomically: a temporary file in the same folder, flushed to disk,
-/// then renamed over `path`. On error the temporary file is removed and `path` is untouched.
+/// Writes `bytes` to `path` atomically ([`crate::file_io::write_atomic`]: a temporary file in
+/// the same folder, flushed to disk, then renamed over `path`, through links; a device, a FIFO
+/// or a folder at `path` is refused). On error the temporary file is removed and `path` is
+/// untouched. Each stage is a fault point (`<file name>:<stage>`, module `fault`).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), CheckpointError> {
     write_atomic_with(path, |f| f.write_all(bytes))
 }
@@ -776,45 +793,8 @@ fn write_atomic_with(
     path: &Path,
     write: impl FnOnce(&mut std::fs::File) -> std::io::Result<()>,
 ) -> Result<(), CheckpointError> {
-    let io = |action: &'static str| {
-        move |source| CheckpointError::Io {
-            path: path.to_path_buf(),
-            action,
-            source,
-        }
-    };
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let name = path
-        .file_name()
-        .ok_or_else(|| CheckpointError::Inconsistent {
-            path: path.to_path_buf(),
-            what: "the path has no file name".into(),
-        })?
-        .to_string_lossy()
-        .into_owned();
-    // Unique per process and per call, so concurrent saves of one process do not share a file.
-    static SAVES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-    let serial = SAVES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let tmp = dir.join(format!(".{name}.tmp.{}.{serial}", std::process::id()));
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp).map_err(io("creating the temporary file"))?;
-        crate::fault::point(&name, "created");
-        write(&mut f).map_err(io("writing"))?;
-        crate::fault::point(&name, "written");
-        f.sync_all().map_err(io("flushing to disk"))?;
-        crate::fault::point(&name, "synced");
-        drop(f);
-        std::fs::rename(&tmp, path).map_err(io("renaming the temporary file"))?;
-        crate::fault::point(&name, "renamed");
-        Ok(())
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
+    let name = path.file_name().unwrap_or_default().to_string_lossy().into_owned();
+    crate::file_io::write_atomic_staged(path, write, |stage| crate::fault::point(&name, stage)).map_err(Into::into)
 }
 
 impl Trainer {
@@ -838,7 +818,8 @@ impl Trainer {
     /// the checkpoint; the bytes are those of [`Trainer::checkpoint_bytes`].
     ///
     /// # Errors
-    /// [`CheckpointError::Io`] when the folder cannot be written.
+    /// [`CheckpointError::Io`] when the folder cannot be written; [`CheckpointError::File`] when
+    /// `path` (links followed) is a folder, a device or a FIFO (left as it is).
     pub fn save_checkpoint(&self, path: impl AsRef<Path>) -> Result<(), CheckpointError> {
         let len = encoded_len(self);
         write_atomic_with(path.as_ref(), |file| {
@@ -850,15 +831,12 @@ impl Trainer {
     /// continuing the trainer that was saved.
     ///
     /// # Errors
-    /// See [`CheckpointError`]: unreadable file, bad magic, unsupported version, truncated,
-    /// corrupted (checksum) or inconsistent sizes.
+    /// See [`CheckpointError`]: unreadable file, not a regular file or larger than
+    /// [`crate::file_io::CHECKPOINT`] (refused before reading), bad magic, unsupported version,
+    /// truncated, corrupted (checksum) or inconsistent sizes.
     pub fn load_checkpoint(path: impl AsRef<Path>) -> Result<Trainer, CheckpointError> {
         let path = path.as_ref();
-        let bytes = std::fs::read(path).map_err(|source| CheckpointError::Io {
-            path: path.to_path_buf(),
-            action: "reading",
-            source,
-        })?;
+        let bytes = crate::file_io::read_bounded(path, crate::file_io::CHECKPOINT)?;
         decode(&bytes, path)
     }
 }

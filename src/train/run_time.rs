@@ -23,8 +23,12 @@ use std::path::{Path, PathBuf};
 /// File name of the run time, in the checkpoint's folder.
 pub const RUN_TIME_FILE: &str = "run_time.json";
 
-/// Largest run-time file read, bytes (it holds four numbers).
-const MAX_RUN_TIME_BYTES: u64 = 64 * 1024;
+/// The size limit of a run-time file (it holds four numbers).
+const RUN_TIME: crate::file_io::Limit = crate::file_io::Limit {
+    bytes: 64 * 1024,
+    what: "run-time file",
+    plural: "run-time files",
+};
 
 /// The time spent by a run up to a checkpoint (module docs).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -71,11 +75,7 @@ pub fn checkpoint_checksum(path: &Path) -> std::io::Result<u64> {
 pub fn read_beside(checkpoint: &Path, step: usize) -> Result<RunTime, String> {
     let path = path_beside(checkpoint);
     let why = |what: String| format!("{}: {what}; the time before step {step} is not counted", path.display());
-    let meta = std::fs::metadata(&path).map_err(|e| why(format!("cannot be read ({e})")))?;
-    if !meta.is_file() || meta.len() > MAX_RUN_TIME_BYTES {
-        return Err(why("is not a run-time file".into()));
-    }
-    let text = std::fs::read(&path).map_err(|e| why(format!("cannot be read ({e})")))?;
+    let text = crate::file_io::read_bounded(&path, RUN_TIME).map_err(|e| why(format!("cannot be read ({e})")))?;
     let time: RunTime = serde_json::from_slice(&text).map_err(|e| why(format!("is not valid ({e})")))?;
     let checksum = checkpoint_checksum(checkpoint).map_err(|e| why(format!("the checkpoint cannot be read ({e})")))?;
     if time.step != step {

@@ -24,6 +24,8 @@ mod export_browser;
 mod export_fixtures;
 mod external_tool;
 mod f64_reference;
+#[cfg(feature = "cli")]
+mod file_kinds;
 mod gradcheck;
 mod init_fibonacci;
 mod init_fps;

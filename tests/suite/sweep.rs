@@ -343,7 +343,7 @@ mod output {
         let leftovers: Vec<_> = std::fs::read_dir(dir.join("report"))
             .unwrap()
             .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .filter(|n| n.ends_with(".tmp"))
+            .filter(|n| n.contains(".tmp"))
             .collect();
         assert!(leftovers.is_empty(), "{leftovers:?}");
         assert_eq!(std::fs::read_to_string(&files.csv).unwrap(), csv_table(&recs));
@@ -366,10 +366,11 @@ mod output {
     fn write_errors_name_the_file() {
         let dir = temp_dir("blocked");
         std::fs::create_dir_all(&dir).unwrap();
-        // A directory where the CSV's temp file should go makes the write fail.
-        std::fs::create_dir_all(dir.join("sweep.csv.tmp")).unwrap();
+        // A directory where the CSV goes is refused (not replaced by the file).
+        std::fs::create_dir_all(dir.join("sweep.csv")).unwrap();
         let err = write_outputs(&dir, &records()).unwrap_err().to_string();
-        assert!(err.contains("sweep.csv.tmp"), "{err}");
+        assert!(err.contains("sweep.csv") && err.contains("is a directory"), "{err}");
+        assert!(dir.join("sweep.csv").is_dir());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -558,8 +558,9 @@ fn the_summary_records_the_clamp_gradient() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// A summary that cannot be written (a folder stands where `summary.json` goes) is a typed I/O
-/// error naming the file and the step that failed, and no temporary file is left behind.
+/// A summary that cannot be written (a folder stands where `summary.json` goes) is a typed error
+/// naming the file and saying what is there, the folder is left as it is (not replaced by a
+/// renamed file), and no temporary file is left behind.
 #[test]
 fn an_unwritable_summary_is_an_io_error_naming_the_file() {
     let Setup {
@@ -575,13 +576,16 @@ fn an_unwritable_summary_is_an_io_error_naming_the_file() {
     };
     let err = run(&mut trainer, &train, &test, &config, &StopSignal::new(), |_| {}).unwrap_err();
     match &err {
-        RunError::Io { path, action, .. } => {
+        RunError::Checkpoint(bbsplat::train::checkpoint::CheckpointError::File(
+            bbsplat::file_io::FileError::NotWritable { path, kind, .. },
+        )) => {
             assert_eq!(path, &dir.join(SUMMARY_FILE), "{err}");
-            assert_eq!(*action, "renaming the temporary file", "{err}");
+            assert_eq!(*kind, bbsplat::file_io::FileKind::Directory, "{err}");
         }
-        other => panic!("expected an I/O error, got {other:?}"),
+        other => panic!("expected a refused output, got {other:?}"),
     }
     assert!(err.to_string().contains(SUMMARY_FILE), "{err}");
+    assert!(dir.join(SUMMARY_FILE).is_dir());
     let leftovers: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()
         .filter_map(|e| e.ok())
