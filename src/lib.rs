@@ -127,6 +127,7 @@ pub mod fault;
 #[cfg(not(feature = "fault-injection"))]
 mod fault;
 pub mod file_io;
+pub mod fnv;
 #[cfg(feature = "testing")]
 pub mod gradcheck;
 pub mod init;

@@ -2,6 +2,7 @@
 
 use anyhow::{Context, Result};
 use bbsplat::model::RawBillboards;
+use bbsplat::model_file::scene_mark::SceneMark;
 use bbsplat::model_file::{ModelMeta, load_model};
 use bbsplat::scene::data_background::{BackgroundChoice, load_with_data_background};
 use bbsplat::scene::{Background, LoadOptions, Scene, View};
@@ -83,10 +84,12 @@ impl SceneArgs {
             .with_context(|| format!("loading the scene {}", path.display()))
     }
 
-    /// Loads `path` for a model read from `model` whose stored background is `stored`: with
-    /// `--background` if given, else with the model's background (the truth images are
-    /// composited on the background the model was trained on).
-    pub fn load_for_model(&self, path: &Path, model: &Path, stored: [f32; 3]) -> Result<Scene> {
+    /// Loads `path` for a model read from `model` whose metadata is `meta`: with `--background`
+    /// if given, else with the model's background (the truth images are composited on the
+    /// background the model was trained on). Warns when the model records another scene
+    /// ([`SceneMark`]).
+    pub fn load_for_model(&self, path: &Path, model: &Path, meta: &ModelMeta) -> Result<Scene> {
+        let stored = meta.background;
         let background = match self.background {
             Some(arg) => arg.into(),
             None => Background::from_rgb(stored).ok_or_else(|| {
@@ -96,14 +99,18 @@ impl SceneArgs {
                 )
             })?,
         };
-        self.load(path, background)
+        let scene = self.load(path, background)?;
+        if let Some(warning) = scene_mismatch(model, meta, path, &scene) {
+            eprintln!("warning: {warning}");
+        }
+        Ok(scene)
     }
 
     /// Reads the model folder `model` and loads the scene `scene` for it
     /// ([`SceneArgs::load_for_model`]: with the model's background unless `--background`).
     pub fn load_model_and_scene(&self, model: &Path, scene: &Path) -> Result<(RawBillboards, ModelMeta, Scene)> {
         let (raw, meta) = read_model(model)?;
-        let scene = self.load_for_model(scene, model, meta.background)?;
+        let scene = self.load_for_model(scene, model, &meta)?;
         Ok((raw, meta, scene))
     }
 
@@ -249,4 +256,18 @@ pub fn render_file_name(index: usize, name: &str) -> String {
         })
         .collect();
     format!("{index:04}_{clean}.png")
+}
+
+/// The warning when the model at `model` (metadata `meta`) records another scene than `scene`
+/// (loaded from `path`); `None` when it is the same or the model records none.
+pub fn scene_mismatch(model: &Path, meta: &ModelMeta, path: &Path, scene: &Scene) -> Option<String> {
+    let trained_on = meta.scene.as_ref()?;
+    let now = SceneMark::of_cameras(scene.train.iter().chain(&scene.test).map(|v| &v.camera));
+    trained_on.difference(&now).map(|d| {
+        format!(
+            "{}: {d} ({}): is it the model of another scene? Its renders and scores compare it with images it was not trained on",
+            model.display(),
+            path.display()
+        )
+    })
 }

@@ -52,7 +52,7 @@ pub fn run(args: ViewArgs) -> Result<()> {
     let set = activated.borrowed();
     let (background, views) = match &args.scene {
         Some(path) => {
-            let scene = args.scene_args.load_for_model(path, &args.model, meta.background)?;
+            let scene = args.scene_args.load_for_model(path, &args.model, &meta)?;
             let views: Vec<(String, Camera)> = scene
                 .train
                 .iter()

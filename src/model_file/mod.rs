@@ -8,7 +8,7 @@
 //! | `point_cloud.ply` | binary little-endian float32 vertices, the reference's 60 fields `x y z nx ny nz f_dc_0..2 f_rest_0..44 scale_0..1 rot_0..3` (normals 0, SH rest channel-major, log scales, raw quaternion w first; no opacity) |
 //! | `texture_color.npz` | zip (deflate) with `texture_color.npy`: `uint8`, `N×3×TS×TS`, `round(255·sigmoid(logit))` |
 //! | `texture_alpha.npz` | zip (deflate) with `texture_alpha.npy`: `uint8`, `N×TS×TS`, `round(255·((alpha − G) + 1)/2)`, `G` = [`alpha_asset`] |
-//! | `bbsplat.json` | [`ModelMeta`] plus the format name and version |
+//! | `bbsplat.json` | [`ModelMeta`] plus the format name and version; `scene`: the [`scene_mark`] of the scene trained on (optional) |
 //!
 //! Rounding is half to even, like `numpy.round`. Decoding (as the reference): colour `q/255`,
 //! alpha `clip(2q/255 − 1 + G, 0, 1)`; texels outside [`RawBillboards::alpha_mask`] decode to 0 whatever
@@ -44,6 +44,7 @@
 
 pub(crate) mod npz;
 pub mod ply;
+pub mod scene_mark;
 
 use crate::file_io::{self, FileError};
 use crate::model::{RawBillboards, alpha_asset, logit, sigmoid, standard_alpha_mask};
@@ -94,6 +95,10 @@ pub struct ModelMeta {
     pub background: [f32; 3],
     /// Number of billboards (must equal the PLY's vertex count).
     pub billboards: usize,
+    /// The scene it was trained on ([`scene_mark`]); `None` for models saved without one
+    /// (absent from the file).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scene: Option<scene_mark::SceneMark>,
 }
 
 impl ModelMeta {
@@ -104,6 +109,7 @@ impl ModelMeta {
             sh_degree,
             background,
             billboards: model.len(),
+            scene: None,
         }
     }
 }

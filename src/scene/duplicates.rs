@@ -1,18 +1,39 @@
 //! Duplicate frames: views whose images are the same, pixel for pixel (after undistortion,
-//! downscaling and background compositing). A copy among the training views trains its frame
+//! downscaling and background compositing), taken from the same pose ([`same_pose`]). A copy among the training views trains its frame
 //! twice and skews the camera statistics; a test view that is also a training view inflates the
 //! test score. [`find`] names them, [`leave_out`] keeps the first of each set (a training view
 //! before a test view) and removes the others with a warning.
 //!
-//! Images of a single colour are not duplicates of each other (two empty frames from different
-//! poses are both true observations). Only exact copies are found: a re-encoded copy of a frame
-//! differs in its pixels and is not.
+//! Equal images from different poses are not copies (two empty frames, or a symmetric synthetic
+//! object seen alike from two places, are both true observations), nor are images of a single
+//! colour. Only exact copies are found: a re-encoded copy of a frame differs in its pixels and is
+//! not.
 //!
 //! Cost: one hash of at most [`SAMPLES`] bytes per view, then a full comparison only of the views
 //! whose sizes and hashes agree.
 
 use super::{Image, View};
+use crate::camera::Camera;
 use std::collections::HashMap;
+
+/// Largest distance between the centres of two copies, as a share of the views' spread (the
+/// largest distance of a camera centre from their mean).
+pub const SAME_CENTRE: f32 = 1e-3;
+
+/// Largest Frobenius norm of the difference of two copies' rotation matrices (about 0.08°).
+pub const SAME_ROTATION: f32 = 2e-3;
+
+/// True when cameras `a` and `b` have the same pose: centres within [`SAME_CENTRE`] · `spread`,
+/// rotations within [`SAME_ROTATION`].
+pub fn same_pose(a: &Camera, b: &Camera, spread: f32) -> bool {
+    let rotation = (a.rotation - b.rotation)
+        .to_cols_array()
+        .iter()
+        .map(|d| d * d)
+        .sum::<f32>()
+        .sqrt();
+    a.centre().distance(b.centre()) <= SAME_CENTRE * spread && rotation <= SAME_ROTATION
+}
 
 /// Bytes of an image hashed to group candidate copies.
 pub const SAMPLES: usize = 4096;
@@ -39,13 +60,9 @@ pub struct Duplicate {
 fn sample_hash(image: &Image) -> u64 {
     let bytes = image.as_bytes();
     let stride = bytes.len().div_ceil(SAMPLES).max(1);
-    let mut h = 0xcbf2_9ce4_8422_2325u64;
     let size = [image.width().to_le_bytes(), image.height().to_le_bytes()].concat();
-    for &b in size.iter().chain(bytes.iter().step_by(stride)) {
-        h ^= b as u64;
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    h
+    let sampled: Vec<u8> = bytes.iter().step_by(stride).copied().collect();
+    crate::fnv::update(crate::fnv::fnv1a(&size), &sampled)
 }
 
 /// True when every pixel of `image` has the first pixel's colour.
@@ -56,20 +73,33 @@ fn single_colour(image: &Image) -> bool {
 
 /// Every view of `train` then `test` whose image equals an earlier one's, in that order.
 pub fn find(train: &[View], test: &[View]) -> Vec<Duplicate> {
-    let all: Vec<((Split, usize), &Image)> = train
+    let all: Vec<((Split, usize), &View)> = train
         .iter()
         .enumerate()
-        .map(|(i, v)| ((Split::Train, i), &v.image))
-        .chain(test.iter().enumerate().map(|(i, v)| ((Split::Test, i), &v.image)))
+        .map(|(i, v)| ((Split::Train, i), v))
+        .chain(test.iter().enumerate().map(|(i, v)| ((Split::Test, i), v)))
         .collect();
+    let spread = {
+        let n = all.len().max(1) as f32;
+        let mean = all.iter().map(|(_, v)| v.camera.centre()).sum::<glam::Vec3>() / n;
+        let far = all
+            .iter()
+            .map(|(_, v)| v.camera.centre().distance(mean))
+            .fold(0.0, f32::max);
+        far.max(f32::MIN_POSITIVE)
+    };
     // Earlier views of each sample hash (the first seen of each distinct image).
     let mut seen: HashMap<u64, Vec<usize>> = HashMap::new();
     let mut out = Vec::new();
-    for (k, &(at, image)) in all.iter().enumerate() {
+    for (k, &(at, view)) in all.iter().enumerate() {
+        let image = &view.image;
         let firsts = seen.entry(sample_hash(image)).or_default();
         let original = firsts.iter().copied().find(|&j| {
             let other = all[j].1;
-            other.width() == image.width() && other.height() == image.height() && other.as_bytes() == image.as_bytes()
+            let same_image = other.image.width() == image.width()
+                && other.image.height() == image.height()
+                && other.image.as_bytes() == image.as_bytes();
+            same_image && same_pose(&other.camera, &view.camera, spread)
         });
         match original {
             Some(j) if !single_colour(image) => out.push(Duplicate {
@@ -185,5 +215,19 @@ mod tests {
             ..view("c", &[1, 2, 3, 4, 5, 6])
         };
         assert!(find(&[view("d", &[1, 2, 3, 4, 5, 6]), wide], &[]).is_empty());
+    }
+
+    #[test]
+    fn equal_images_from_other_poses_are_not_copies() {
+        let a = [1, 2, 3, 4, 5, 6];
+        let mut moved = view("b", &a);
+        moved.camera.translation.x = 1.0;
+        let mut turned = view("c", &a);
+        turned.camera.rotation = glam::Mat3::from_rotation_y(0.01);
+        assert!(find(&[view("a", &a), moved.clone(), turned.clone()], &[]).is_empty());
+        // A hair's breadth away is the same pose (spread 2/3 from the moved view).
+        let mut near = view("d", &a);
+        near.camera.translation.x = 1e-4;
+        assert_eq!(find(&[view("a", &a), moved, near], &[]).len(), 1);
     }
 }

@@ -163,23 +163,6 @@ impl From<FileError> for CheckpointError {
     }
 }
 
-/// FNV-1a 64 offset basis (the hash of no bytes).
-const FNV_BASIS: u64 = 0xcbf2_9ce4_8422_2325;
-
-/// FNV-1a, 64 bit.
-pub(crate) fn fnv1a(data: &[u8]) -> u64 {
-    fnv1a_update(FNV_BASIS, data)
-}
-
-/// Continues an FNV-1a 64 hash over `data`.
-fn fnv1a_update(mut h: u64, data: &[u8]) -> u64 {
-    for &b in data {
-        h ^= b as u64;
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    h
-}
-
 /// Where [`encode_into`] puts the checkpoint bytes: counted, or hashed and written.
 trait Sink {
     fn put(&mut self, bytes: &[u8]);
@@ -212,7 +195,7 @@ impl<W: Write> Sink for HashingWriter<W> {
         if self.error.is_some() {
             return;
         }
-        self.hash = fnv1a_update(self.hash, bytes);
+        self.hash = crate::fnv::update(self.hash, bytes);
         if let Err(e) = self.out.write_all(bytes) {
             self.error = Some(e);
         }
@@ -332,7 +315,7 @@ fn encode(tr: &Trainer) -> Vec<u8> {
 fn write_checkpoint<W: Write>(tr: &Trainer, len: u64, out: W) -> std::io::Result<W> {
     let mut sink = HashingWriter {
         out,
-        hash: FNV_BASIS,
+        hash: crate::fnv::BASIS,
         error: None,
     };
     encode_into(tr, len, &mut sink);
@@ -584,7 +567,7 @@ fn check_envelope<'d>(data: &'d [u8], path: &Path) -> Result<(u32, &'d [u8]), Ch
     }
     let (body, tail) = data.split_at(data.len() - 8);
     let stored = u64::from_le_bytes(tail.try_into().expect("8 bytes"));
-    let computed = fnv1a(body);
+    let computed = crate::fnv::fnv1a(body);
     if stored != computed {
         return Err(CheckpointError::Checksum {
             path: p(),

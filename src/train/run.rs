@@ -74,6 +74,7 @@ use super::{CheckpointError, NonFinite, ParamGroup, StepLog, TrainError, TrainVi
 use crate::billboards::ActivatedBillboards;
 use crate::eval::{EvalView, evaluate_views};
 use crate::loss::LossError;
+use crate::model_file::scene_mark::SceneMark;
 use crate::model_file::{ModelFileError, ModelMeta, load_model, save_model};
 use crate::raster::{ActivatedRef, RenderSettings};
 use crate::report::{
@@ -507,6 +508,8 @@ struct RunState<'a> {
     train_seconds: f64,
     /// The time of the earlier parts of a resumed run (zero otherwise).
     earlier: RunTime,
+    /// The mark of the scene trained on (its training and test views), saved with the model.
+    scene_mark: SceneMark,
     running_psnr: f64,
     relocated_total: usize,
     /// The last checkpoint this call wrote (named by a failed step's error).
@@ -590,6 +593,7 @@ impl<'a> RunState<'a> {
             curve: Vec::new(),
             train_seconds: earlier.train_seconds,
             earlier,
+            scene_mark: SceneMark::of_cameras(train.iter().chain(test).map(|v| &v.camera)),
             running_psnr: f64::NAN,
             relocated_total: 0,
             last_checkpoint: None,
@@ -780,7 +784,10 @@ impl<'a> RunState<'a> {
         let tc = &self.tc;
         let written = self.save(trainer, on_event)?;
         let model_dir = dir.join(MODEL_DIR);
-        let meta = ModelMeta::for_model(trainer.model(), tc.sh_degree, tc.background.to_array());
+        let meta = ModelMeta {
+            scene: Some(self.scene_mark.clone()),
+            ..ModelMeta::for_model(trainer.model(), tc.sh_degree, tc.background.to_array())
+        };
         let model_bytes = match save_model(&model_dir, &trainer.export_model(), &meta) {
             Ok(bytes) => bytes,
             Err(source) => {

@@ -63,7 +63,7 @@ fn camera_hash(c: &Camera) -> u64 {
     let mut bytes: Vec<u8> = floats.flat_map(f32::to_le_bytes).collect();
     bytes.extend(c.width.to_le_bytes());
     bytes.extend(c.height.to_le_bytes());
-    super::checkpoint::fnv1a(&bytes)
+    crate::fnv::fnv1a(&bytes)
 }
 
 impl DatasetFingerprint {

@@ -84,9 +84,8 @@ pub fn read_beside(checkpoint: &Path, step: usize) -> Result<RunTime, String> {
     if time.checkpoint_checksum != checksum {
         return Err(why("belongs to another checkpoint (its checksum differs)".into()));
     }
-    if !(time.train_seconds.is_finite() && time.train_seconds >= 0.0)
-        || !(time.other_seconds.is_finite() && time.other_seconds >= 0.0)
-    {
+    let valid = |s: f64| s.is_finite() && s >= 0.0;
+    if !(valid(time.train_seconds) && valid(time.other_seconds)) {
         return Err(why("holds a negative or non-finite time".into()));
     }
     Ok(time)

@@ -14,6 +14,7 @@ mod cli_full_disk;
 #[cfg(feature = "cli")]
 mod cli_reliability;
 mod cli_resume_time;
+mod cli_scene_mark;
 mod cli_serve;
 mod demo;
 mod eval;
