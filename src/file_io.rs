@@ -454,13 +454,27 @@ pub fn read_bounded(path: &Path, limit: Limit) -> Result<Vec<u8>, FileError> {
     Ok(bytes)
 }
 
-/// [`read_bounded`], the content as UTF-8 text.
+/// `bytes` without a leading UTF-8 byte-order mark (`EF BB BF`, which Windows editors write at
+/// the start of text files; JSON readers may ignore it, RFC 8259 §8.1).
+///
+/// ```
+/// assert_eq!(bbsplat::file_io::without_bom(b"\xEF\xBB\xBF{}"), b"{}");
+/// assert_eq!(bbsplat::file_io::without_bom(b"{}"), b"{}");
+/// ```
+pub fn without_bom(bytes: &[u8]) -> &[u8] {
+    bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes)
+}
+
+/// [`read_bounded`], the content as UTF-8 text, a leading byte-order mark left out
+/// ([`without_bom`]).
 ///
 /// # Errors
 /// As [`read_bounded`]; [`FileError::Io`] of kind [`io::ErrorKind::InvalidData`] when the file is
 /// not UTF-8.
 pub fn read_text_bounded(path: &Path, limit: Limit) -> Result<String, FileError> {
-    let bytes = read_bounded(path, limit)?;
+    let mut bytes = read_bounded(path, limit)?;
+    let bom = bytes.len() - without_bom(&bytes).len();
+    bytes.drain(..bom);
     String::from_utf8(bytes)
         .map_err(|e| io_error(path, "reading it as text")(io::Error::new(io::ErrorKind::InvalidData, e)))
 }

@@ -153,7 +153,7 @@ pub fn eval(args: EvalArgs) -> Result<()> {
     let report = run_views(&args.common, |_, _, _, _, _, _| Ok(()))?;
     let json = serde_json::to_string_pretty(&report).context("encoding the report")?;
     if let Some(path) = &args.report {
-        write_text_atomic(path, &json)?;
+        write_text_atomic(path, &json).with_context(|| format!("writing the report {}", path.display()))?;
     }
     if args.json {
         println!("{json}");

@@ -50,9 +50,10 @@ pub struct TrainArgs {
     /// Evaluate on the test views every n steps (0: only at the end).
     #[arg(long, default_value_t = 1000)]
     pub eval_every: usize,
-    /// At most this many test views (evenly spaced) in the intermediate evaluations; the final
-    /// evaluation uses all of them.
-    #[arg(long, default_value_t = 25)]
+    /// At most this many test views (evenly spaced) in the intermediate evaluations, at least 1
+    /// (a number at least the test view count takes them all; no intermediate evaluation:
+    /// --eval-every 0); the final evaluation uses all of them.
+    #[arg(long, default_value_t = 25, value_parser = super::validate::count_between::<1, { usize::MAX }>)]
     pub eval_views: usize,
     /// Write a checkpoint every n steps (0: only on Ctrl-C).
     #[arg(long, default_value_t = 0)]

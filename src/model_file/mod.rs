@@ -667,7 +667,8 @@ fn parse_meta(path: &Path, bytes: &[u8]) -> Result<ModelMeta, ModelFileError> {
         path: path.to_path_buf(),
         reason,
     };
-    let value: serde_json::Value = serde_json::from_slice(bytes).map_err(|e| bad(format!("not valid JSON: {e}")))?;
+    let value: serde_json::Value =
+        serde_json::from_slice(file_io::without_bom(bytes)).map_err(|e| bad(format!("not valid JSON: {e}")))?;
     let format = value.get("format").and_then(|v| v.as_str()).unwrap_or("").to_string();
     let version = value.get("version").and_then(|v| v.as_u64()).unwrap_or(0);
     if format != FORMAT_NAME || version != FORMAT_VERSION as u64 {

@@ -35,8 +35,10 @@ use std::fmt::Write as _;
 use std::path::Path;
 use std::str::FromStr;
 
-/// Decodes a text file's bytes as UTF-8; the error names the line of the first invalid byte.
+/// Decodes a text file's bytes as UTF-8, a leading byte-order mark left out
+/// ([`crate::file_io::without_bom`]); the error names the line of the first invalid byte.
 pub fn decode_utf8<'a>(bytes: &'a [u8], file: &Path) -> Result<&'a str, SceneError> {
+    let bytes = crate::file_io::without_bom(bytes);
     std::str::from_utf8(bytes).map_err(|e| {
         let line = 1 + bytes[..e.valid_up_to()].iter().filter(|&&b| b == b'\n').count();
         SceneError::parse(file, Location::Line(line), "text is not valid UTF-8")

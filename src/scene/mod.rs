@@ -128,6 +128,11 @@ impl Image {
     }
 }
 
+/// The smallest side, in pixels, that [`LoadOptions::downscale`] and [`LoadOptions::max_width`]
+/// may shrink an image to (a smaller image has too few pixels to train on; images stored smaller
+/// are loaded as they are).
+pub const MIN_DOWNSCALED_SIDE: u32 = 8;
+
 /// One posed photograph.
 #[derive(Clone, Debug, PartialEq)]
 pub struct View {

@@ -172,7 +172,10 @@ fn json_error(text: &str, file: &Path, e: &serde_json::Error) -> SceneError {
 
 /// Parses a transforms file. `file` is only used in error messages; errors name the JSON path
 /// of the bad value (e.g. `frames[3].transform_matrix`).
+///
+/// A leading UTF-8 byte-order mark is ignored.
 pub fn parse_transforms(text: &str, file: &Path) -> Result<TransformsFile, SceneError> {
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let root: Value = serde_json::from_str(text).map_err(|e| json_error(text, file, &e))?;
     let err = |path: &str, m: String| SceneError::parse(file, Location::Record(path.to_string()), m);
     let Value::Object(obj) = &root else {

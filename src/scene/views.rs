@@ -112,6 +112,25 @@ fn load_view(s: ViewSource, options: &LoadOptions) -> Result<(View, Option<Strin
     }
     let plan = undistort::plan(&intrinsics, iw, ih, options.undistort).map_err(perr)?;
     let (nw, nh) = image_io::target_size(plan.width, plan.height, options.downscale, options.max_width);
+    if (nw, nh) != (plan.width, plan.height) && nw.min(nh) < super::MIN_DOWNSCALED_SIDE {
+        return Err(SceneError::InvalidOption(format!(
+            "{}: {}x{} becomes {nw}x{nh} with downscale {}{}, under the {} pixels a side that a downscaled image keeps; \
+             choose a smaller downscale{}",
+            s.image_path.display(),
+            plan.width,
+            plan.height,
+            options.downscale,
+            options
+                .max_width
+                .map_or(String::new(), |m| format!(" and max width {m}")),
+            super::MIN_DOWNSCALED_SIDE,
+            if options.max_width.is_some() {
+                " or a larger max width"
+            } else {
+                ""
+            },
+        )));
+    }
     // Coverage is kept for images that need no undistortion (RGBA renders such as NeRF-synthetic).
     let coverage = alpha
         .filter(|_| !undistort::needs_undistortion(&intrinsics.distortion))

@@ -65,3 +65,14 @@ fn counts_at_their_bounds_are_accepted_by_the_parser() {
         assert!(err.contains("no-such-model"), "{command} {flag} {value}: {err}");
     }
 }
+
+/// `train --eval-views 0` meant "all test views" in silence; it is refused naming the range.
+#[test]
+fn zero_evaluation_views_are_refused() {
+    let (ok, err) = run(&["train", "no-such-scene", "-o", "no-such-output", "--eval-views", "0"]);
+    assert!(
+        !ok && err.contains("--eval-views") && err.contains("not between 1 and"),
+        "{err}"
+    );
+    assert!(!std::path::Path::new("no-such-output").exists());
+}

@@ -77,6 +77,7 @@ mod stage_sh;
 mod stage_splat_transform;
 mod strategies;
 mod sweep;
+mod text_bom;
 mod train_adam;
 mod train_camera_fit;
 mod train_checkpoint;

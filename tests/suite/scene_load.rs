@@ -143,15 +143,34 @@ fn downscale_and_max_width_scale_intrinsics_exactly() {
     let s = load(
         &d,
         &LoadOptions {
-            max_width: Some(8),
+            max_width: Some(12),
             test_every: 0,
             ..quiet()
         },
     )
     .unwrap();
     let v = s.train.iter().find(|v| v.name == "img_0.png").unwrap();
-    assert_eq!((v.camera.width, v.camera.height), (8, 6));
-    assert_eq!((v.camera.fx, v.camera.cx, v.camera.cy), (7.5, 4.0, 3.0));
+    assert_eq!((v.camera.width, v.camera.height), (12, 9));
+    assert_eq!((v.camera.fx, v.camera.cx, v.camera.cy), (11.25, 6.0, 4.5));
+    // Shrinking an image under 8 pixels a side is refused (it trained on 1-pixel images).
+    for (downscale, max_width, says) in [
+        (
+            100_000,
+            None,
+            "32x24 becomes 1x1 with downscale 100000, under the 8 pixels",
+        ),
+        (1, Some(1), "32x24 becomes 1x1 with downscale 1 and max width 1"),
+        (4, None, "becomes 8x6 with downscale 4"),
+    ] {
+        let options = LoadOptions {
+            downscale,
+            max_width,
+            test_every: 0,
+            ..quiet()
+        };
+        let err = load(&d, &options).unwrap_err().to_string();
+        assert!(err.contains(says) && err.contains("img_0.png"), "{err}");
+    }
     // A ratio that does not divide: 32 → 11 wide; intrinsics follow the exact size ratio.
     let s = load(
         &d,
