@@ -7,9 +7,26 @@ use super::Image;
 use super::error::{Location, SceneError};
 use std::path::Path;
 
-/// A decoded image, its alpha channel (if it has one) and the warning naming its damage (if
-/// accepted damaged).
-pub(crate) type Decoded = (Image, Option<Vec<u8>>, Option<String>);
+/// A decoded image, its alpha channel (if it has one), the warning naming its damage (if
+/// accepted damaged) and its EXIF orientation when that is not the normal one ([`exif_turn`]).
+pub(crate) type Decoded = (Image, Option<Vec<u8>>, Option<String>, Option<&'static str>);
+
+/// What an EXIF orientation other than the normal one asks a viewer to do, or `None` for the
+/// normal one. The loader does not do it: structure from motion (COLMAP) registers the stored
+/// pixels, so the poses and the camera's size are those of the image as stored.
+pub fn exif_turn(orientation: image::metadata::Orientation) -> Option<&'static str> {
+    use image::metadata::Orientation as O;
+    match orientation {
+        O::NoTransforms => None,
+        O::Rotate90 => Some("turned 90° clockwise"),
+        O::Rotate180 => Some("turned 180°"),
+        O::Rotate270 => Some("turned 90° anticlockwise"),
+        O::FlipHorizontal => Some("mirrored left to right"),
+        O::FlipVertical => Some("mirrored top to bottom"),
+        O::Rotate90FlipH => Some("turned 90° clockwise and mirrored"),
+        O::Rotate270FlipH => Some("turned 90° anticlockwise and mirrored"),
+    }
+}
 
 /// Decodes an image file into 8-bit RGB, compositing any alpha channel onto `background`
 /// (values in `[0, 1]`): `c = c_rgb·a + background·(1 − a)`, rounded to 8 bits, and returns the
@@ -39,8 +56,13 @@ pub(crate) fn decode_with_alpha(
             "{message} (refused: LoadOptions::allow_damaged_images, bbsplat's --allow-damaged-images, accepts it with a warning)"
         )));
     }
-    let (image, alpha) = decode_bytes_with_alpha(&bytes, background).map_err(error)?;
-    Ok((image, alpha, damage.map(|d| format!("{}: {d}", image_path.display()))))
+    let (image, alpha, orientation) = decode_oriented(&bytes, background).map_err(error)?;
+    Ok((
+        image,
+        alpha,
+        damage.map(|d| format!("{}: {d}", image_path.display())),
+        exif_turn(orientation),
+    ))
 }
 
 /// Why a JPEG stream is incomplete, or `None` when it is whole (or not a JPEG). A JPEG whose
@@ -63,15 +85,31 @@ pub(crate) fn jpeg_damage(bytes: &[u8]) -> Option<String> {
     }
 }
 
-/// Decodes image bytes (PNG or JPEG); see [`decode_with_alpha`].
-pub(crate) fn decode_bytes_with_alpha(bytes: &[u8], background: [f32; 3]) -> Result<(Image, Option<Vec<u8>>), String> {
-    let dynamic = image::load_from_memory(bytes).map_err(|e| e.to_string())?;
+/// Decodes image bytes (PNG or JPEG), with the image's EXIF orientation (not applied); see
+/// [`decode_with_alpha`].
+fn decode_oriented(
+    bytes: &[u8],
+    background: [f32; 3],
+) -> Result<(Image, Option<Vec<u8>>, image::metadata::Orientation), String> {
+    use image::ImageDecoder;
+    let reader = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| e.to_string())?;
+    let mut decoder = reader.into_decoder().map_err(|e| e.to_string())?;
+    let orientation = decoder
+        .orientation()
+        .unwrap_or(image::metadata::Orientation::NoTransforms);
+    let dynamic = image::DynamicImage::from_decoder(decoder).map_err(|e| e.to_string())?;
     let (width, height) = (dynamic.width(), dynamic.height());
     if width == 0 || height == 0 {
         return Err(format!("image has zero size {width}x{height}"));
     }
     if !dynamic.color().has_alpha() {
-        return Ok((Image::from_raw(width, height, dynamic.into_rgb8().into_raw()), None));
+        return Ok((
+            Image::from_raw(width, height, dynamic.into_rgb8().into_raw()),
+            None,
+            orientation,
+        ));
     }
     let rgba = dynamic.into_rgba8();
     let bg = background.map(|b| b.clamp(0.0, 1.0) * 255.0);
@@ -85,7 +123,7 @@ pub(crate) fn decode_bytes_with_alpha(bytes: &[u8], background: [f32; 3]) -> Res
         }
         alpha.push(px[3]);
     }
-    Ok((Image::from_raw(width, height, data), Some(alpha)))
+    Ok((Image::from_raw(width, height, data), Some(alpha), orientation))
 }
 
 /// Area-downscales an 8-bit single-channel map (an alpha channel) from `w × h` to `nw × nh`

@@ -68,20 +68,35 @@ pub(crate) fn load_all(
             Err(e) => return Err(SceneError::io(&s.image_path, e)),
         }
     }
-    let results: Vec<Result<(View, Option<String>), SceneError>> =
+    let results: Vec<Result<(View, Option<String>, Option<&'static str>), SceneError>> =
         sources.into_par_iter().map(|s| load_view(s, options)).collect();
     let mut views = Vec::with_capacity(results.len());
+    let mut turned: Vec<(PathBuf, &'static str)> = Vec::new();
     for r in results {
-        let (view, warning) = r?;
+        let (view, warning, turn) = r?;
         warnings.extend(warning);
+        if let Some(turn) = turn {
+            turned.push((view.path.clone(), turn));
+        }
         views.push(view);
+    }
+    if let Some((first, turn)) = turned.first() {
+        warnings.push(format!(
+            "{} of {} images ask through their EXIF orientation to be shown turned or mirrored ({} {turn}{}); \
+             it is not applied: structure from motion registers the pixels as stored, so the cameras fit them \
+             as stored, and renders show the scene as stored",
+            turned.len(),
+            views.len(),
+            first.display(),
+            if turned.len() > 1 { ", ..." } else { "" }
+        ));
     }
     Ok(views)
 }
 
-fn load_view(s: ViewSource, options: &LoadOptions) -> Result<(View, Option<String>), SceneError> {
+fn load_view(s: ViewSource, options: &LoadOptions) -> Result<(View, Option<String>, Option<&'static str>), SceneError> {
     let background = options.background.rgb();
-    let (image, alpha, damage) = image_io::decode_with_alpha(
+    let (image, alpha, damage, turn) = image_io::decode_with_alpha(
         &s.image_path,
         &s.file,
         &s.location,
@@ -176,5 +191,5 @@ fn load_view(s: ViewSource, options: &LoadOptions) -> Result<(View, Option<Strin
         image,
         coverage,
     };
-    Ok((view, damage))
+    Ok((view, damage, turn))
 }

@@ -59,6 +59,7 @@ mod scene_bad_input;
 mod scene_colmap_roundtrip;
 mod scene_distortion;
 mod scene_duplicates;
+mod scene_exif;
 mod scene_fuzz;
 mod scene_image_io;
 mod scene_load;
