@@ -68,8 +68,7 @@ pub(crate) fn load_all(
             Err(e) => return Err(SceneError::io(&s.image_path, e)),
         }
     }
-    let results: Vec<Result<(View, Option<String>, Option<&'static str>), SceneError>> =
-        sources.into_par_iter().map(|s| load_view(s, options)).collect();
+    let results: Vec<Result<LoadedView, SceneError>> = sources.into_par_iter().map(|s| load_view(s, options)).collect();
     let mut views = Vec::with_capacity(results.len());
     let mut turned: Vec<(PathBuf, &'static str)> = Vec::new();
     for r in results {
@@ -94,7 +93,11 @@ pub(crate) fn load_all(
     Ok(views)
 }
 
-fn load_view(s: ViewSource, options: &LoadOptions) -> Result<(View, Option<String>, Option<&'static str>), SceneError> {
+/// A loaded view, the warning naming its damage (if accepted damaged) and its EXIF orientation
+/// (if not the normal one, [`image_io::exif_turn`]).
+type LoadedView = (View, Option<String>, Option<&'static str>);
+
+fn load_view(s: ViewSource, options: &LoadOptions) -> Result<LoadedView, SceneError> {
     let background = options.background.rgb();
     let (image, alpha, damage, turn) = image_io::decode_with_alpha(
         &s.image_path,
