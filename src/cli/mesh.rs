@@ -67,7 +67,7 @@ pub struct MeshArgs {
     /// The scene is the demo (`bbsplat demo --export`): measure the mesh against the demo's true
     /// surface seen by the training cameras inside the grid (Chamfer distance, normal
     /// consistency) with this many samples on each surface (at most 10 000 000).
-    #[arg(long, value_parser = super::validate::count_between::<1, { super::validate::MAX_COMPARE_SAMPLES }>)]
+    #[arg(long, value_parser = super::flag_parsers::count_between::<1, { super::flag_parsers::MAX_COMPARE_SAMPLES }>)]
     pub compare_demo: Option<usize>,
     /// Rayon worker threads (default: all cores).
     #[arg(long)]

@@ -4,6 +4,7 @@
 pub mod common;
 pub mod demo;
 pub mod export;
+pub mod flag_parsers;
 pub mod http;
 pub mod mesh;
 pub mod preflight;

@@ -42,11 +42,11 @@ pub struct RenderArgs {
     /// (`bbsplat::export::orbit`: placed from the training cameras) to `orbit_NNNN.png` and an
     /// animated `orbit.gif` (looping, --frame-ms per frame).
     /// At most 100 000 frames.
-    #[arg(long, value_name = "N", value_parser = super::validate::count_between::<1, { super::validate::MAX_ORBIT_FRAMES }>)]
+    #[arg(long, value_name = "N", value_parser = super::flag_parsers::count_between::<1, { super::flag_parsers::MAX_ORBIT_FRAMES }>)]
     pub orbit: Option<usize>,
     /// Milliseconds per frame of `orbit.gif`: 10 to 655 350, a multiple of 10 (a GIF stores
     /// hundredths of a second).
-    #[arg(long, default_value_t = 80, value_parser = super::validate::frame_ms)]
+    #[arg(long, default_value_t = 80, value_parser = super::flag_parsers::frame_ms)]
     pub frame_ms: u32,
 }
 

@@ -53,7 +53,7 @@ pub struct TrainArgs {
     /// At most this many test views (evenly spaced) in the intermediate evaluations, at least 1
     /// (a number at least the test view count takes them all; no intermediate evaluation:
     /// --eval-every 0); the final evaluation uses all of them.
-    #[arg(long, default_value_t = 25, value_parser = super::validate::count_between::<1, { usize::MAX }>)]
+    #[arg(long, default_value_t = 25, value_parser = super::flag_parsers::count_between::<1, { usize::MAX }>)]
     pub eval_views: usize,
     /// Write a checkpoint every n steps (0: only on Ctrl-C).
     #[arg(long, default_value_t = 0)]
