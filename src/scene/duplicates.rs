@@ -1,7 +1,7 @@
 //! Duplicate frames: views whose images are the same, pixel for pixel (after undistortion,
-//! downscaling and background compositing), taken from the same pose ([`same_pose`]). A copy among the training views trains its frame
-//! twice and skews the camera statistics; a test view that is also a training view inflates the
-//! test score. [`find`] names them, [`leave_out`] keeps the first of each set (a training view
+//! downscaling and background compositing), taken from the same pose ([`same_pose`]). A copy
+//! among the training views trains its frame twice and skews the camera statistics; a test view
+//! that is also a training view inflates the test score. [`find`] names them, the loader keeps the first of each set (a training view
 //! before a test view) and removes the others with a warning.
 //!
 //! Equal images from different poses are not copies (two empty frames, or a symmetric synthetic
