@@ -159,6 +159,36 @@ pub(crate) fn load_nerf_synthetic(
     })
 }
 
+/// The warning when the scene's one focal length in pixels (`fl_x`/`fl_y`, no `w`/`h`), used by
+/// frames without their own, meets images of different sizes: the same focal gives them
+/// different fields of view, which is wrong when they were resized copies of one camera's
+/// photos.
+fn one_focal_for_mixed_sizes(file: &Path, t: &TransformsFile, views: &[View]) -> Option<String> {
+    let scene = &t.intrinsics;
+    let shared = (scene.fl_x.is_some() || scene.fl_y.is_some()) && scene.w.is_none() && scene.h.is_none();
+    let own_focal = t
+        .frames
+        .iter()
+        .any(|f| f.intrinsics.fl_x.is_some() || f.intrinsics.fl_y.is_some());
+    if !shared || own_focal {
+        return None;
+    }
+    let first = views.first()?;
+    let size = |v: &View| (v.camera.width, v.camera.height);
+    let other = views.iter().find(|v| size(v) != size(first))?;
+    Some(format!(
+        "{}: one focal length (fl_x/fl_y) for images of different sizes ({:?} is {}x{}, {:?} {}x{}) gives them \
+         different fields of view: if the images were resized, give the frames their own fl_x, w and h",
+        file.display(),
+        first.name,
+        first.camera.width,
+        first.camera.height,
+        other.name,
+        other.camera.width,
+        other.camera.height
+    ))
+}
+
 /// instant-ngp / nerfstudio `transforms.json`: frames whose image is missing are skipped with a
 /// warning; views are sorted by name and every n-th is held out; `ply_file_path` is read when
 /// it exists (a warning when it does not).
@@ -197,6 +227,7 @@ pub(crate) fn load_transforms(
         }
     };
     let views = sort_by_name(views::load_all(sources, options, warnings)?);
+    warnings.extend(one_focal_for_mixed_sizes(file, &t, &views));
     let (train, test) = split::split_every(views, options.test_every);
     Ok(Scene {
         name: scene_name(file),

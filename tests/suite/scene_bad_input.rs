@@ -717,3 +717,39 @@ element vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_head
     let err = bbsplat::scene::ply::parse_point_cloud(only_junk, Path::new("junk.ply")).unwrap_err();
     assert!(!err.to_string().is_empty());
 }
+
+/// Issue 60 item 12: one focal length in pixels for images of different sizes (no `w`/`h`)
+/// gives them different fields of view; it was trained on in silence, now it is warned about.
+#[test]
+fn one_focal_for_images_of_different_sizes_is_warned_about() {
+    let d = temp_dir("mixed_sizes");
+    let json = format!(
+        r#"{{"fl_x": 30, "frames": [{}, {}]}}"#,
+        frame("a.png", 4.0),
+        frame("b.png", 5.0)
+    );
+    std::fs::write(d.join("transforms.json"), &json).unwrap();
+    write_png(&d.join("a.png"), 32, 24);
+    write_png(&d.join("b.png"), 16, 12);
+    let options = LoadOptions {
+        test_every: 0,
+        ..quiet()
+    };
+    let s = load(&d, &options).unwrap();
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains("one focal length") && w.contains("\"a.png\" is 32x24, \"b.png\" 16x12")),
+        "{:?}",
+        s.warnings
+    );
+    // Same sizes, or each frame with its own focal: no warning.
+    write_png(&d.join("b.png"), 32, 24);
+    assert!(load(&d, &options).unwrap().warnings.is_empty());
+    let own = r#"{"fl_x": 30, "frames": [
+        {"file_path": "a.png", "fl_x": 30, "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,4],[0,0,0,1]]},
+        {"file_path": "b.png", "fl_x": 15, "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,5],[0,0,0,1]]}]}"#;
+    std::fs::write(d.join("transforms.json"), own).unwrap();
+    write_png(&d.join("b.png"), 16, 12);
+    assert!(load(&d, &options).unwrap().warnings.is_empty());
+}
