@@ -343,6 +343,9 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
             .filter(|(i, _)| !outliers.iter().any(|o| o.index == *i))
             .map(|(_, v)| &v.camera),
     );
+    if let Some(points) = &scene.points {
+        far_points(points, &scene.train, scene.extent, &scene.source)?;
+    }
     if options.print_warnings {
         for w in &warnings {
             eprintln!("warning: {w}");
@@ -350,6 +353,35 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
     }
     scene.warnings = warnings;
     Ok(scene)
+}
+
+/// How far from the training cameras' mean centre, in scene extents, a point may lie
+/// (checked by [`load`]): a sky point of a real capture lies some thousands of extents away.
+pub const MAX_POINT_DISTANCE: f32 = 1e6;
+
+/// Refuses a point cloud with a point farther than [`MAX_POINT_DISTANCE`] scene extents from the
+/// training cameras (a corrupt or misregistered cloud: the billboards initialised on it would get
+/// astronomical scales), naming the file and the point.
+fn far_points(points: &PointCloud, train: &[View], extent: f32, source: &Path) -> Result<(), SceneError> {
+    let n = train.len().max(1) as f32;
+    let mean = train.iter().map(|v| v.camera.centre()).sum::<Vec3>() / n;
+    let limit = MAX_POINT_DISTANCE * extent;
+    match points
+        .positions
+        .iter()
+        .enumerate()
+        .find(|(_, p)| p.distance(mean).is_nan() || p.distance(mean) > limit)
+    {
+        None => Ok(()),
+        Some((i, p)) => Err(SceneError::parse(
+            source,
+            Location::Record(format!("point cloud point {i}")),
+            format!(
+                "at {p:?}, {:.1e} scene extents ({extent}) from the cameras, more than {MAX_POINT_DISTANCE:.0e}: a corrupt or misregistered point cloud",
+                p.distance(mean) / extent
+            ),
+        )),
+    }
 }
 
 /// Detects the format of `path` (or checks the forced one) and returns it with the file or

@@ -753,3 +753,23 @@ fn one_focal_for_images_of_different_sizes_is_warned_about() {
     write_png(&d.join("b.png"), 16, 12);
     assert!(load(&d, &options).unwrap().warnings.is_empty());
 }
+
+/// Issue 60 item 7: SfM points at 1e20 were refused only later, by the trainer's log-scales,
+/// naming no file; the loader refuses them, naming the model and the point.
+#[test]
+fn points_astronomically_far_from_the_cameras_are_refused_naming_the_file() {
+    let d = temp_dir("far_points");
+    let mut m = colmap_dataset(&d, 4, true);
+    assert!(load(&d, &quiet()).is_ok());
+    m.points[1].xyz = [1e20, 0.0, 0.0];
+    bin::write_model(&m, &d.join("sparse/0")).unwrap();
+    expect(
+        load_err(&d),
+        &[
+            "sparse/0",
+            "point cloud point 1",
+            "scene extents",
+            "a corrupt or misregistered point cloud",
+        ],
+    );
+}
