@@ -16,7 +16,7 @@
 /// Stages of an atomic file write: the temporary file created, written, flushed to disk, and
 /// renamed over the destination.
 #[cfg(feature = "fault-injection")]
-pub const ATOMIC_STAGES: [&str; 4] = ["created", "written", "synced", "renamed"];
+pub const ATOMIC_STAGES: [&str; 4] = crate::file_io::WRITE_STAGES;
 
 /// Stages of a model save: the temporary folder written, swapped with the previous model (or
 /// renamed into place), and the previous model removed.
