@@ -192,6 +192,7 @@ fn texture_step(c: &mut Criterion) {
                 1e-3,
                 &hp,
                 true,
+                bbsplat::cpu::Simd::detect(),
             );
             step_texture_group(
                 &mut colour,
@@ -205,6 +206,7 @@ fn texture_step(c: &mut Criterion) {
                 1e-3,
                 &hp,
                 true,
+                bbsplat::cpu::Simd::detect(),
             );
         })
     });
@@ -234,6 +236,7 @@ fn texture_step(c: &mut Criterion) {
                 None,
                 &hp,
                 true,
+                bbsplat::cpu::Simd::detect(),
             )
         })
     });

@@ -117,6 +117,7 @@
 
 pub mod billboards;
 pub mod camera;
+pub mod cpu;
 #[cfg(feature = "tools")]
 pub mod demo;
 pub mod eval;

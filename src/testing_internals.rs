@@ -163,7 +163,11 @@ pub mod ssim {
         P: Fn(R, R, R, R, R) -> [R; 4] + Sync,
     {
         let geo = Geometry::new(w, h, c, padding)?;
-        let (sum, grad) = crate::loss::ssim::value_and_grad(a, b, &geo, Cotangent::Uniform(1.0), partials);
+        let pass = crate::loss::ssim::Pass {
+            cot: Cotangent::Uniform(1.0),
+            simd: crate::cpu::Simd::detect(),
+        };
+        let (sum, grad) = crate::loss::ssim::value_and_grad(a, b, &geo, pass, partials, &mut Vec::new());
         Ok((geo.map_len(), sum, grad))
     }
 }
@@ -305,7 +309,7 @@ pub mod raster {
         bin_into(&prepared, camera.width, camera.height, &mut bins, &mut scratch);
         let half_side = support_half_side(set.texture_size);
         let mut rows = BillboardRows::default();
-        rows.build(&prepared, half_side);
+        rows.build(&prepared, half_side, crate::cpu::Simd::detect());
         let all: Vec<u32> = (0..prepared.len() as u32)
             .filter(|&b| prepared[b as usize].is_some())
             .collect();

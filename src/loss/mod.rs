@@ -36,8 +36,9 @@ pub mod normal_consistency;
 pub mod psnr;
 pub mod ssim;
 
+use crate::cpu::Simd;
 use rayon::prelude::*;
-use ssim::{Padding, Precision};
+use ssim::{Padding, Precision, SsimOptions, SsimScratch};
 use thiserror::Error;
 
 /// Errors of the loss functions: shapes that do not match the buffers.
@@ -119,6 +120,9 @@ pub struct TrainingLoss {
     /// The arithmetic of the SSIM term: [`Precision::F32`] (as the reference's PyTorch code,
     /// and twice the vector lanes) or [`Precision::F64`] (the proven reference).
     pub precision: Precision,
+    /// The instruction set of the SSIM passes (default: the widest the CPU runs; the same bits
+    /// whatever it is).
+    pub simd: Simd,
 }
 
 impl Default for TrainingLoss {
@@ -128,6 +132,7 @@ impl Default for TrainingLoss {
             lambda_dssim: 0.2,
             padding: Padding::Same,
             precision: Precision::F32,
+            simd: Simd::detect(),
         }
     }
 }
@@ -161,13 +166,31 @@ impl TrainingLoss {
         height: usize,
         channels: usize,
     ) -> Result<TrainingLossOutput, LossError> {
+        self.evaluate_in(render, target, (width, height, channels), &mut SsimScratch::default())
+    }
+
+    /// [`TrainingLoss::evaluate`] of a `(width, height, channels)` render, with the SSIM
+    /// gradient's partial maps in the caller's `scratch` (kept from call to call, so that a
+    /// training step allocates none).
+    ///
+    /// # Errors
+    ///
+    /// As [`TrainingLoss::evaluate`].
+    pub fn evaluate_in(
+        &self,
+        render: &[f32],
+        target: &[f32],
+        dims: (usize, usize, usize),
+        scratch: &mut SsimScratch,
+    ) -> Result<TrainingLossOutput, LossError> {
         let lambda = self.lambda_dssim;
         // d/d(render) of −λ·SSIM, then add the L1 part in place.
-        let ssim_with_grad = match self.precision {
-            Precision::F64 => ssim::ssim_with_grad,
-            Precision::F32 => ssim::ssim_with_grad_f32,
+        let options = SsimOptions {
+            padding: self.padding,
+            simd: self.simd,
         };
-        let (ssim, mut d_render) = ssim_with_grad(render, target, width, height, channels, self.padding, -lambda)?;
+        let (ssim, mut d_render) =
+            ssim::ssim_with_grad_in(render, target, dims, options, -lambda, self.precision, scratch)?;
         let l1 = l1::l1(render, target)?;
         l1::l1_vjp_accumulate(render, target, 1.0 - lambda, &mut d_render);
         let loss = (1.0 - lambda) * l1 + lambda * (1.0 - ssim);

@@ -85,6 +85,7 @@
 //! ```
 
 use super::LossError;
+use crate::cpu::Simd;
 use rayon::prelude::*;
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
@@ -113,10 +114,8 @@ pub(crate) trait Real:
     fn of_f64(x: f64) -> Self;
     fn to_f32(self) -> f32;
     fn to_f64(self) -> f64;
-    /// Hands over this thread's kept partial-map storage (see [`value_and_grad`]).
-    fn take_partial_maps() -> Vec<Self>;
-    /// Keeps `maps` for this thread's next call.
-    fn keep_partial_maps(maps: Vec<Self>);
+    /// The partial-map storage of this precision in `scratch` (see [`value_and_grad`]).
+    fn partial_maps(scratch: &mut SsimScratch) -> &mut Vec<Self>;
 }
 
 impl Real for f64 {
@@ -141,11 +140,8 @@ impl Real for f64 {
     fn to_f64(self) -> f64 {
         self
     }
-    fn take_partial_maps() -> Vec<Self> {
-        PARTIAL_MAPS_F64.take()
-    }
-    fn keep_partial_maps(maps: Vec<Self>) {
-        PARTIAL_MAPS_F64.set(maps);
+    fn partial_maps(scratch: &mut SsimScratch) -> &mut Vec<Self> {
+        &mut scratch.maps_f64
     }
 }
 
@@ -171,11 +167,8 @@ impl Real for f32 {
     fn to_f64(self) -> f64 {
         self as f64
     }
-    fn take_partial_maps() -> Vec<Self> {
-        PARTIAL_MAPS_F32.take()
-    }
-    fn keep_partial_maps(maps: Vec<Self>) {
-        PARTIAL_MAPS_F32.set(maps);
+    fn partial_maps(scratch: &mut SsimScratch) -> &mut Vec<Self> {
+        &mut scratch.maps_f32
     }
 }
 
@@ -209,6 +202,35 @@ pub enum Padding {
     Same,
     /// No padding: only windows fully inside the image, `(w − 10) × (h − 10)` map values.
     Valid,
+}
+
+/// How the SSIM gradient passes run: the padding of the map, and the instruction set of their
+/// lane-wise loops (the same bits whatever it is; only the speed differs). A [`Padding`] alone
+/// converts to it with the widest instruction set the CPU runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct SsimOptions {
+    /// How windows at the border are handled.
+    pub padding: Padding,
+    /// The instruction set ([`Simd::detect`] by default).
+    pub simd: Simd,
+}
+
+impl From<Padding> for SsimOptions {
+    fn from(padding: Padding) -> Self {
+        Self {
+            padding,
+            simd: Simd::detect(),
+        }
+    }
+}
+
+/// Storage for the SSIM gradient's weighted partial maps, owned by the caller and kept from
+/// call to call ([`ssim_with_grad_in`]): 24 bytes per map value in f64 (11.5 MB at 400×400×3),
+/// 12 in f32. Its contents never affect a result: every value is written before it is read.
+#[derive(Clone, Debug, Default)]
+pub struct SsimScratch {
+    maps_f64: Vec<f64>,
+    maps_f32: Vec<f32>,
 }
 
 /// The normalised 1-D Gaussian window: `exp(−(k − 5)²/(2σ²))` for `k in 0..11`, divided by
@@ -304,10 +326,10 @@ pub fn ssim_vjp(
     width: usize,
     height: usize,
     channels: usize,
-    padding: Padding,
+    options: impl Into<SsimOptions>,
     d_ssim: f64,
 ) -> Result<Vec<f32>, LossError> {
-    Ok(ssim_with_grad(a, b, width, height, channels, padding, d_ssim)?.1)
+    Ok(ssim_with_grad(a, b, width, height, channels, options, d_ssim)?.1)
 }
 
 /// The mean SSIM and `d_ssim · ∂SSIM/∂a` in one pass (the forward work is shared).
@@ -321,10 +343,19 @@ pub fn ssim_with_grad(
     width: usize,
     height: usize,
     channels: usize,
-    padding: Padding,
+    options: impl Into<SsimOptions>,
     d_ssim: f64,
 ) -> Result<(f64, Vec<f32>), LossError> {
-    mean_with_grad::<f64>(a, b, (width, height, channels), padding, d_ssim)
+    let scratch = &mut SsimScratch::default();
+    ssim_with_grad_in(
+        a,
+        b,
+        (width, height, channels),
+        options.into(),
+        d_ssim,
+        Precision::F64,
+        scratch,
+    )
 }
 
 /// [`ssim_with_grad`] computed in f32 instead of f64: the same passes and formulas (one generic
@@ -348,25 +379,49 @@ pub fn ssim_with_grad_f32(
     width: usize,
     height: usize,
     channels: usize,
-    padding: Padding,
+    options: impl Into<SsimOptions>,
     d_ssim: f64,
 ) -> Result<(f64, Vec<f32>), LossError> {
-    mean_with_grad::<f32>(a, b, (width, height, channels), padding, d_ssim)
+    let scratch = &mut SsimScratch::default();
+    ssim_with_grad_in(
+        a,
+        b,
+        (width, height, channels),
+        options.into(),
+        d_ssim,
+        Precision::F32,
+        scratch,
+    )
 }
 
-/// The mean SSIM and its gradient scaled by `d_ssim`, computed in precision `R` (the body of
-/// [`ssim_with_grad`] and [`ssim_with_grad_f32`]).
-fn mean_with_grad<R: Real>(
+/// The mean SSIM and its gradient scaled by `d_ssim` ([`ssim_with_grad`] in
+/// [`Precision::F64`], [`ssim_with_grad_f32`] in [`Precision::F32`]) of `(width, height,
+/// channels)` images, with the partial maps in the caller's `scratch` (no allocation of them
+/// once it has held an image this size).
+///
+/// # Errors
+///
+/// As [`ssim`].
+pub fn ssim_with_grad_in(
     a: &[f32],
     b: &[f32],
     (width, height, channels): (usize, usize, usize),
-    padding: Padding,
+    options: SsimOptions,
     d_ssim: f64,
+    precision: Precision,
+    scratch: &mut SsimScratch,
 ) -> Result<(f64, Vec<f32>), LossError> {
-    let geo = Geometry::new(width, height, channels, padding)?;
+    let geo = Geometry::new(width, height, channels, options.padding)?;
     geo.check(a, b)?;
     let weight = d_ssim / geo.map_len() as f64;
-    let (sum, grad) = value_and_grad(a, b, &geo, Cotangent::Uniform(weight), ssim_partials::<R>);
+    let pass = Pass {
+        cot: Cotangent::Uniform(weight),
+        simd: options.simd,
+    };
+    let (sum, grad) = match precision {
+        Precision::F64 => value_and_grad(a, b, &geo, pass, ssim_partials::<f64>, f64::partial_maps(scratch)),
+        Precision::F32 => value_and_grad(a, b, &geo, pass, ssim_partials::<f32>, f32::partial_maps(scratch)),
+    };
     Ok((sum / geo.map_len() as f64, grad))
 }
 
@@ -382,10 +437,11 @@ pub fn ssim_map_vjp(
     width: usize,
     height: usize,
     channels: usize,
-    padding: Padding,
+    options: impl Into<SsimOptions>,
     d_map: &[f32],
 ) -> Result<Vec<f32>, LossError> {
-    let geo = Geometry::new(width, height, channels, padding)?;
+    let options = options.into();
+    let geo = Geometry::new(width, height, channels, options.padding)?;
     geo.check(a, b)?;
     if d_map.len() != geo.map_len() {
         return Err(LossError::BadLength {
@@ -394,7 +450,12 @@ pub fn ssim_map_vjp(
             got: d_map.len(),
         });
     }
-    Ok(value_and_grad(a, b, &geo, Cotangent::Map(d_map), ssim_partials::<f64>).1)
+    let pass = Pass {
+        cot: Cotangent::Map(d_map),
+        simd: options.simd,
+    };
+    let maps = &mut Vec::new();
+    Ok(value_and_grad(a, b, &geo, pass, ssim_partials::<f64>, maps).1)
 }
 
 /// Number of moment maps: μa, μb, G*(a²), G*(b²), G*(a·b).
@@ -713,16 +774,25 @@ pub(crate) enum Cotangent<'a> {
     Map(&'a [f32]),
 }
 
+/// What [`value_and_grad`] is asked: the cotangent of the map, and the instruction set.
+#[derive(Clone, Copy)]
+pub(crate) struct Pass<'a> {
+    pub(crate) cot: Cotangent<'a>,
+    pub(crate) simd: Simd,
+}
+
 /// Forward and backward in one go: returns `(Σ S over the map, ∂(Σ ω·S)/∂a)`.
 ///
 /// `partials` computes `[S, ∂S/∂μa, ∂S/∂Saa, ∂S/∂Sab]` from the moments (a parameter so that
-/// tests can inject faults).
+/// tests can inject faults); `dbuf` is the storage of the weighted partial maps (its contents
+/// are overwritten).
 pub(crate) fn value_and_grad<R, P>(
     a: &[f32],
     b: &[f32],
     geo: &Geometry,
-    cot: Cotangent<'_>,
+    Pass { cot, simd }: Pass<'_>,
     partials: P,
+    dbuf: &mut Vec<R>,
 ) -> (f64, Vec<f32>)
 where
     R: Real,
@@ -732,12 +802,11 @@ where
     let lin = geo.in_row();
 
     // Per map row: the sum of S, and the three weighted partial maps.
-    // Every value is written below before it is read: storage recycled from this thread's last
-    // call, neither zeroed nor freshly allocated.
-    let mut dbuf = R::take_partial_maps();
-    crate::memory::resize_for_overwrite(&mut dbuf, geo.oh * PARTIALS * lout, R::ZERO);
+    // Every value is written below before it is read: the caller's storage, neither zeroed nor
+    // freshly allocated.
+    crate::memory::resize_for_overwrite(dbuf, geo.oh * PARTIALS * lout, R::ZERO);
     let mut row_sums = vec![0.0f64; geo.oh];
-    let wide = crate::raster::lanes::wide_lanes();
+    let wide = simd.avx2_fma();
     dbuf.par_chunks_mut(PARTIALS * lout)
         .zip(row_sums.par_iter_mut())
         .enumerate()
@@ -747,7 +816,7 @@ where
                 let row = MapRow { oy, drow, sum };
                 #[cfg(target_arch = "x86_64")]
                 if wide {
-                    // SAFETY: `wide_lanes` checked that the CPU has AVX2 and FMA.
+                    // SAFETY: `wide` is `Simd::avx2_fma`: the CPU has AVX2 and FMA.
                     unsafe { map_row_avx2(scratch, (a, b), geo, cot, &partials, row) };
                     return;
                 }
@@ -756,6 +825,7 @@ where
             },
         );
 
+    let dbuf: &[R] = dbuf;
     // Per image row: the adjoint of the vertical pass (map rows to image rows, shift −off),
     // the adjoint of the horizontal pass, then the chain rule through a, a², a·b.
     let mut grad = vec![0.0f32; geo.h * lin];
@@ -770,23 +840,14 @@ where
         |buffers, (y, out)| {
             #[cfg(target_arch = "x86_64")]
             if wide {
-                // SAFETY: `wide_lanes` checked that the CPU has AVX2 and FMA.
-                unsafe { grad_row_avx2(buffers, (a, b), geo, &dbuf, y, out) };
+                // SAFETY: `wide` is `Simd::avx2_fma`: the CPU has AVX2 and FMA.
+                unsafe { grad_row_avx2(buffers, (a, b), geo, dbuf, y, out) };
                 return;
             }
-            grad_row(buffers, (a, b), geo, &dbuf, y, out);
+            grad_row(buffers, (a, b), geo, dbuf, y, out);
         },
     );
-    R::keep_partial_maps(dbuf);
     (row_sums.iter().sum(), grad)
-}
-
-thread_local! {
-    /// The weighted partial maps of [`value_and_grad`]'s last call on this thread in f64 (24
-    /// bytes per map value: 11.5 MB at 400×400×3), kept for its next call.
-    static PARTIAL_MAPS_F64: std::cell::Cell<Vec<f64>> = const { std::cell::Cell::new(Vec::new()) };
-    /// The same in f32 (12 bytes per map value).
-    static PARTIAL_MAPS_F32: std::cell::Cell<Vec<f32>> = const { std::cell::Cell::new(Vec::new()) };
 }
 
 /// One map row of [`value_and_grad`]'s forward: map row `oy`, its three weighted partial rows
@@ -799,7 +860,7 @@ struct MapRow<'r, R> {
 
 /// [`map_row`] compiled for AVX2 and FMA: f64 in four lanes instead of two, the same operations
 /// (Rust fuses no multiply-add by itself), so the same bits as the baseline build
-/// (`crate::raster::lanes::force_baseline` selects that one; tested in `loss_ssim`).
+/// ([`Simd::BASELINE`] selects that one; tested in `loss_ssim`).
 ///
 /// # Safety
 /// The CPU must support AVX2 and FMA.

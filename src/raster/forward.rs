@@ -95,7 +95,7 @@ pub fn render_with(
     bin_into(&prepared, w, h, &mut bins, &mut spare.bin_scratch);
     let n_tiles = bins.tile_count();
     let half_side = crate::stages::splat_transform::support_half_side(set.texture_size);
-    spare.billboard_rows.build(&prepared, half_side);
+    spare.billboard_rows.build(&prepared, half_side, settings.simd);
     let billboard_rows = &spare.billboard_rows;
     refill(&mut spare.entry_impact, bins.entries.len(), 0.0);
     let impact_chunks = split_by_lengths(&mut spare.entry_impact, (0..n_tiles).map(|t| bins.tile_range(t).len()));
@@ -133,7 +133,7 @@ pub fn render_with(
             let blended = &mut *blended_pairs;
             // Tiles of small billboards go pixel by pixel (the same bits; see
             // `tile_forward_pixels`).
-            let by_pixel = super::lanes::walk_by_pixel(
+            let by_pixel = settings.tile_walk.by_pixel(
                 spans.entries.iter().map(|s| usize::from(s.pixels)).sum(),
                 spans.entries.len(),
             );

@@ -2,6 +2,8 @@
 //! settings of the render ([`RenderSettings`]); and the planar copy of its textures
 //! ([`planar_textures`], the layout of the model's logits).
 
+use super::lanes::TileWalk;
+use crate::cpu::Simd;
 use crate::stages::composite::CompositeParams;
 use crate::stages::sh::SH_FLOATS;
 use glam::{Vec2, Vec3};
@@ -86,6 +88,11 @@ pub struct RenderSettings {
     /// [`crate::stages::depth_distortion`]); off by default (the forward then does no extra
     /// work and the map is empty).
     pub distortion: bool,
+    /// The instruction set of the tile loops (default: the widest the CPU runs). The same bits
+    /// whatever it is; only the speed differs.
+    pub simd: Simd,
+    /// How tiles are walked (default: each by its entries' size). The same bits whatever it is.
+    pub tile_walk: TileWalk,
 }
 
 impl Default for RenderSettings {
@@ -95,6 +102,8 @@ impl Default for RenderSettings {
             sh_degree: 3,
             composite: CompositeParams::default(),
             distortion: false,
+            simd: Simd::detect(),
+            tile_walk: TileWalk::Auto,
         }
     }
 }

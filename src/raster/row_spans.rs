@@ -18,6 +18,7 @@
 //! rectangle the box misses (not binned there, kept exact anyway) takes the per-entry path.
 
 use super::preprocess::Prepared;
+use crate::cpu::Simd;
 use crate::memory::resize_for_overwrite;
 use crate::stages::splat_transform::{ROW_LANES, pixel_range, support_quad};
 use rayon::prelude::*;
@@ -62,8 +63,9 @@ fn row_count(p: &Option<Prepared>) -> usize {
 impl BillboardRows {
     /// Computes the rows of every prepared billboard (in parallel; each billboard's rows depend
     /// on its record only). `half_side` is the support's half side
-    /// ([`support_half_side`](crate::stages::splat_transform::support_half_side)).
-    pub(crate) fn build(&mut self, prepared: &[Option<Prepared>], half_side: f32) {
+    /// ([`support_half_side`](crate::stages::splat_transform::support_half_side)); `simd` the
+    /// instruction set to compute them in (the same bits whatever it is).
+    pub(crate) fn build(&mut self, prepared: &[Option<Prepared>], half_side: f32, simd: Simd) {
         // Every range is written below.
         resize_for_overwrite(&mut self.ranges, prepared.len(), [0, 0]);
         self.blocks.resize_with(prepared.len().div_ceil(BUILD_BLOCK), Vec::new);
@@ -78,7 +80,7 @@ impl BillboardRows {
                     if let Some(p) = p.as_ref().filter(|_| count > 0) {
                         // Every row is written by `fill_rows`.
                         rows.resize(start + count, [0, 0]);
-                        fill_rows(p, half_side, &mut rows[start..]);
+                        fill_rows(p, half_side, simd, &mut rows[start..]);
                     }
                     *range = [start as u32, rows.len() as u32];
                 }
@@ -111,12 +113,12 @@ impl BillboardRows {
 }
 
 /// The rows of a wide billboard's box (`rows`, one per image row from `pixel_min[1]`): with
-/// AVX2 when the CPU has it (the rows' eight lanes in one vector instead of two; the same
+/// AVX2 when `simd` has it (the rows' eight lanes in one vector instead of two; the same
 /// operations, so the same bits), else with the baseline instructions.
-fn fill_rows(p: &Prepared, half_side: f32, rows: &mut [[u32; 2]]) {
+fn fill_rows(p: &Prepared, half_side: f32, simd: Simd, rows: &mut [[u32; 2]]) {
     #[cfg(target_arch = "x86_64")]
-    if super::lanes::wide_lanes() {
-        // SAFETY: the CPU has AVX2 and FMA (checked at run time by `wide_lanes`).
+    if simd.avx2_fma() {
+        // SAFETY: the CPU has AVX2 and FMA (a `Simd` at that level exists only on such a CPU).
         return unsafe { fill_rows_avx2(p, half_side, rows) };
     }
     fill_rows_body(p, half_side, rows);

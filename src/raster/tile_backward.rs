@@ -95,8 +95,8 @@ fn by_entry(
     texels: &mut TileTexels,
 ) -> Vec3 {
     #[cfg(target_arch = "x86_64")]
-    if super::lanes::wide_lanes() {
-        // SAFETY: the CPU has AVX2 and FMA (checked at run time by `wide_lanes`).
+    if out.state.settings.simd.avx2_fma() {
+        // SAFETY: the CPU has AVX2 and FMA (a `Simd` at that level exists only on such a CPU).
         return unsafe { by_entry_avx2(set, out, grads_in, tile, records, owned_rows, scratch, sums, texels) };
     }
     by_entry_body::<false>(set, out, grads_in, tile, records, owned_rows, scratch, sums, texels)

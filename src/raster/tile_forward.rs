@@ -67,8 +67,8 @@ pub(crate) struct TileComposite {
 ///
 /// On a CPU with AVX2 and FMA this runs the explicit vector implementation of
 /// [`super::tile_forward_avx2`] (eight pixels of a run side by side; its AVX-512 build where
-/// the CPU has that, see [`super::lanes::avx512_lanes`]); elsewhere, and when
-/// [`super::lanes::force_baseline`] is on, the body below, pixel after pixel with the stages'
+/// [`crate::cpu::Simd::avx512`] holds); elsewhere, and when
+/// [`super::RenderSettings::simd`] is the baseline, the body below, pixel after pixel with the stages'
 /// own code, which is the reference the vector one is tested against bit for bit.
 pub(crate) fn composite_tile<const DISTORTION: bool>(
     scratch: &mut TileComposite,
@@ -78,16 +78,17 @@ pub(crate) fn composite_tile<const DISTORTION: bool>(
     blended: &mut TileBlended,
 ) {
     #[cfg(target_arch = "x86_64")]
-    if super::lanes::wide_lanes() {
+    if inputs.settings.simd.avx2_fma() {
         let lanes = &mut scratch.lanes;
-        if super::lanes::avx512_lanes() {
-            // SAFETY: the CPU has AVX2, FMA and the AVX-512 subsets (checked at run time by
-            // `avx512_lanes`).
+        if inputs.settings.simd.avx512() {
+            // SAFETY: the CPU has AVX2, FMA and the AVX-512 subsets (a `Simd` at that level
+            // exists only on such a CPU).
             unsafe {
                 super::tile_forward_avx2::composite_tile_avx512::<DISTORTION>(lanes, inputs, impact, pixels, blended);
             }
         } else {
-            // SAFETY: the CPU has AVX2 and FMA (checked at run time by `wide_lanes`).
+            // SAFETY: the CPU has AVX2 and FMA (a `Simd` at that level exists only on such a
+            // CPU).
             unsafe {
                 super::tile_forward_avx2::composite_tile_avx2::<DISTORTION>(lanes, inputs, impact, pixels, blended);
             }

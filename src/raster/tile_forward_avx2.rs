@@ -498,7 +498,7 @@ pub(crate) fn classify_lanes(
     a: &[f32; LANES],
     params: &CompositeParams,
 ) -> Option<[Step; LANES]> {
-    if !super::lanes::wide_lanes() {
+    if !crate::cpu::Simd::detect().avx2_fma() {
         return None;
     }
     // SAFETY: the CPU has AVX2 and FMA (checked just above).
@@ -551,7 +551,7 @@ unsafe fn classify_lanes_avx2(
 /// For the tests (`testing_internals`): [`sample_lanes`] of every lane as `[r, g, b, alpha]`, or `None` without AVX2.
 #[cfg(feature = "testing")]
 pub(crate) fn sample_rgba_lanes(taps: &RowTaps, texture: &[[f32; 4]]) -> Option<[[f32; 4]; LANES]> {
-    if !super::lanes::wide_lanes() {
+    if !crate::cpu::Simd::detect().avx2_fma() {
         return None;
     }
     // SAFETY: the CPU has AVX2 and FMA (checked just above).
@@ -669,7 +669,7 @@ pub(crate) fn push_pairs_lanes(
     first: (usize, usize, u8),
     fronts: &[f32; LANES],
 ) -> Option<Vec<(u16, u8, u8, u32)>> {
-    if !super::lanes::wide_lanes() {
+    if !crate::cpu::Simd::detect().avx2_fma() {
         return None;
     }
     let mut out: Vec<EntryPair> = pairs
@@ -718,7 +718,7 @@ pub(crate) unsafe fn composite_tile_avx2<const DISTORTION: bool>(
 /// [`composite_tile_avx2`] compiled with AVX-512 (F, VL, BW, DQ) enabled as well: the same
 /// source and the same bits. The compiler then uses the upper 16 vector registers and mask
 /// registers, and the function has 6 % fewer instructions; on a Zen 4 host the forward took
-/// 0.94 of the AVX2 build's time (docs/perf-log.md, 2026-11-29). [`super::lanes::avx512_lanes`]
+/// 0.94 of the AVX2 build's time (docs/perf-log.md, 2026-11-29). [`crate::cpu::SimdLevel::Avx512`]
 /// chooses it.
 ///
 /// # Safety

@@ -672,6 +672,8 @@ fn decode_config(r: &mut Reader<'_>, version: u32) -> Result<TrainConfig, Checkp
         lr_scales,
         clamp_gradient,
         geometry,
+        // A speed choice of the machine, not of the run: not saved.
+        simd: crate::cpu::Simd::detect(),
     })
 }
 

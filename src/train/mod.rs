@@ -47,8 +47,10 @@ pub mod view_pixels;
 
 use crate::billboards::ActivatedBillboards;
 use crate::camera::Camera;
+use crate::cpu::Simd;
 use crate::loss::TrainingLoss;
 use crate::loss::psnr::psnr_u8;
+use crate::loss::ssim::SsimScratch;
 use crate::model::{RawBillboards, clamped_logit, initial_alpha, logit, sigmoid};
 use crate::raster::{
     RenderBuffers, RenderGradients, RenderOutput, RenderSettings, SH_FLOATS, render_backward, render_with,
@@ -241,6 +243,9 @@ pub struct TrainConfig {
     /// The 2DGS normal-consistency and depth-distortion regularisers ([`geometry`]; off by
     /// default).
     pub geometry: geometry::GeometryRegularisers,
+    /// The instruction set of the lane-wise loops (render, loss, regulariser, texture step;
+    /// default: the widest the CPU runs). The same bits whatever it is; only the speed differs.
+    pub simd: Simd,
 }
 
 impl TrainConfig {
@@ -346,6 +351,7 @@ impl Default for TrainConfig {
             lr_by_run_length: false,
             clamp_gradient: ClampGradient::Exact,
             geometry: geometry::GeometryRegularisers::default(),
+            simd: Simd::detect(),
         }
     }
 }
@@ -548,6 +554,8 @@ pub struct Trainer {
     render_buffers: RenderBuffers,
     /// The float values of the step's view when it is 8-bit (recycled from step to step).
     target: Vec<f32>,
+    /// The SSIM gradient's partial maps (recycled from step to step; values never carried over).
+    ssim_scratch: SsimScratch,
     /// Per billboard, the regularisers' gradient of the current step, which the texture step
     /// adds as it reads the texture gradients (full textures; empty in Gaussian mode, where
     /// `regularise` adds it in place).
@@ -619,6 +627,7 @@ impl Trainer {
             shape,
             opacity_logits,
             render_buffers: RenderBuffers::default(),
+            ssim_scratch: SsimScratch::default(),
             target: Vec::new(),
             regulariser_rows: Vec::new(),
             record: run_record::RunRecord::default(),
@@ -806,6 +815,7 @@ impl Trainer {
         let mut settings = RenderSettings {
             background: self.config.background,
             sh_degree: active_sh_degree(self.step, self.config.iterations, self.config.sh_degree),
+            simd: self.config.simd,
             ..RenderSettings::default()
         };
         settings.composite.clamp_gradient = self.config.clamp_gradient;
@@ -877,9 +887,17 @@ impl Trainer {
         // An 8-bit view is converted to floats here, into a buffer recycled from step to step.
         let mut target_buffer = std::mem::take(&mut self.target);
         let target = view.rgb.as_f32(&mut target_buffer);
-        let loss = TrainingLoss::default()
-            .evaluate(&out.rgb, target, cam.width as usize, cam.height as usize, 3)
-            .expect("sizes validated above");
+        let loss = TrainingLoss {
+            simd: self.config.simd,
+            ..TrainingLoss::default()
+        }
+        .evaluate_in(
+            &out.rgb,
+            target,
+            (cam.width as usize, cam.height as usize, 3),
+            &mut self.ssim_scratch,
+        )
+        .expect("sizes validated above");
         let psnr = crate::loss::psnr::psnr(&out.rgb, target).unwrap_or(f64::NAN);
         // Both geometry terms off: no map gradient (the plain backward pass).
         let geometry_loss = GeometryLoss::evaluate(&out, cam, lambda_normal, lambda_distortion);
@@ -905,6 +923,7 @@ impl Trainer {
                 texture_term,
                 opacity_weight,
                 &mut self.grads.textures,
+                self.config.simd,
             )
         } else {
             // Only read here: the texture step adds each row's regulariser gradient as it reads
@@ -915,6 +934,7 @@ impl Trainer {
                 texture_term,
                 opacity_weight,
                 &mut self.regulariser_rows,
+                self.config.simd,
             )
         };
         // Growth this step: how many rows, and those placed on this view's error (drawn now,
@@ -1141,6 +1161,7 @@ impl Trainer {
                 added,
                 &hp,
                 textures_live,
+                self.config.simd,
             )
         };
         let ((), [alpha_finite, colour_finite]) = rayon::join(geometry, textures);
@@ -1282,6 +1303,7 @@ impl Trainer {
         let settings = RenderSettings {
             background: self.config.background,
             sh_degree: self.config.sh_degree,
+            simd: self.config.simd,
             ..Default::default()
         };
         let mut buffers = RenderBuffers::default();

@@ -12,6 +12,7 @@
 //! threshold σ = 500 is our default (see `docs/training.md` for the choice).
 
 use super::row_sums::{RowSums, row_sums};
+use crate::cpu::Simd;
 use rayon::prelude::*;
 
 /// Weight of the texture regulariser in the reference (`1e-4`).
@@ -51,7 +52,8 @@ pub struct RegulariserValues {
 /// order, so the gradients are the bits of the two calls one after the other; each value is
 /// summed row by row and the rows' sums added in billboard order (the same for any thread
 /// count). See the two functions for the formulas. [`regulariser_rows`] followed by
-/// [`RowGradient::add_to`] on every row.
+/// [`RowGradient::add_to`] on every row. `simd` is the instruction set of the row sums (the same
+/// bits whatever it is).
 ///
 /// # Panics
 /// When `d_textures` and `textures` differ in length, `textures` is not whole rows of
@@ -63,10 +65,11 @@ pub fn regularise(
     texture: Option<TextureTerm<'_>>,
     opacity_weight: Option<f32>,
     d_textures: &mut [[f32; 4]],
+    simd: Simd,
 ) -> RegulariserValues {
     assert_eq!(d_textures.len(), textures.len(), "texture gradient buffer");
     let mut rows = Vec::new();
-    let values = regulariser_rows(textures, texels_per_row, texture, opacity_weight, &mut rows);
+    let values = regulariser_rows(textures, texels_per_row, texture, opacity_weight, &mut rows, simd);
     if !rows.is_empty() {
         d_textures
             .par_chunks_mut(texels_per_row)
@@ -149,6 +152,7 @@ pub fn regulariser_rows(
     texture: Option<TextureTerm<'_>>,
     opacity_weight: Option<f32>,
     rows: &mut Vec<RowGradient>,
+    simd: Simd,
 ) -> RegulariserValues {
     let t = texels_per_row;
     rows.clear();
@@ -180,7 +184,7 @@ pub fn regulariser_rows(
             // term, or for a row the term skips).
             let texture_row = texture.and_then(|(term, vis)| Some((term, vis, term_weight(term, i)?)));
             let sums = (texture_row.is_some() || g_opacity.is_some())
-                .then(|| row_sums(tex, texture_row.map(|(term, _, _)| term.alpha0)));
+                .then(|| row_sums(tex, texture_row.map(|(term, _, _)| term.alpha0), simd));
             let term = texture_row.and_then(|(term, vis, w)| Some(row_texture_term(term, vis, w, tex.len(), sums?)));
             let alpha_sum = match g_opacity {
                 Some(_) => sums.map_or(0.0, |s| s.alpha),
@@ -261,7 +265,7 @@ pub fn texture_regulariser(
         threshold,
         weight,
     };
-    regularise(textures, alpha0.len(), Some(term), None, d_textures).texture
+    regularise(textures, alpha0.len(), Some(term), None, d_textures, Simd::detect()).texture
 }
 
 /// Global opacity regulariser: `L = λ · mean over all billboards and texels of alpha`, including
@@ -274,7 +278,7 @@ pub fn opacity_regulariser(
     weight: f32,
     d_textures: &mut [[f32; 4]],
 ) -> f64 {
-    regularise(textures, texels_per_row, None, Some(weight), d_textures).opacity
+    regularise(textures, texels_per_row, None, Some(weight), d_textures, Simd::detect()).opacity
 }
 
 /// The opacity regulariser's value alone (no gradient).

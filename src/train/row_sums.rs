@@ -67,14 +67,14 @@ pub fn row_sums_in_order(texels: &[[f32; 4]], alpha0: Option<&[f32]>) -> RowSums
 }
 
 /// [`row_sums_in_order`], bit for bit: in vector lanes when [`exact_in_any_order`] holds,
-/// else in texel order.
+/// else in texel order; in the AVX2 build when `simd` has it (the same bits).
 ///
 /// # Panics
 /// As [`row_sums_in_order`].
-pub fn row_sums(texels: &[[f32; 4]], alpha0: Option<&[f32]>) -> RowSums {
+pub fn row_sums(texels: &[[f32; 4]], alpha0: Option<&[f32]>, simd: crate::cpu::Simd) -> RowSums {
     #[cfg(target_arch = "x86_64")]
-    if crate::raster::lanes::wide_lanes() {
-        // SAFETY: `wide_lanes` checked that the CPU has AVX2 and FMA.
+    if simd.avx2_fma() {
+        // SAFETY: the CPU has AVX2 and FMA (a `Simd` at that level exists only on such a CPU).
         return unsafe { row_sums_avx2(texels, alpha0) };
     }
     row_sums_body(texels, alpha0)

@@ -574,6 +574,7 @@ impl<'a> RunState<'a> {
         let eval_settings = RenderSettings {
             background: tc.background,
             sh_degree: tc.sh_degree,
+            simd: tc.simd,
             ..RenderSettings::default()
         };
         let eval_subset = evenly_spaced(test, config.eval_views);

@@ -17,6 +17,7 @@
 use super::adam::{AdamGroup, AdamParams, StepFactors, update_row_with};
 use super::finite::{EXPONENT, max_exponent_field};
 use super::regularise::RowGradient;
+use crate::cpu::Simd;
 use crate::model::sigmoid;
 use rayon::prelude::*;
 use std::ops::Range;
@@ -50,6 +51,7 @@ const CHUNK_ROWS: usize = 64;
 ///   first), so that the regulariser pass need not write the gradients; `None` adds nothing.
 /// * `update`: `false` (textures frozen or before the window when the moments should not move)
 ///   skips the step and only zeroes the gradients.
+/// * `simd`: the instruction set of the lane-wise loop (the same bits whatever it is).
 ///
 /// Returns true when every logit the step wrote (those of the selected rows; none without
 /// `update`) is finite: the parameter check of those logits, done while they are in cache.
@@ -70,6 +72,7 @@ pub fn step_texture_group(
     lr: f32,
     hp: &AdamParams,
     update: bool,
+    simd: Simd,
 ) -> bool {
     let texels = check_group(group, logits, activated, grads, &channels, mask, added);
     let n = group.row_len;
@@ -84,7 +87,7 @@ pub fn step_texture_group(
     let AdamGroup { m, v, steps, .. } = group;
     let chunk = CHUNK_ROWS * n.max(1);
     let texel_chunk = CHUNK_ROWS * texels.max(1);
-    let wide = crate::raster::lanes::wide_lanes();
+    let wide = simd.avx2_fma();
     m.par_chunks_mut(chunk)
         .zip(v.par_chunks_mut(chunk))
         .zip(steps.par_chunks_mut(CHUNK_ROWS))
@@ -153,6 +156,7 @@ pub fn step_texture_pair(
     added: Option<&[RowGradient]>,
     hp: &AdamParams,
     update: bool,
+    simd: Simd,
 ) -> [bool; 2] {
     assert!(
         first.channels.end <= second.channels.start || second.channels.end <= first.channels.start,
@@ -185,7 +189,7 @@ pub fn step_texture_pair(
     });
     let (n1, n2) = (first.group.row_len, second.group.row_len);
     let (c1, c2) = (CHUNK_ROWS * n1.max(1), CHUNK_ROWS * n2.max(1));
-    let wide = crate::raster::lanes::wide_lanes();
+    let wide = simd.avx2_fma();
     let AdamGroup {
         m: m1,
         v: v1,
@@ -268,12 +272,13 @@ fn check_group(
     texels
 }
 
-/// [`step_rows`] in the AVX2 build when `wide` (the CPU has AVX2 and FMA), else the baseline.
+/// [`step_rows`] in the AVX2 build when `wide` ([`Simd::avx2_fma`]: the CPU has AVX2 and FMA),
+/// else the baseline.
 #[inline]
 fn step_rows_dispatch(rows: ChunkRows<'_>, how: &RowStep<'_, '_>, wide: bool) -> u32 {
     #[cfg(target_arch = "x86_64")]
     if wide {
-        // SAFETY: `wide` comes from `wide_lanes`, which checked that the CPU has AVX2 and FMA.
+        // SAFETY: `wide` is `Simd::avx2_fma`: the CPU has AVX2 and FMA.
         return unsafe { step_rows_avx2(rows, how) };
     }
     let _ = wide;
@@ -305,7 +310,7 @@ struct RowStep<'a, 'h> {
 }
 
 /// [`step_rows`] compiled for AVX2 and FMA (the same operations, eight lanes a register: the same
-/// bits as the baseline build; `crate::raster::lanes::force_baseline` selects that one).
+/// bits as the baseline build, which [`Simd::BASELINE`] selects).
 ///
 /// # Safety
 /// The CPU must support AVX2 and FMA.

@@ -725,6 +725,7 @@ fn training_loss_gradient_matches_finite_differences() {
                     lambda_dssim: 0.5,
                     padding: Padding::Same,
                     precision: Precision::F64,
+                    ..TrainingLoss::default()
                 },
                 3.8e-6,
             ),
@@ -765,6 +766,7 @@ fn training_loss_lambda_extremes() {
         lambda_dssim: 0.0,
         padding: Padding::Same,
         precision: Precision::F64,
+        ..TrainingLoss::default()
     }
     .evaluate(&render, &gt, w, h, 3)
     .unwrap();
@@ -774,6 +776,7 @@ fn training_loss_lambda_extremes() {
         lambda_dssim: 1.0,
         padding: Padding::Valid,
         precision: Precision::F64,
+        ..TrainingLoss::default()
     }
     .evaluate(&render, &gt, w, h, 3)
     .unwrap();
@@ -872,7 +875,8 @@ fn window_is_normalised_and_symmetric() {
 /// precisions.
 #[test]
 fn ssim_builds_and_thread_counts_give_the_same_bits() {
-    use bbsplat::raster::lanes;
+    use bbsplat::cpu::Simd;
+    use bbsplat::loss::ssim::SsimOptions;
     let (w, h, c) = (41, 23, 3);
     let mut rng = Rng::new(7);
     let a: Vec<f32> = (0..w * h * c).map(|_| rng.uniform()).collect();
@@ -883,12 +887,12 @@ fn ssim_builds_and_thread_counts_give_the_same_bits() {
         let d_map: Vec<f32> = (0..mw * mh * c).map(|_| rng.uniform() - 0.5).collect();
         let mut results = Vec::new();
         for (threads, baseline) in [(1, true), (2, true), (1, false), (2, false)] {
-            lanes::force_baseline(baseline);
+            let simd = if baseline { Simd::BASELINE } else { Simd::detect() };
+            let options = SsimOptions { padding, simd };
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-            let (value, grad) = pool.install(|| ssim_with_grad(&a, &b, w, h, c, padding, 0.8).unwrap());
-            let vjp = pool.install(|| ssim_map_vjp(&a, &b, w, h, c, padding, &d_map).unwrap());
-            let (value32, grad32) = pool.install(|| ssim_with_grad_f32(&a, &b, w, h, c, padding, 0.8).unwrap());
-            lanes::force_baseline(false);
+            let (value, grad) = pool.install(|| ssim_with_grad(&a, &b, w, h, c, options, 0.8).unwrap());
+            let vjp = pool.install(|| ssim_map_vjp(&a, &b, w, h, c, options, &d_map).unwrap());
+            let (value32, grad32) = pool.install(|| ssim_with_grad_f32(&a, &b, w, h, c, options, 0.8).unwrap());
             results.push((
                 value.to_bits(),
                 bits(&grad),

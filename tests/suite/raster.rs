@@ -21,6 +21,7 @@ fn settings(background: Vec3) -> RenderSettings {
         sh_degree: 3,
         composite: CompositeParams::default(),
         distortion: false,
+        ..RenderSettings::default()
     }
 }
 
@@ -32,6 +33,7 @@ pub(crate) fn smooth_settings(background: Vec3) -> RenderSettings {
         sh_degree: 3,
         composite: CompositeParams::smooth(),
         distortion: false,
+        ..RenderSettings::default()
     }
 }
 

@@ -1,4 +1,5 @@
-//! The rasterizer's choices made for speed alone (`bbsplat::raster::lanes`) give the same bits:
+//! The rasterizer's choices made for speed alone (`bbsplat::cpu::Simd` and
+//! `bbsplat::raster::lanes::TileWalk`, both in `RenderSettings`) give the same bits:
 //! the instruction-set builds of its lane-wise tile loops (baseline SSE2, AVX2 + FMA, and the
 //! forward's AVX-512 build, chosen at run time) and the two tile walks (billboard by billboard, pixel by pixel), in every
 //! combination: every image, the per-billboard impact and every gradient, on trained-like
@@ -13,16 +14,11 @@ use bbsplat::billboards::{
     ActivatedBillboards, RandomSceneConfig, TrainedLikeConfig, random_scene, random_scene_camera, trained_like_scene,
 };
 use bbsplat::camera::Camera;
+use bbsplat::cpu::{Simd, SimdLevel};
 use bbsplat::raster::backward::ImageGradients;
-use bbsplat::raster::lanes::{self, TileWalk};
+use bbsplat::raster::lanes::TileWalk;
 use bbsplat::raster::{RenderGradients, RenderSettings, render, render_backward};
 use bbsplat::rng::Rng;
-use std::sync::Mutex;
-
-/// Serialises the tests that switch the process-wide choices (here and in
-/// `train_texture_step.rs`).
-pub(crate) static SWITCH: Mutex<()> = Mutex::new(());
-
 /// The image gradients handed to the backward.
 #[derive(Clone, Copy, Debug)]
 enum Upstream {
@@ -129,32 +125,21 @@ fn all_variants_with(
     aux: bool,
     upstream: Upstream,
 ) -> Vec<(String, Vec<u32>)> {
-    let _guard = SWITCH.lock().unwrap_or_else(|e| e.into_inner());
     let mut out = Vec::new();
     // The baseline build, the AVX2 build (AVX-512 ruled out), the widest build.
-    for (baseline, avx2) in [(true, false), (false, true), (false, false)] {
-        lanes::force_baseline(baseline);
-        lanes::force_avx2(avx2);
-        if baseline {
-            assert!(!lanes::wide_lanes(), "the baseline build is forced");
-        }
-        if avx2 {
-            assert!(!lanes::avx512_lanes(), "the AVX2 build is forced");
-        }
+    for level in [SimdLevel::Baseline, SimdLevel::Avx2, SimdLevel::Avx512] {
+        let simd = Simd::at_most(level);
         for walk in [TileWalk::Auto, TileWalk::ByEntry, TileWalk::ByPixel] {
-            lanes::force_tile_walk(walk);
-            let name = format!("baseline {baseline}, AVX2 only {avx2}, {walk:?}");
-            out.push((name, everything_with(scene, cam, settings, aux, upstream)));
+            let name = format!("{:?} (asked {level:?}), {walk:?}", simd.level());
+            let settings = RenderSettings {
+                simd,
+                tile_walk: walk,
+                ..*settings
+            };
+            out.push((name, everything_with(scene, cam, &settings, aux, upstream)));
         }
     }
-    lanes::force_baseline(false);
-    lanes::force_avx2(false);
-    lanes::force_tile_walk(TileWalk::Auto);
-    println!(
-        "wide lanes (AVX2 + FMA) on this CPU: {}; the AVX-512 build of the forward: {}",
-        lanes::wide_lanes(),
-        lanes::avx512_lanes()
-    );
+    println!("the widest build on this CPU: {:?}", Simd::detect().level());
     out
 }
 
@@ -250,7 +235,6 @@ fn every_build_and_walk_agree_bit_for_bit_on_the_benchmark_scene() {
 /// catches that.)
 #[test]
 fn reused_backward_storage_changes_no_bit() {
-    let _guard = SWITCH.lock().unwrap_or_else(|e| e.into_inner());
     // Every output bit of a trained-like scene, with or without the auxiliary maps.
     let bits = |config: TrainedLikeConfig, aux: bool| {
         let settings = RenderSettings {
@@ -278,12 +262,10 @@ fn reused_backward_storage_changes_no_bit() {
     assert!(fresh[1] == reused[1], "without them");
 }
 
-/// The AVX2 forward's explicit code is used: the CPU has AVX2 and FMA and the baseline is not
-/// forced (callers hold [`SWITCH`]). On a CPU without them the tests below check only that
-/// the AVX2 entry points refuse to run, and say so.
+/// The AVX2 forward's explicit code can run: the CPU has AVX2 and FMA. On a CPU without them
+/// the tests below check only that the AVX2 entry points refuse to run, and say so.
 fn avx2_available() -> bool {
-    lanes::force_baseline(false);
-    let wide = lanes::wide_lanes();
+    let wide = Simd::detect().avx2_fma();
     println!("wide lanes (AVX2 + FMA) on this CPU: {wide}");
     wide
 }
@@ -296,7 +278,6 @@ fn avx2_available() -> bool {
 fn avx2_forward_decision_equals_classify() {
     use bbsplat::stages::composite::{CompositeParams, Step, classify};
     use bbsplat::testing_internals::forward_avx2::classify_lanes;
-    let _guard = SWITCH.lock().unwrap_or_else(|e| e.into_inner());
     let wide = avx2_available();
     let mut rng = Rng::new(11);
     let mut compared = 0;
@@ -370,7 +351,6 @@ fn avx2_forward_decision_equals_classify() {
 #[test]
 fn avx2_packed_pairs_equal_pushing_lane_by_lane() {
     use bbsplat::testing_internals::forward_avx2::push_pairs_lanes;
-    let _guard = SWITCH.lock().unwrap_or_else(|e| e.into_inner());
     let wide = avx2_available();
     let tile = bbsplat::raster::TILE_SIZE as usize;
     let mut rng = Rng::new(5);
@@ -486,7 +466,6 @@ fn avx2_forward_runs_cover_each_span_pixel_once_in_pixel_order() {
 fn avx2_forward_sample_equals_the_row_taps_sample() {
     use bbsplat::testing_internals::bilinear::sampling_taps_row;
     use bbsplat::testing_internals::forward_avx2::sample_rgba_lanes;
-    let _guard = SWITCH.lock().unwrap_or_else(|e| e.into_inner());
     let wide = avx2_available();
     let mut rng = Rng::new(12);
     let mut compared = 0;

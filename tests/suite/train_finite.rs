@@ -89,7 +89,14 @@ fn the_check_with_regulariser_rows_sees_what_the_texture_step_will_read() {
         weight: 1e37,
     };
     let mut added: Vec<RowGradient> = Vec::new();
-    regulariser_rows(&activated, texels, Some(term), Some(1e37), &mut added);
+    regulariser_rows(
+        &activated,
+        texels,
+        Some(term),
+        Some(1e37),
+        &mut added,
+        bbsplat::cpu::Simd::detect(),
+    );
     let (gc, ga) = added[3].texture.expect("the term weighs row 3");
     assert!(
         gc > 1e32 && ga > 1e32 && added[3].opacity.is_some_and(|g| g > 1e32),
@@ -109,7 +116,14 @@ fn the_check_with_regulariser_rows_sees_what_the_texture_step_will_read() {
         let mut g = RenderGradients::zeros(rows, ts);
         g.textures[row * texels + 5][channel] = value;
         let mut in_place = g.clone();
-        regularise(&activated, texels, Some(term), Some(1e37), &mut in_place.textures);
+        regularise(
+            &activated,
+            texels,
+            Some(term),
+            Some(1e37),
+            &mut in_place.textures,
+            bbsplat::cpu::Simd::detect(),
+        );
         let want = non_finite_gradient(&in_place);
         assert_eq!(
             non_finite_gradient_with(&g, Some(&added)),

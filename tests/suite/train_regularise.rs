@@ -276,6 +276,7 @@ fn the_fused_pass_equals_the_two_regularisers_in_turn() {
             with_texture.then_some(term),
             with_opacity.then_some(0.01),
             &mut fused,
+            bbsplat::cpu::Simd::detect(),
         );
         assert_eq!(
             bits(&fused),

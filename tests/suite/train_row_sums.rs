@@ -1,6 +1,7 @@
 //! The regularisers' row sums: the four-way fast path against the texel-order definition, bit
 //! for bit, and the condition that chooses it.
 
+use bbsplat::cpu::Simd;
 use bbsplat::rng::Rng;
 use bbsplat::train::row_sums::{RowSums, exact_in_any_order, row_sums, row_sums_in_order};
 
@@ -45,17 +46,14 @@ fn row(rng: &mut Rng, texels: usize, tau: f32, low_exponent: i32) -> (Vec<[f32; 
 /// trivial (rows of values spread over 20 binades). In the AVX2 and the baseline build.
 #[test]
 fn the_fast_path_gives_the_texel_order_bits() {
-    let _guard = crate::raster_lanes::SWITCH.lock().unwrap_or_else(|e| e.into_inner());
-    for baseline in [false, true] {
-        bbsplat::raster::lanes::force_baseline(baseline);
-        fast_path_rows();
+    for simd in [Simd::detect(), Simd::BASELINE] {
+        fast_path_rows(simd);
     }
-    bbsplat::raster::lanes::force_baseline(false);
 }
 
-/// The rows of [`the_fast_path_gives_the_texel_order_bits`], in the build the lanes switch
-/// selects (AVX2 or baseline).
-fn fast_path_rows() {
+/// The rows of [`the_fast_path_gives_the_texel_order_bits`], in the build `simd` selects (AVX2
+/// or baseline).
+fn fast_path_rows(simd: Simd) {
     let mut rng = Rng::new(7);
     let mut fast = 0;
     for ts in [2usize, 6, 16, 18, 19] {
@@ -66,7 +64,11 @@ fn fast_path_rows() {
             let (tex, alpha0) = row(&mut rng, texels, tau, low);
             for a0 in [None, Some(alpha0.as_slice())] {
                 assert!(exact_in_any_order(&tex, a0), "TS {ts}: every value is 0 or in [τ, 1]");
-                assert_eq!(bits(row_sums(&tex, a0)), bits(row_sums_in_order(&tex, a0)), "TS {ts}");
+                assert_eq!(
+                    bits(row_sums(&tex, a0, simd)),
+                    bits(row_sums_in_order(&tex, a0)),
+                    "TS {ts}"
+                );
                 fast += 1;
             }
         }
@@ -90,7 +92,7 @@ fn rows_below_the_threshold_take_the_texel_order() {
     for _ in 0..200 {
         let (tex, alpha0) = row(&mut rng, texels, tau, -30);
         let want = row_sums_in_order(&tex, Some(&alpha0));
-        assert_eq!(bits(row_sums(&tex, Some(&alpha0))), bits(want));
+        assert_eq!(bits(row_sums(&tex, Some(&alpha0), Simd::detect())), bits(want));
         assert!(!exact_in_any_order(&tex, Some(&alpha0)), "some value lies below τ");
         // The four-way order, as the fast path sums.
         let four_way: f64 = (0..4)
@@ -148,7 +150,10 @@ fn each_breaking_value_is_refused() {
         assert!(!exact_in_any_order(&base, Some(&a0)), "alpha0 {x:e}");
         // Whichever path, the texel-order bits (NaN compared by its bits too).
         for (t, a) in [(&tex, &alpha0), (&base, &a0)] {
-            assert_eq!(bits(row_sums(t, Some(a))), bits(row_sums_in_order(t, Some(a))));
+            assert_eq!(
+                bits(row_sums(t, Some(a), Simd::detect())),
+                bits(row_sums_in_order(t, Some(a)))
+            );
         }
     }
 }

@@ -1,7 +1,7 @@
 //! The parallel texture step against the serial per-row loop.
 
+use bbsplat::cpu::Simd;
 use bbsplat::model::sigmoid;
-use bbsplat::raster::lanes;
 use bbsplat::train::adam::{AdamGroup, AdamParams};
 use bbsplat::train::regularise::chain_sigmoid;
 use bbsplat::train::texture_step::{RowSelection, step_texture_group};
@@ -12,7 +12,6 @@ use bbsplat::train::texture_step::{RowSelection, step_texture_group};
 /// alone. 37 texels a row: the vector loops run full registers and a remainder.
 #[test]
 fn matches_the_serial_row_loop_bit_for_bit() {
-    let _guard = crate::raster_lanes::SWITCH.lock().unwrap_or_else(|e| e.into_inner());
     let (rows, texels) = (150usize, 37usize);
     let mask: Vec<bool> = (0..texels).map(|k| k % 5 != 2).collect();
     let mut state = 0x9e3779b97f4a7c15u64;
@@ -70,7 +69,7 @@ fn matches_the_serial_row_loop_bit_for_bit() {
                 }
             }
             for (threads, baseline) in [(1, true), (2, true), (1, false), (2, false)] {
-                lanes::force_baseline(baseline);
+                let simd = if baseline { Simd::BASELINE } else { Simd::detect() };
                 let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
                 let mut g2 = AdamGroup::new(rows, n);
                 let mut logits2 = logits0.clone();
@@ -105,6 +104,7 @@ fn matches_the_serial_row_loop_bit_for_bit() {
                             0.01,
                             &hp,
                             true,
+                            simd,
                         );
                         for (g, g0) in grads.iter().zip(&grads_rgba0) {
                             for ch in 0..4 {
@@ -115,7 +115,6 @@ fn matches_the_serial_row_loop_bit_for_bit() {
                     }
                 });
                 let bits = |x: &[f32]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-                lanes::force_baseline(false);
                 let tag = format!("channels {channels:?}, dense {dense}, {threads} threads, baseline {baseline}");
                 assert_eq!(bits(&logits2), bits(&logits), "{tag}");
                 assert_eq!(bits(&planar(&act2)), bits(&act), "{tag}");
@@ -141,6 +140,7 @@ fn matches_the_serial_row_loop_bit_for_bit() {
 /// adds no alpha gradient). Measured: the step ignoring `added` fails this test.
 #[test]
 fn regulariser_gradients_added_as_read_match_adding_them_in_place() {
+    let simd = Simd::detect();
     use bbsplat::train::regularise::{RowGradient, TextureTerm, regularise, regulariser_rows};
     let (rows, texels) = (12usize, 16usize);
     let mask: Vec<bool> = (0..texels).map(|k| k % 6 != 1).collect();
@@ -178,7 +178,7 @@ fn regulariser_gradients_added_as_read_match_adding_them_in_place() {
     for (with_texture, with_opacity) in [(true, true), (true, false), (false, true)] {
         let (texture, opacity) = (with_texture.then_some(term), with_opacity.then_some(0.25));
         let mut added: Vec<RowGradient> = Vec::new();
-        let values = regulariser_rows(&activated0, texels, texture, opacity, &mut added);
+        let values = regulariser_rows(&activated0, texels, texture, opacity, &mut added, simd);
         assert_eq!(added.len(), rows);
         assert!(added.iter().any(|a| a.texture.is_some()) == with_texture);
         for dense in [true, false] {
@@ -186,7 +186,7 @@ fn regulariser_gradients_added_as_read_match_adding_them_in_place() {
                 let mut grads = grads0.clone();
                 let mut activated = activated0.clone();
                 if in_place {
-                    let v = regularise(&activated0, texels, texture, opacity, &mut grads);
+                    let v = regularise(&activated0, texels, texture, opacity, &mut grads, simd);
                     assert_eq!(v, values, "the values do not depend on where the gradient goes");
                 }
                 let selection = if dense {
@@ -212,6 +212,7 @@ fn regulariser_gradients_added_as_read_match_adding_them_in_place() {
                         0.01,
                         &hp,
                         true,
+                        simd,
                     );
                     out.extend(bits(&logits));
                     out.extend(bits(&group.m));
@@ -238,6 +239,7 @@ fn regulariser_gradients_added_as_read_match_adding_them_in_place() {
 /// stepped nothing (`update = false`).
 #[test]
 fn the_step_reports_the_finiteness_of_the_logits_it_wrote() {
+    let simd = Simd::detect();
     let (rows, texels) = (8usize, 9usize);
     let hp = AdamParams::default();
     // The NaN sits in row 5: unselected in the first sparse case, selected in the second.
@@ -267,6 +269,7 @@ fn the_step_reports_the_finiteness_of_the_logits_it_wrote() {
             0.01,
             &hp,
             update,
+            simd,
         );
         assert_eq!(finite, want, "{selection:?}, update {update}");
     }
@@ -283,7 +286,6 @@ fn the_step_reports_the_finiteness_of_the_logits_it_wrote() {
 fn the_pair_step_equals_the_two_group_steps() {
     use bbsplat::train::regularise::RowGradient;
     use bbsplat::train::texture_step::{GroupStep, step_texture_pair};
-    let _guard = crate::raster_lanes::SWITCH.lock().unwrap_or_else(|e| e.into_inner());
     let (rows, texels) = (150usize, 37usize);
     let mask: Vec<bool> = (0..texels).map(|k| k % 5 != 2).collect();
     let mut state = 0x2545f4914f6cdd1du64;
@@ -331,7 +333,7 @@ fn the_pair_step_equals_the_two_group_steps() {
             };
             let added = with_added.then_some(added.as_slice());
             let run = |pair: bool, threads: usize, baseline: bool| {
-                lanes::force_baseline(baseline);
+                let simd = if baseline { Simd::BASELINE } else { Simd::detect() };
                 let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
                 let (mut a, mut c) = (AdamGroup::new(rows, texels), AdamGroup::new(rows, 3 * texels));
                 let (mut al, mut cl) = (alpha0.clone(), colour0.clone());
@@ -364,6 +366,7 @@ fn the_pair_step_equals_the_two_group_steps() {
                                 added,
                                 &hp,
                                 update,
+                                simd,
                             )
                         } else {
                             let ra = step_texture_group(
@@ -378,6 +381,7 @@ fn the_pair_step_equals_the_two_group_steps() {
                                 0.01,
                                 &hp,
                                 update,
+                                simd,
                             );
                             let rc = step_texture_group(
                                 &mut c,
@@ -391,13 +395,13 @@ fn the_pair_step_equals_the_two_group_steps() {
                                 0.02,
                                 &hp,
                                 update,
+                                simd,
                             );
                             [ra, rc]
                         };
                         reports.push(report);
                     }
                 });
-                lanes::force_baseline(false);
                 (
                     bits(&al),
                     bits(&cl),

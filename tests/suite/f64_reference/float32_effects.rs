@@ -41,6 +41,7 @@ fn oblique_plane_near_the_near_plane() {
         sh_degree: 1,
         composite: CompositeParams::default(),
         distortion: false,
+        ..RenderSettings::default()
     };
     let th = Thresholds::crate_values(&settings.composite);
     let (mut worst_rel, mut worst_near, mut flips, mut band, mut worst_image) = (0.0f64, 0.0f64, 0, 0, 0.0f64);
@@ -188,6 +189,7 @@ fn two_layers_at_the_clamp() {
         sh_degree: 0,
         composite: CompositeParams::default(),
         distortion: false,
+        ..RenderSettings::default()
     };
     let (out, img) = both(&b, &cam, &settings);
     let pix = 4;
@@ -254,6 +256,7 @@ fn two_interpolated_layers_at_the_clamp() {
         sh_degree: 0,
         composite: CompositeParams::default(),
         distortion: false,
+        ..RenderSettings::default()
     };
     let (out, img) = both(&b, &cam, &settings);
     let second = 0.99 * (1.0 - 0.99f32 as f64);

@@ -78,6 +78,7 @@ fn hard_settings(rng: &mut Rng) -> RenderSettings {
         sh_degree: 3,
         composite: CompositeParams::default(),
         distortion: false,
+        ..RenderSettings::default()
     }
 }
 

@@ -170,6 +170,7 @@ pub fn scene(spec: &Spec) -> (ActivatedBillboards, Camera, RenderSettings) {
         sh_degree: spec.sh_degree,
         composite: CompositeParams::default(),
         distortion: false,
+        ..RenderSettings::default()
     };
     (b, cam, settings)
 }
