@@ -946,3 +946,47 @@ fn an_out_of_range_texture_threshold_is_a_typed_error() {
         );
     }
 }
+
+/// A run's instruction set (`TrainConfig::simd`) changes nothing but its speed: the baseline
+/// build and the widest the CPU runs give the same checkpoint bytes and curve, on one thread and
+/// on two (each trainer's choice is its own: the two builds run side by side in this process).
+/// On a CPU without AVX2 both are the baseline, and the test says so.
+#[test]
+fn the_instruction_set_of_a_run_changes_no_bit() {
+    use bbsplat::cpu::Simd;
+    println!("the widest build on this CPU: {:?}", Simd::detect().level());
+    let mut results = Vec::new();
+    for (simd, threads) in [
+        (Simd::BASELINE, 1),
+        (Simd::detect(), 1),
+        (Simd::BASELINE, 2),
+        (Simd::detect(), 2),
+    ] {
+        let Setup {
+            mut trainer,
+            train,
+            test,
+        } = setup(8, |c| TrainConfig { simd, ..c });
+        let config = RunConfig {
+            eval_every: 4,
+            ..RunConfig::default()
+        };
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let outcome = pool
+            .install(|| run(&mut trainer, &train, &test, &config, &StopSignal::new(), |_| {}))
+            .unwrap();
+        let RunOutcome::Finished(summary) = outcome else {
+            panic!("the run finishes")
+        };
+        assert_eq!(trainer.config().simd, simd);
+        results.push((
+            trainer.checkpoint_bytes(),
+            summary.test_psnr.to_bits(),
+            summary.curve.len(),
+        ));
+    }
+    assert!(
+        results.iter().all(|r| *r == results[0]),
+        "the builds or thread counts differ"
+    );
+}
