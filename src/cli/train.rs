@@ -153,6 +153,9 @@ pub fn run(args: TrainArgs) -> Result<()> {
                 plan.training_bytes(&scene),
             )?;
             preflight::free_space(&args.output, output_bytes(budget, args.texture_size))?;
+            if !args.quiet {
+                println!("initialising {budget} billboards...");
+            }
             let (model, init) = plan
                 .init_model(&scene)
                 .with_context(|| format!("initialising {} billboards", budget))?;
@@ -202,6 +205,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         warnings: scene_warnings,
         automatic,
         earlier_time,
+        step_clock: bbsplat::train::StepClock::Wall,
     };
     let last_record = std::cell::RefCell::new(None::<RunReport>);
     let on_event = |event: &TrainEvent| match event {

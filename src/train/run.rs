@@ -128,6 +128,23 @@ pub struct RunConfig {
     /// ([`super::run_time::read_beside`]): the clocks start from it, so the summary reports the
     /// whole run. `None` (the default): they start from zero.
     pub earlier_time: Option<RunTime>,
+    /// How each step's time is measured: the wall clock (the default), or a cost per pixel for
+    /// tests of the time budget that must not depend on the machine's load.
+    pub step_clock: StepClock,
+}
+
+/// How [`run`] measures the time of a step, which the time budget plans on and the summary
+/// reports as `train_seconds`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum StepClock {
+    /// Seconds of wall-clock time (the default).
+    #[default]
+    Wall,
+    /// A step counts this many seconds per pixel of the views it draws from (their mean pixel
+    /// count: a coarse step counts a quarter of a full one at factor 2), whatever it took: the
+    /// same run on any machine under any load, so that a test can check the budget's planning
+    /// to the step.
+    PerPixel(f64),
 }
 
 impl Default for RunConfig {
@@ -144,6 +161,7 @@ impl Default for RunConfig {
             warnings: Vec::new(),
             automatic: Vec::new(),
             earlier_time: None,
+            step_clock: StepClock::Wall,
         }
     }
 }
@@ -675,7 +693,13 @@ impl<'a> RunState<'a> {
             Ok(log) => log,
             Err(source) => return Err(self.step_failed(trainer, source, on_event)),
         };
-        let seconds = t0.elapsed().as_secs_f64();
+        let seconds = match config.step_clock {
+            StepClock::Wall => t0.elapsed().as_secs_f64(),
+            StepClock::PerPixel(per_pixel) => {
+                let pixels: u64 = views.iter().map(|v| v.camera.pixel_count() as u64).sum();
+                per_pixel * pixels as f64 / views.len() as f64
+            }
+        };
         self.train_seconds += seconds;
         if let Some(plan) = trainer.time_plan_mut() {
             if calibrating {

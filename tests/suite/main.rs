@@ -43,6 +43,7 @@ mod model_file_npz;
 mod model_file_ply;
 mod model_knn;
 mod plan;
+mod progress;
 mod raster;
 mod raster_aux;
 mod raster_backward;
