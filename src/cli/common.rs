@@ -1,6 +1,7 @@
 //! Pieces shared by the subcommands: scene-loading flags, thread pool, atomic PNG writes.
 
 use anyhow::{Context, Result};
+use bbsplat::file_io::FileKind;
 use bbsplat::model::RawBillboards;
 use bbsplat::model_file::scene_mark::SceneMark;
 use bbsplat::model_file::{ModelMeta, load_model};
@@ -204,9 +205,19 @@ pub struct OutputDir {
     created: Option<std::path::PathBuf>,
 }
 
+/// An output folder's path that names something else (a file, a device, a dangling link) is
+/// refused naming what it is (`create_dir_all` would say only "File exists").
+pub fn refuse_non_folder(path: &Path) -> Result<()> {
+    match bbsplat::file_io::kind_of(path) {
+        Ok(FileKind::Missing | FileKind::Directory) | Err(_) => Ok(()),
+        Ok(kind) => anyhow::bail!("cannot write into {}: it {kind}, not a folder", path.display()),
+    }
+}
+
 impl OutputDir {
     /// Creates `path` (and missing parents) if it does not exist.
     pub fn create(path: &Path) -> Result<Self> {
+        refuse_non_folder(path)?;
         let mut created = None;
         let mut missing = Some(path);
         while let Some(p) = missing.filter(|p| !p.as_os_str().is_empty() && !p.exists()) {

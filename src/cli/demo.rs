@@ -115,6 +115,7 @@ pub fn run(
         summary.test_psnr, summary.train_seconds
     );
     if let Some(dir) = output {
+        super::common::refuse_non_folder(&dir)?;
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
         let settings = RenderSettings {
             background: config.background,

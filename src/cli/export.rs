@@ -83,6 +83,7 @@ pub fn run(args: ExportArgs) -> Result<()> {
         }
     );
     let mesh = plane_mesh(&set, &kept)?;
+    super::common::refuse_non_folder(&args.output)?;
     std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
     let files = match args.format {
         ExportFormat::Obj => write_obj(&args.output, "planes_mesh", &mesh)?,

@@ -202,6 +202,34 @@ fn an_output_that_is_a_device_a_fifo_or_a_folder_is_refused_and_left_as_it_is() 
     std::fs::remove_dir_all(&root).ok();
 }
 
+/// An output *folder* (`render -o`, `export -o`) that is a device, a FIFO or a regular file is
+/// refused naming what it is, not a folder (before: "creating …: File exists").
+#[test]
+fn an_output_folder_that_is_something_else_is_named() {
+    let (data, model) = shared();
+    let root = temp("file-kinds-folders");
+    std::fs::create_dir_all(&root).unwrap();
+    let (device, fifo, file) = (root.join("full"), root.join("fifo"), root.join("file"));
+    let Some(()) = full_device(&device, "an_output_folder_that_is_something_else_is_named") else {
+        return;
+    };
+    mkfifo(&fifo);
+    std::fs::write(&file, b"mine").unwrap();
+    for (out, what) in [
+        (&device, "is a character device, not a folder"),
+        (&fifo, "is a FIFO (named pipe), not a folder"),
+        (&file, "is a regular file, not a folder"),
+    ] {
+        for command in ["render", "export"] {
+            let (ok, err) = run_bounded(&[command, s(model), s(data), "-o", s(out)]);
+            assert!(!ok, "{command} {}: written", out.display());
+            assert!(err.contains(s(out)) && err.contains(what), "{command}: {err}");
+        }
+    }
+    assert_eq!(std::fs::read(&file).unwrap(), b"mine");
+    std::fs::remove_dir_all(&root).ok();
+}
+
 /// Every file of a model folder replaced by a link to `/dev/zero` (or a FIFO): `eval` fails
 /// at once naming the file and what it is (before, it read until memory ran out, or blocked).
 #[test]
