@@ -17,7 +17,9 @@ use bbsplat::billboards::{
 };
 use bbsplat::camera::Camera;
 use bbsplat::raster::backward::ImageGradients;
-use bbsplat::raster::{RenderBuffers, RenderGradients, RenderSettings, render, render_backward, render_with};
+use bbsplat::raster::{
+    RenderBuffers, RenderGradients, RenderSettings, render, render_backward, render_backward_with, render_with,
+};
 use criterion::Throughput;
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::time::Duration;
@@ -46,6 +48,7 @@ fn bench(c: &mut Criterion) {
             });
             let d_rgb = vec![1e-3f32; (size * size * 3) as usize];
             let mut grads = RenderGradients::zeros(n, set.texture_size);
+            let mut backward_scratch = bbsplat::raster::BackwardScratch::default();
             let ig = ImageGradients {
                 rgb: &d_rgb,
                 alpha: None,
@@ -57,7 +60,7 @@ fn bench(c: &mut Criterion) {
             group.bench_function(format!("fwd_bwd/{size}/{n}"), |b| {
                 b.iter(|| {
                     let out = render_with(&set, &cam, &settings, std::mem::take(&mut buffers));
-                    let touched = render_backward(&set, &out, &ig, &mut grads);
+                    let touched = render_backward_with(&set, &out, &ig, &mut grads, &mut backward_scratch);
                     buffers = out.into_buffers();
                     touched
                 })
@@ -96,6 +99,7 @@ fn bench_scene(c: &mut Criterion, group_name: &str, name: &str, scene: &Activate
     });
     let d_rgb = vec![1e-3f32; (cam.width * cam.height * 3) as usize];
     let mut grads = RenderGradients::zeros(set.len(), set.texture_size);
+    let mut backward_scratch = bbsplat::raster::BackwardScratch::default();
     let ig = ImageGradients {
         rgb: &d_rgb,
         alpha: None,
@@ -107,7 +111,7 @@ fn bench_scene(c: &mut Criterion, group_name: &str, name: &str, scene: &Activate
     group.bench_function(format!("{name}/fwd_bwd"), |b| {
         b.iter(|| {
             let out = render_with(&set, cam, &settings, std::mem::take(&mut buffers));
-            let touched = render_backward(&set, &out, &ig, &mut grads);
+            let touched = render_backward_with(&set, &out, &ig, &mut grads, &mut backward_scratch);
             buffers = out.into_buffers();
             touched
         })

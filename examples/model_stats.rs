@@ -18,7 +18,7 @@ use bbsplat::billboards::planar_textures;
 use bbsplat::model::RawBillboards;
 use bbsplat::model_file::load_model;
 use bbsplat::raster::backward::ImageGradients;
-use bbsplat::raster::{RenderGradients, RenderSettings, WorkloadStats, render, render_backward};
+use bbsplat::raster::{RenderGradients, RenderSettings, WorkloadStats, render, render_backward_with};
 use bbsplat::report::process_cpu_ms;
 use bbsplat::scene::{Background, LoadOptions, load};
 use bbsplat::train::Trainer;
@@ -89,6 +89,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     println!("|---|--:|--:|--:|--:|--:|--:|--:|--:|");
     let mut grads = RenderGradients::zeros(set.len(), set.texture_size);
+    let mut backward_scratch = bbsplat::raster::BackwardScratch::default();
     let mut hasher = DefaultHasher::new();
     let mut workload = Vec::new();
     let (mut sum_fwd, mut sum_both, mut count) = (0.0, 0.0, 0usize);
@@ -112,7 +113,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 distortion: None,
                 camera: false,
             };
-            let touched = render_backward(&set, &out, &ig, &mut grads);
+            let touched = render_backward_with(&set, &out, &ig, &mut grads, &mut backward_scratch);
             both_ms += start.elapsed().as_secs_f64() * 1e3;
             both_cpu += process_cpu_ms() - cpu_start;
             out.rgb.iter().for_each(|v| v.to_bits().hash(&mut hasher));

@@ -18,7 +18,8 @@ use bbsplat::raster::backward::ImageGradients;
 use bbsplat::raster::binning::bin;
 use bbsplat::raster::preprocess::preprocess;
 use bbsplat::raster::{
-    RenderBuffers, RenderGradients, RenderSettings, WorkloadStats, render, render_backward, render_with,
+    RenderBuffers, RenderGradients, RenderSettings, WorkloadStats, render, render_backward, render_backward_with,
+    render_with,
 };
 use bbsplat::report::process_cpu_ms as cpu_ms;
 use std::time::Instant;
@@ -68,6 +69,7 @@ fn main() {
         let calls: usize = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(20);
         let d_rgb = vec![1e-3f32; (size * size * 3) as usize];
         let mut grads = RenderGradients::zeros(n, set.texture_size);
+        let mut backward_scratch = bbsplat::raster::BackwardScratch::default();
         // `loop` recycles the render's storage as the trainer does; `loopfresh` allocates it
         // afresh every call.
         let recycle = mode == Some("loop");
@@ -86,7 +88,7 @@ fn main() {
                 distortion: None,
                 camera: false,
             };
-            let touched = render_backward(&set, &out, &ig, &mut grads).len();
+            let touched = render_backward_with(&set, &out, &ig, &mut grads, &mut backward_scratch).len();
             if recycle {
                 buffers = out.into_buffers();
             }
@@ -157,8 +159,9 @@ fn main() {
     let t_fwd = time(&mut || out = render(&set, &cam, &settings));
     let d_rgb = vec![1e-3f32; (size * size * 3) as usize];
     let mut grads = RenderGradients::zeros(n, 16);
+    let mut backward_scratch = bbsplat::raster::BackwardScratch::default();
     let t_bwd = time(&mut || {
-        render_backward(
+        render_backward_with(
             &set,
             &out,
             &ImageGradients {
@@ -170,6 +173,7 @@ fn main() {
                 camera: false,
             },
             &mut grads,
+            &mut backward_scratch,
         );
     });
     let px = (size * size) as f64;

@@ -48,12 +48,13 @@ struct Scratch {
     by_entry: EntryScratch,
 }
 
-/// The large arrays of one [`render_backward`] call, kept for the next call on the same
-/// thread (see [`BACKWARD_STORAGE`]) so that their pages are faulted in and zeroed by the
-/// kernel once, not per call (they are several megabytes: freed, they go back to the system
-/// and come back as fresh pages). Every value is written before it is read.
+/// The large arrays of a backward pass, owned by the caller and passed to every
+/// [`render_backward_with`] call so that their pages are faulted in and zeroed by the kernel
+/// once, not per call (they are several megabytes: freed, they go back to the system and come
+/// back as fresh pages). Every value is written before it is read: what a call leaves in it
+/// never changes the next call's result.
 #[derive(Default)]
-struct BackwardStorage {
+pub struct BackwardScratch {
     /// Per tile entry: its record.
     records: Vec<EntryRecord>,
     /// Per tile entry, only with a normal or distortion gradient: `∂L/∂normal_view`.
@@ -121,17 +122,13 @@ thread_local! {
     /// Each thread's [`TexelSums`], kept across tiles and calls so that its pages are zeroed
     /// by the kernel once, not per call.
     static TEXEL_SUMS: std::cell::RefCell<TexelSums> = std::cell::RefCell::default();
-
-    /// The [`BackwardStorage`] of the last [`render_backward`] call made on this thread. A call
-    /// takes it and puts it back when done, so a call nested in another on the same thread
-    /// (a rayon worker that steals a second view while the first waits) starts from empty
-    /// storage instead of sharing it.
-    static BACKWARD_STORAGE: std::cell::RefCell<BackwardStorage> = std::cell::RefCell::default();
 }
 
 /// Back-propagates image gradients to every billboard parameter and the background, adding
 /// into `grads`. Returns the indices of the billboards that received a gradient (those with at
-/// least one blended pixel), in increasing order.
+/// least one blended pixel), in increasing order. Allocates its scratch afresh: a caller
+/// running many backward passes keeps a [`BackwardScratch`] and calls
+/// [`render_backward_with`].
 ///
 /// Deterministic: bit-identical for any number of rayon threads.
 ///
@@ -145,11 +142,25 @@ pub fn render_backward(
     image_grads: &ImageGradients<'_>,
     grads: &mut RenderGradients,
 ) -> Vec<u32> {
+    render_backward_with(set, out, image_grads, grads, &mut BackwardScratch::default())
+}
+
+/// [`render_backward`] with its large arrays in the caller's `scratch` (the same bits whatever
+/// it holds).
+///
+/// # Panics
+/// As [`render_backward`].
+pub fn render_backward_with(
+    set: &ActivatedRef<'_>,
+    out: &RenderOutput,
+    image_grads: &ImageGradients<'_>,
+    grads: &mut RenderGradients,
+    scratch: &mut BackwardScratch,
+) -> Vec<u32> {
     check_inputs(set, out, image_grads, grads);
-    // The records and texel lists of the last call on this thread, reused (every tile task
-    // resets its own records and texel list).
-    let mut storage = BACKWARD_STORAGE.take();
-    let backgrounds = tile_pass(set, out, image_grads, &mut grads.textures, &mut storage);
+    // Every tile task resets its own records and texel list.
+    let storage = scratch;
+    let backgrounds = tile_pass(set, out, image_grads, &mut grads.textures, storage);
     for &background in &backgrounds {
         grads.background += background;
     }
@@ -165,7 +176,6 @@ pub fn render_backward(
         texels: set.texels(),
     };
     let chunks = reduction.reduce(grads);
-    BACKWARD_STORAGE.set(storage);
     let mut touched = Vec::new();
     for (t, d_camera) in &chunks {
         touched.extend_from_slice(t);
@@ -226,12 +236,12 @@ fn tile_pass(
     out: &RenderOutput,
     image_grads: &ImageGradients<'_>,
     textures: &mut [[f32; 4]],
-    storage: &mut BackwardStorage,
+    storage: &mut BackwardScratch,
 ) -> Vec<Vec3> {
     let state = &out.state;
     let bins = &state.bins;
     let n_tiles = bins.tile_count();
-    let BackwardStorage {
+    let BackwardScratch {
         records,
         normal_records,
         tile_texels,

@@ -50,7 +50,7 @@ pub(crate) mod tile_spans;
 mod tile_types;
 pub mod workload;
 
-pub use backward::render_backward;
+pub use backward::{BackwardScratch, render_backward, render_backward_with};
 pub use binning::TILE_SIZE;
 pub use forward::{render, render_with};
 pub use gradients::RenderGradients;

@@ -281,7 +281,7 @@ impl TexelSums {
     }
 
     /// The touched cells grouped by slot, in texel order within a slot, written over `out`
-    /// (cleared first; its storage is kept, see `backward::BackwardStorage`), resetting the cells and
+    /// (cleared first; its storage is kept, see `backward::BackwardScratch`), resetting the cells and
     /// flags for the next tile. `span(k, (start, end))` is called for every slot `k` in order:
     /// the texels of slot `k` are `out[start..end]`.
     #[inline(always)]

@@ -13,9 +13,12 @@
 
 use super::adam::{AdamGroup, AdamParams};
 use crate::camera::Camera;
+use crate::loss::ssim::SsimScratch;
 use crate::loss::{LossError, TrainingLoss};
 use crate::raster::backward::{CameraGradient, ImageGradients};
-use crate::raster::{ActivatedRef, RenderBuffers, RenderGradients, RenderSettings, render_backward, render_with};
+use crate::raster::{
+    ActivatedRef, BackwardScratch, RenderBuffers, RenderGradients, RenderSettings, render_backward_with, render_with,
+};
 use glam::Vec3;
 
 /// Adam step sizes of a camera correction.
@@ -119,16 +122,20 @@ pub fn fit_camera(
     sizes: &CameraStepSizes,
 ) -> Result<CameraFit, LossError> {
     let (w, h) = (camera.width as usize, camera.height as usize);
-    let loss_fn = TrainingLoss::default();
+    let loss_fn = TrainingLoss {
+        simd: settings.simd,
+        ..TrainingLoss::default()
+    };
     let mut adam = CameraAdam::new();
     let mut grads = RenderGradients::zeros(set.len(), set.texture_size);
     let mut buffers = RenderBuffers::default();
+    let (mut ssim_scratch, mut backward_scratch) = (SsimScratch::default(), BackwardScratch::default());
     let mut current = *camera;
     let mut best = (f64::INFINITY, *camera);
     let mut loss_before = f64::NAN;
     for k in 0..=iterations {
         let out = render_with(set, &current, settings, std::mem::take(&mut buffers));
-        let loss = loss_fn.evaluate(&out.rgb, target, w, h, 3)?;
+        let loss = loss_fn.evaluate_in(&out.rgb, target, (w, h, 3), &mut ssim_scratch)?;
         if k == 0 {
             loss_before = loss.loss;
         }
@@ -143,7 +150,7 @@ pub fn fit_camera(
             camera: true,
             ..ImageGradients::default()
         };
-        let touched = render_backward(set, &out, &ig, &mut grads);
+        let touched = render_backward_with(set, &out, &ig, &mut grads, &mut backward_scratch);
         for &b in &touched {
             grads.clear_row(b as usize);
         }

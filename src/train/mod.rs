@@ -53,7 +53,8 @@ use crate::loss::psnr::psnr_u8;
 use crate::loss::ssim::SsimScratch;
 use crate::model::{RawBillboards, clamped_logit, initial_alpha, logit, sigmoid};
 use crate::raster::{
-    RenderBuffers, RenderGradients, RenderOutput, RenderSettings, SH_FLOATS, render_backward, render_with,
+    BackwardScratch, RenderBuffers, RenderGradients, RenderOutput, RenderSettings, SH_FLOATS, render_backward_with,
+    render_with,
 };
 use crate::rng::Rng;
 pub use crate::stages::composite::ClampGradient;
@@ -556,6 +557,8 @@ pub struct Trainer {
     target: Vec<f32>,
     /// The SSIM gradient's partial maps (recycled from step to step; values never carried over).
     ssim_scratch: SsimScratch,
+    /// The backward pass's records and texel lists (recycled likewise).
+    backward_scratch: BackwardScratch,
     /// Per billboard, the regularisers' gradient of the current step, which the texture step
     /// adds as it reads the texture gradients (full textures; empty in Gaussian mode, where
     /// `regularise` adds it in place).
@@ -628,6 +631,7 @@ impl Trainer {
             opacity_logits,
             render_buffers: RenderBuffers::default(),
             ssim_scratch: SsimScratch::default(),
+            backward_scratch: BackwardScratch::default(),
             target: Vec::new(),
             regulariser_rows: Vec::new(),
             record: run_record::RunRecord::default(),
@@ -902,7 +906,13 @@ impl Trainer {
         // Both geometry terms off: no map gradient (the plain backward pass).
         let geometry_loss = GeometryLoss::evaluate(&out, cam, lambda_normal, lambda_distortion);
         let ig = geometry_loss.image_gradients(&loss.d_render);
-        let touched = render_backward(&self.activated.borrowed(), &out, &ig, &mut self.grads);
+        let touched = render_backward_with(
+            &self.activated.borrowed(),
+            &out,
+            &ig,
+            &mut self.grads,
+            &mut self.backward_scratch,
+        );
         // Both regularisers in one pass over the texture rows (the bits of one after the other).
         let texture_term = (self.config.texture_reg_weight != 0.0).then_some(TextureTerm {
             alpha0: &self.alpha0,

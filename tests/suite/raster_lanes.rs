@@ -17,7 +17,7 @@ use bbsplat::camera::Camera;
 use bbsplat::cpu::{Simd, SimdLevel};
 use bbsplat::raster::backward::ImageGradients;
 use bbsplat::raster::lanes::TileWalk;
-use bbsplat::raster::{RenderGradients, RenderSettings, render, render_backward};
+use bbsplat::raster::{BackwardScratch, RenderGradients, RenderSettings, render, render_backward_with};
 use bbsplat::rng::Rng;
 /// The image gradients handed to the backward.
 #[derive(Clone, Copy, Debug)]
@@ -31,7 +31,14 @@ enum Upstream {
 
 /// Every output bit of a render and its backward for fixed random image gradients.
 fn everything(scene: &ActivatedBillboards, cam: &Camera, settings: &RenderSettings, aux: bool) -> Vec<u32> {
-    everything_with(scene, cam, settings, aux, Upstream::Noise)
+    everything_with(
+        scene,
+        cam,
+        settings,
+        aux,
+        Upstream::Noise,
+        &mut BackwardScratch::default(),
+    )
 }
 
 /// [`everything`] with the image gradients `upstream`.
@@ -41,6 +48,7 @@ fn everything_with(
     settings: &RenderSettings,
     aux: bool,
     upstream: Upstream,
+    scratch: &mut BackwardScratch,
 ) -> Vec<u32> {
     let set = scene.borrowed();
     let out = render(&set, cam, settings);
@@ -69,7 +77,7 @@ fn everything_with(
     // lane that did not blend), which the baseline never emits, so an add of +0.0 there would
     // turn such texels +0.0 in one build only.
     grads.textures.fill([-0.0; 4]);
-    let touched = render_backward(&set, &out, &grads_in, &mut grads);
+    let touched = render_backward_with(&set, &out, &grads_in, &mut grads, scratch);
     let mut bits: Vec<u32> = [
         &out.rgb[..],
         &out.alpha,
@@ -136,7 +144,8 @@ fn all_variants_with(
                 tile_walk: walk,
                 ..*settings
             };
-            out.push((name, everything_with(scene, cam, &settings, aux, upstream)));
+            let scratch = &mut BackwardScratch::default();
+            out.push((name, everything_with(scene, cam, &settings, aux, upstream, scratch)));
         }
     }
     println!("the widest build on this CPU: {:?}", Simd::detect().level());
@@ -226,37 +235,40 @@ fn every_build_and_walk_agree_bit_for_bit_on_the_benchmark_scene() {
     assert_all_equal(&all_variants(&scene, &cam, &RenderSettings::default(), false));
 }
 
-/// `render_backward` keeps its entry records, per-entry normal gradients and per-tile texel
-/// lists for the next call on the same thread; what an earlier, larger call left there changes
-/// no bit. A small scene's bits (with and without the auxiliary maps, which size the normal
-/// records) after larger scenes on one thread equal its bits on a fresh thread, whose storage
-/// starts empty. (Leaving out the tile's reset of its records fails this test: tried. A texel
+/// `render_backward_with` keeps its entry records, per-entry normal gradients and per-tile
+/// texel lists in the caller's `BackwardScratch` for the next call; what an earlier, larger call
+/// left there changes no bit. A small scene's bits (with and without the auxiliary maps, which
+/// size the normal records) with a scratch that larger scenes used equal its bits with a fresh
+/// scratch. (Leaving out the tile's reset of its records fails this test: tried. A texel
 /// list left uncleared keeps correct spans and only grows; `texel_sums_match_the_sorting_reference`
 /// catches that.)
 #[test]
 fn reused_backward_storage_changes_no_bit() {
     // Every output bit of a trained-like scene, with or without the auxiliary maps.
-    let bits = |config: TrainedLikeConfig, aux: bool| {
+    let bits = |config: TrainedLikeConfig, aux: bool, scratch: &mut BackwardScratch| {
         let settings = RenderSettings {
             distortion: aux,
             ..RenderSettings::default()
         };
         let cam = random_scene_camera(config.width, config.height);
-        everything(&trained_like_scene(&config), &cam, &settings, aux)
+        everything_with(
+            &trained_like_scene(&config),
+            &cam,
+            &settings,
+            aux,
+            Upstream::Noise,
+            scratch,
+        )
     };
-    let small = move |aux: bool| bits(TrainedLikeConfig::object(800, 96, 80), aux);
-    let large = move |aux: bool| bits(TrainedLikeConfig::capture(3000, 160, 128), aux);
-    let fresh = std::thread::spawn(move || [small(true), small(false)])
-        .join()
-        .expect("the fresh thread renders");
-    let reused = std::thread::spawn(move || {
-        large(true);
-        let with_aux = small(true);
-        large(false);
-        [with_aux, small(false)]
-    })
-    .join()
-    .expect("the reusing thread renders");
+    let small = |aux: bool, scratch: &mut BackwardScratch| bits(TrainedLikeConfig::object(800, 96, 80), aux, scratch);
+    let large =
+        |aux: bool, scratch: &mut BackwardScratch| bits(TrainedLikeConfig::capture(3000, 160, 128), aux, scratch);
+    let fresh = [true, false].map(|aux| small(aux, &mut BackwardScratch::default()));
+    let scratch = &mut BackwardScratch::default();
+    large(true, scratch);
+    let with_aux = small(true, scratch);
+    large(false, scratch);
+    let reused = [with_aux, small(false, scratch)];
     assert!(fresh[0].len() > 10_000);
     assert!(fresh[0] == reused[0], "with the auxiliary maps");
     assert!(fresh[1] == reused[1], "without them");
