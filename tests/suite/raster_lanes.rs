@@ -29,18 +29,6 @@ enum Upstream {
     NegativeZero,
 }
 
-/// Every output bit of a render and its backward for fixed random image gradients.
-fn everything(scene: &ActivatedBillboards, cam: &Camera, settings: &RenderSettings, aux: bool) -> Vec<u32> {
-    everything_with(
-        scene,
-        cam,
-        settings,
-        aux,
-        Upstream::Noise,
-        &mut BackwardScratch::default(),
-    )
-}
-
 /// [`everything`] with the image gradients `upstream`.
 fn everything_with(
     scene: &ActivatedBillboards,
