@@ -29,7 +29,8 @@ enum Upstream {
     NegativeZero,
 }
 
-/// [`everything`] with the image gradients `upstream`.
+/// Every output bit of a render and its backward (with `scratch`) for the image gradients
+/// `upstream`.
 fn everything_with(
     scene: &ActivatedBillboards,
     cam: &Camera,
