@@ -16,7 +16,7 @@ const NORM_EPSILON: f64 = 1e-10;
 const PIXELS_PER_PIECE: usize = 4096;
 
 /// A loaded LPIPS network.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Lpips {
     weights: Weights,
 }

@@ -26,7 +26,7 @@ fn required() -> bool {
 }
 
 /// Skips (or, when required, fails) with `why`.
-fn missing(test: &str, why: &str) {
+pub(crate) fn missing(test: &str, why: &str) {
     assert!(!required(), "{test}: {why} (CI / BBSPLAT_REQUIRE_TOOLS is set)");
     let _ = writeln!(std::io::stderr(), "SKIPPED {test}: {why}");
 }
