@@ -24,7 +24,10 @@ fn run() -> Result<(), String> {
     let first: Vec<f32> = (0..side * side * 3)
         .map(|i| 0.5 + 0.4 * ((i % (side * 3)) as f32 * 0.01).sin() * ((i / (side * 3)) as f32 * 0.02).cos())
         .collect();
-    let second: Vec<f32> = first.iter().map(|v| (v + 0.05 * rng.normal()).clamp(0.0, 1.0)).collect();
+    let second: Vec<f32> = first
+        .iter()
+        .map(|v| (v + 0.05 * rng.normal()).clamp(0.0, 1.0))
+        .collect();
     println!("{side}×{side} pair, {} rayon threads", rayon::current_num_threads());
     for variant in [Variant::Vgg, Variant::Alex] {
         let net = Lpips::load_cached(variant).map_err(|e| e.to_string())?;

@@ -1,7 +1,8 @@
 //! `bbsplat render <model> <scene> -o <dir>` and `bbsplat eval <model> <scene>`.
 
 use super::common::{
-    LpipsNetwork, OutputDir, SceneArgs, Split, render_file_name, split_views, start_threads, write_png_atomic, write_text_atomic,
+    LpipsNetwork, OutputDir, SceneArgs, Split, render_file_name, split_views, start_threads, write_png_atomic,
+    write_text_atomic,
 };
 use anyhow::{Context, Result};
 use bbsplat::eval::{EvalReport, EvalView, evaluate_views, lpips_u8};
@@ -69,7 +70,6 @@ pub struct EvalArgs {
     #[arg(long, value_enum, num_args = 0..=1, require_equals = true, default_missing_value = "vgg", value_name = "NETWORK")]
     pub lpips: Option<LpipsNetwork>,
 }
-
 
 fn run_views(
     common: &ModelSceneArgs,

@@ -314,4 +314,3 @@ pub enum AdamModeArg {
     /// Touched rows only.
     Sparse,
 }
-

@@ -81,7 +81,12 @@ pub fn conv_relu(input: &FeatureMap, weights: &ConvWeights) -> FeatureMap {
             values[o * plane + y0 * out_w..][..n].copy_from_slice(&band[o * n..(o + 1) * n]);
         }
     }
-    FeatureMap { channels: s.outputs, height: out_h, width: out_w, values }
+    FeatureMap {
+        channels: s.outputs,
+        height: out_h,
+        width: out_w,
+        values,
+    }
 }
 
 /// Output rows `y0..y0 + rows` of [`conv_relu`], `[outputs][rows·out_w]`.
@@ -152,7 +157,10 @@ fn band(input: &FeatureMap, weights: &ConvWeights, y0: usize, rows: usize, out_w
 ///
 /// When the map is smaller than one window.
 pub fn max_pool(input: &FeatureMap, size: usize, stride: usize) -> FeatureMap {
-    assert!(input.height >= size && input.width >= size, "max pool window larger than the map");
+    assert!(
+        input.height >= size && input.width >= size,
+        "max pool window larger than the map"
+    );
     let out_h = (input.height - size) / stride + 1;
     let out_w = (input.width - size) / stride + 1;
     let mut values = vec![0.0f32; input.channels * out_h * out_w];
@@ -170,5 +178,10 @@ pub fn max_pool(input: &FeatureMap, size: usize, stride: usize) -> FeatureMap {
             }
         }
     });
-    FeatureMap { channels: input.channels, height: out_h, width: out_w, values }
+    FeatureMap {
+        channels: input.channels,
+        height: out_h,
+        width: out_w,
+        values,
+    }
 }

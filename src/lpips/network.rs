@@ -28,7 +28,9 @@ impl Lpips {
     ///
     /// See [`Weights::load`].
     pub fn load(path: &Path, variant: Variant) -> Result<Lpips, LpipsError> {
-        Ok(Lpips { weights: Weights::load(path, variant)? })
+        Ok(Lpips {
+            weights: Weights::load(path, variant)?,
+        })
     }
 
     /// `variant`'s weights from the cache folder ([`weights_path`]).
@@ -54,17 +56,27 @@ impl Lpips {
     ///
     /// [`LpipsError::ImageSize`] when a buffer does not hold `width·height·3` values,
     /// [`LpipsError::TooSmall`] when a side is below the network's
-    /// [`min_side`](super::weights::min_side).
+    /// [`min_side`].
     pub fn distance(&self, first: &[f32], second: &[f32], width: usize, height: usize) -> Result<f64, LpipsError> {
         for (which, image) in [("first", first), ("second", second)] {
             if image.len() != width * height * 3 {
-                return Err(LpipsError::ImageSize { which, len: image.len(), width, height });
+                return Err(LpipsError::ImageSize {
+                    which,
+                    len: image.len(),
+                    width,
+                    height,
+                });
             }
         }
         let variant = self.variant();
         let min = min_side(variant);
         if width < min || height < min {
-            return Err(LpipsError::TooSmall { variant, width, height, min });
+            return Err(LpipsError::TooSmall {
+                variant,
+                width,
+                height,
+                min,
+            });
         }
         let taps_a = self.features(first, width, height);
         let taps_b = self.features(second, width, height);
@@ -89,7 +101,12 @@ impl Lpips {
                 values[c * plane + p] = (rescale(rgb[c]) - SHIFT[c]) / SCALE[c];
             }
         }
-        let mut map = FeatureMap { channels: 3, height, width, values };
+        let mut map = FeatureMap {
+            channels: 3,
+            height,
+            width,
+            values,
+        };
         let mut convs = self.weights.convs.iter();
         let mut taps = Vec::new();
         for layer in layers(self.variant()) {

@@ -88,7 +88,14 @@ pub fn parse(bytes: &[u8]) -> Result<BTreeMap<String, Tensor>, String> {
             .chunks_exact(4)
             .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
             .collect();
-        out.insert(name.clone(), Tensor { shape, values, offset: begin });
+        out.insert(
+            name.clone(),
+            Tensor {
+                shape,
+                values,
+                offset: begin,
+            },
+        );
     }
     Ok(out)
 }

@@ -64,7 +64,13 @@ pub enum Layer {
 }
 
 const fn conv(outputs: usize, inputs: usize, kernel: usize, stride: usize, pad: usize) -> Layer {
-    Layer::Conv(ConvShape { outputs, inputs, kernel, stride, pad })
+    Layer::Conv(ConvShape {
+        outputs,
+        inputs,
+        kernel,
+        stride,
+        pad,
+    })
 }
 
 const fn c3(outputs: usize, inputs: usize) -> Layer {
@@ -115,7 +121,12 @@ pub fn output_side(layer: &Layer, side: usize) -> usize {
 /// The smallest image side for which every layer of `variant` keeps at least one pixel.
 pub fn min_side(variant: Variant) -> usize {
     (1..)
-        .find(|&n| layers(variant).iter().try_fold(n, |s, l| Some(output_side(l, s)).filter(|&s| s > 0)).is_some())
+        .find(|&n| {
+            layers(variant)
+                .iter()
+                .try_fold(n, |s, l| Some(output_side(l, s)).filter(|&s| s > 0))
+                .is_some()
+        })
         .expect("some side fits")
 }
 
@@ -181,23 +192,38 @@ impl Weights {
     pub fn load(path: &Path, variant: Variant) -> Result<Weights, LpipsError> {
         let bytes = read_bounded(path, WEIGHTS_FILE).map_err(|e| {
             if e.is_not_found() {
-                LpipsError::WeightsMissing { path: path.to_path_buf(), variant }
+                LpipsError::WeightsMissing {
+                    path: path.to_path_buf(),
+                    variant,
+                }
             } else {
                 LpipsError::File(e)
             }
         })?;
-        let tensors = parse(&bytes).map_err(|reason| LpipsError::Format { path: path.to_path_buf(), reason })?;
+        let tensors = parse(&bytes).map_err(|reason| LpipsError::Format {
+            path: path.to_path_buf(),
+            reason,
+        })?;
         let weights = Self::from_tensors(tensors, variant, path)?;
         let found = weights.checksum();
         let expected = expected_checksum(variant);
         if found != expected {
-            return Err(LpipsError::Checksum { path: path.to_path_buf(), variant, found, expected });
+            return Err(LpipsError::Checksum {
+                path: path.to_path_buf(),
+                variant,
+                found,
+                expected,
+            });
         }
         Ok(weights)
     }
 
     /// The tensors of `variant`, each checked against the shape table.
-    fn from_tensors(mut tensors: BTreeMap<String, Tensor>, variant: Variant, path: &Path) -> Result<Weights, LpipsError> {
+    fn from_tensors(
+        mut tensors: BTreeMap<String, Tensor>,
+        variant: Variant,
+        path: &Path,
+    ) -> Result<Weights, LpipsError> {
         let mut take = |name: String, shape: Vec<usize>| -> Result<Vec<f32>, LpipsError> {
             let error = |reason: String| LpipsError::Tensor {
                 path: path.to_path_buf(),

