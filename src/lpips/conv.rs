@@ -60,9 +60,12 @@ impl FeatureMap {
 pub fn conv_relu(input: &FeatureMap, weights: &ConvWeights) -> FeatureMap {
     let s = weights.shape;
     assert_eq!(input.channels, s.inputs, "convolution input channels");
+    assert!(
+        input.height + 2 * s.pad >= s.kernel && input.width + 2 * s.pad >= s.kernel,
+        "convolution kernel larger than the padded map"
+    );
     let out_h = (input.height + 2 * s.pad - s.kernel) / s.stride + 1;
     let out_w = (input.width + 2 * s.pad - s.kernel) / s.stride + 1;
-    assert!(input.height + 2 * s.pad >= s.kernel && input.width + 2 * s.pad >= s.kernel);
     let depth = s.inputs * s.kernel * s.kernel;
     let band_rows = (BAND_VALUES / depth / out_w).clamp(1, out_h);
     let bands: Vec<(usize, Vec<f32>)> = (0..out_h.div_ceil(band_rows))
