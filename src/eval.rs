@@ -6,6 +6,8 @@
 //!   views is the arithmetic mean of the per-view values (as the reference averages them).
 //! - SSIM: the training SSIM (11×11 Gaussian window, σ = 1.5, zero "same" padding,
 //!   `C1 = 0.01²`, `C2 = 0.03²`), mean over the map and channels.
+//! - LPIPS (optional, [`crate::lpips`]: VGG as the reference evaluates, or AlexNet): of the same
+//!   8-bit images, mean over views as PSNR's ([`lpips_u8`], [`EvalReport::with_lpips`]).
 //! - Render time: wall-clock milliseconds of [`render_with`] (the full forward pass with its
 //!   auxiliary outputs, on storage recycled from the previous view), per view.
 //!
@@ -20,6 +22,7 @@ use crate::camera::Camera;
 use crate::loss::LossError;
 use crate::loss::psnr::{psnr_u8, quantize_u8};
 use crate::loss::ssim::{Padding, ssim};
+use crate::lpips::{Lpips, LpipsError};
 use crate::raster::{ActivatedRef, RenderBuffers, RenderSettings, render_with};
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
@@ -46,6 +49,18 @@ pub fn image_metrics(render: &[f32], truth: &[f32], width: usize, height: usize)
     Ok(ImageMetrics { psnr, ssim })
 }
 
+/// The LPIPS distance of `render` and `truth` (interleaved RGB, `width × height`, values in
+/// `[0, 1]`), both quantised to 8 bits first, as [`image_metrics`] does.
+///
+/// # Errors
+///
+/// [`LpipsError`] when a buffer does not hold `width·height·3` values or the image is smaller
+/// than the network needs.
+pub fn lpips_u8(net: &Lpips, render: &[f32], truth: &[f32], width: usize, height: usize) -> Result<f64, LpipsError> {
+    let q = |x: &[f32]| -> Vec<f32> { x.iter().map(|&v| quantize_u8(v) as f32 / 255.0).collect() };
+    net.distance(&q(render), &q(truth), width, height)
+}
+
 /// The metrics of one evaluated view.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ViewMetrics {
@@ -57,6 +72,9 @@ pub struct ViewMetrics {
     pub ssim: f64,
     /// Wall-clock render time, milliseconds.
     pub render_ms: f64,
+    /// LPIPS of the 8-bit images, when asked for ([`EvalReport::with_lpips`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lpips: Option<f64>,
 }
 
 /// Per-view metrics and their means.
@@ -70,6 +88,12 @@ pub struct EvalReport {
     pub mean_ssim: f64,
     /// Mean render time, milliseconds.
     pub mean_render_ms: f64,
+    /// The LPIPS network (`vgg` or `alex`), when LPIPS was computed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lpips_network: Option<String>,
+    /// Mean LPIPS over the views, when computed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mean_lpips: Option<f64>,
 }
 
 impl EvalReport {
@@ -81,26 +105,57 @@ impl EvalReport {
             mean_psnr: mean(|v| v.psnr),
             mean_ssim: mean(|v| v.ssim),
             mean_render_ms: mean(|v| v.render_ms),
+            lpips_network: None,
+            mean_lpips: None,
             views,
         }
+    }
+
+    /// The report with each view's LPIPS (`values`, one per view in order, by `network`) and
+    /// their mean.
+    ///
+    /// # Panics
+    ///
+    /// When `values` does not hold one value per view.
+    pub fn with_lpips(mut self, network: crate::lpips::Variant, values: &[f64]) -> Self {
+        assert_eq!(values.len(), self.views.len(), "one LPIPS value per view");
+        for (view, &v) in self.views.iter_mut().zip(values) {
+            view.lpips = Some(v);
+        }
+        self.lpips_network = Some(network.name().to_string());
+        self.mean_lpips = Some(values.iter().sum::<f64>() / values.len() as f64);
+        self
     }
 
     /// A plain-text table: one line per view, then the mean.
     pub fn table(&self) -> String {
         let width = self.views.iter().map(|v| v.name.len()).max().unwrap_or(4).max(4);
+        let lpips_head = match &self.lpips_network {
+            Some(net) => format!("  {:>10}", format!("LPIPS-{net}")),
+            None => String::new(),
+        };
+        let lpips = |v: Option<f64>| v.map_or(String::new(), |v| format!("  {v:>10.4}"));
         let mut out = format!(
-            "{:<width$}  {:>9}  {:>7}  {:>9}\n",
+            "{:<width$}  {:>9}  {:>7}  {:>9}{lpips_head}\n",
             "view", "PSNR (dB)", "SSIM", "render ms"
         );
         for v in &self.views {
             out += &format!(
-                "{:<width$}  {:>9.3}  {:>7.4}  {:>9.1}\n",
-                v.name, v.psnr, v.ssim, v.render_ms
+                "{:<width$}  {:>9.3}  {:>7.4}  {:>9.1}{}\n",
+                v.name,
+                v.psnr,
+                v.ssim,
+                v.render_ms,
+                lpips(v.lpips)
             );
         }
         out += &format!(
-            "{:<width$}  {:>9.3}  {:>7.4}  {:>9.1}\n",
-            "mean", self.mean_psnr, self.mean_ssim, self.mean_render_ms
+            "{:<width$}  {:>9.3}  {:>7.4}  {:>9.1}{}\n",
+            "mean",
+            self.mean_psnr,
+            self.mean_ssim,
+            self.mean_render_ms,
+            lpips(self.mean_lpips)
         );
         out
     }
@@ -144,6 +199,7 @@ pub fn evaluate_views<'a>(
             psnr: m.psnr,
             ssim: m.ssim,
             render_ms,
+            lpips: None,
         });
     }
     Ok(EvalReport::from_views(out))

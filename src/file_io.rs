@@ -5,7 +5,7 @@
 //!
 //! [`read_bounded`] (and [`read_text_bounded`]) reads a whole file of one kind, with a size
 //! limit per kind ([`Limit`]: [`MODEL_FILE`], [`CHECKPOINT`], [`JSON_FILE`], [`SCENE_FILE`],
-//! [`IMAGE`]):
+//! [`IMAGE`], [`WEIGHTS_FILE`]):
 //!
 //! - the path, links followed, must be a regular file: a directory, a FIFO, a socket, a
 //!   character or block device (a link to `/dev/zero` included), a symlink loop or a link to a
@@ -110,6 +110,14 @@ pub const IMAGE: Limit = Limit {
     bytes: 1_000_000_000,
     what: "image",
     plural: "images",
+};
+
+/// Network weights (the LPIPS safetensors files, `crate::lpips`): 512 MB. The VGG16 file is
+/// 59 MB, AlexNet's 10 MB; the limit leaves room for larger backbones, not for endless inputs.
+pub const WEIGHTS_FILE: Limit = Limit {
+    bytes: 512_000_000,
+    what: "weights file",
+    plural: "weights files",
 };
 
 /// What a path is, links followed (see [`kind_of`]).

@@ -133,6 +133,7 @@ pub mod fnv;
 pub mod gradcheck;
 pub mod init;
 pub mod loss;
+pub mod lpips;
 pub mod memory;
 pub mod mesh;
 pub mod model;

@@ -59,6 +59,18 @@ pub struct TrainSummary {
     /// summaries written before it was recorded.
     #[serde(default)]
     pub command: Vec<String>,
+    /// The LPIPS network of [`TrainSummary::test_lpips`] (`vgg`, the reference's, or `alex`);
+    /// absent when the run had none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lpips_network: Option<String>,
+    /// Mean test-view LPIPS of the final evaluation (8-bit images, [`crate::lpips`]); absent
+    /// when not computed ([`TrainSummary::lpips_note`] says why).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_lpips: Option<f64>,
+    /// Why [`TrainSummary::test_lpips`] is absent (no weights set up, no test views, an image
+    /// too small for the network); absent when it is there.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lpips_note: Option<String>,
 }
 
 /// Reads a number, or `null` (what `serde_json` writes for a NaN or an infinity) as NaN.

@@ -282,3 +282,21 @@ pub fn scene_mismatch(model: &Path, meta: &ModelMeta, path: &Path, scene: &Scene
         )
     })
 }
+
+/// The LPIPS networks of `--lpips=NETWORK` (`bbsplat eval`, `bbsplat train`).
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LpipsNetwork {
+    /// VGG16, images in [0, 1] as given (the reference's evaluation).
+    Vgg,
+    /// AlexNet, images mapped to [-1, 1].
+    Alex,
+}
+
+impl From<LpipsNetwork> for bbsplat::lpips::Variant {
+    fn from(n: LpipsNetwork) -> bbsplat::lpips::Variant {
+        match n {
+            LpipsNetwork::Vgg => bbsplat::lpips::Variant::Vgg,
+            LpipsNetwork::Alex => bbsplat::lpips::Variant::Alex,
+        }
+    }
+}

@@ -1,10 +1,12 @@
 //! `bbsplat render <model> <scene> -o <dir>` and `bbsplat eval <model> <scene>`.
 
 use super::common::{
-    OutputDir, SceneArgs, Split, render_file_name, split_views, start_threads, write_png_atomic, write_text_atomic,
+    LpipsNetwork, OutputDir, SceneArgs, Split, render_file_name, split_views, start_threads, write_png_atomic,
+    write_text_atomic,
 };
 use anyhow::{Context, Result};
-use bbsplat::eval::{EvalReport, EvalView, evaluate_views};
+use bbsplat::eval::{EvalReport, EvalView, evaluate_views, lpips_u8};
+use bbsplat::lpips::Lpips;
 use bbsplat::raster::RenderSettings;
 use clap::Args;
 use glam::Vec3;
@@ -61,6 +63,12 @@ pub struct EvalArgs {
     /// Also write the JSON report to this file.
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// Also compute LPIPS of the 8-bit images: `--lpips` is VGG16 as the reference evaluates
+    /// (images in [0, 1] as given), `--lpips=alex` AlexNet as the `lpips` package is commonly
+    /// used (images in [-1, 1]). Needs the weights, set up once with `python3
+    /// tools/lpips_weights.py` (docs/lpips.md).
+    #[arg(long, value_enum, num_args = 0..=1, require_equals = true, default_missing_value = "vgg", value_name = "NETWORK")]
+    pub lpips: Option<LpipsNetwork>,
 }
 
 fn run_views(
@@ -150,7 +158,23 @@ pub fn render(args: RenderArgs) -> Result<()> {
 
 /// Runs `bbsplat eval`.
 pub fn eval(args: EvalArgs) -> Result<()> {
-    let report = run_views(&args.common, |_, _, _, _, _, _| Ok(()))?;
+    // Loaded first: missing weights refuse the command before anything is rendered.
+    let net = match args.lpips {
+        Some(network) => Some(Lpips::load_cached(network.into())?),
+        None => None,
+    };
+    let mut lpips = Vec::new();
+    let mut report = run_views(&args.common, |_, name, rendered, truth, w, h| {
+        if let Some(net) = &net {
+            let d = lpips_u8(net, rendered, truth, w as usize, h as usize)
+                .with_context(|| format!("LPIPS of view {name}"))?;
+            lpips.push(d);
+        }
+        Ok(())
+    })?;
+    if let Some(net) = &net {
+        report = report.with_lpips(net.variant(), &lpips);
+    }
     let json = serde_json::to_string_pretty(&report).context("encoding the report")?;
     if let Some(path) = &args.report {
         write_text_atomic(path, &json).with_context(|| format!("writing the report {}", path.display()))?;

@@ -192,6 +192,20 @@ pub fn run(args: TrainArgs) -> Result<()> {
         );
         bar
     };
+    // The final evaluation's LPIPS network when asked for; missing or damaged weights are warned
+    // about and noted in the summary, and do not stop the run.
+    let (lpips, lpips_note) = match args.lpips {
+        None => (None, Some("not asked for (bbsplat train --lpips)".to_string())),
+        Some(network) => match bbsplat::lpips::Lpips::load_cached(network.into()) {
+            Ok(net) => (Some(std::sync::Arc::new(net)), None),
+            Err(e) => {
+                if !args.quiet {
+                    eprintln!("warning: {e}; the run goes on without LPIPS");
+                }
+                (None, Some(e.to_string()))
+            }
+        },
+    };
     let run_config = RunConfig {
         eval_every: args.eval_every,
         eval_views: args.eval_views,
@@ -205,6 +219,8 @@ pub fn run(args: TrainArgs) -> Result<()> {
         warnings: scene_warnings,
         automatic,
         earlier_time,
+        lpips,
+        lpips_note,
         step_clock: bbsplat::train::StepClock::Wall,
     };
     let last_record = std::cell::RefCell::new(None::<RunReport>);
@@ -287,8 +303,12 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let scores = if summary.test_views == 0 {
         "no test views to score (--test-every 0 or an empty test list)".to_string()
     } else {
+        let lpips = match (&summary.lpips_network, summary.test_lpips) {
+            (Some(net), Some(d)) => format!(", LPIPS-{net} {d:.4}"),
+            _ => String::new(),
+        };
         format!(
-            "test PSNR {:.2} dB, SSIM {:.4} over {} views",
+            "test PSNR {:.2} dB, SSIM {:.4}{lpips} over {} views",
             summary.test_psnr, summary.test_ssim, summary.test_views
         )
     };

@@ -61,6 +61,13 @@ pub struct TrainArgs {
     /// No progress bar or per-evaluation lines; the final summary is still printed.
     #[arg(long)]
     pub quiet: bool,
+    /// Also compute LPIPS of the final test views (8-bit images, as `bbsplat eval --lpips`) into
+    /// summary.json: `--lpips` is VGG16 as the reference evaluates, `--lpips=alex` AlexNet. Off
+    /// by default: VGG costs seconds per 400×400 view on 2 cores (docs/lpips.md). Needs the
+    /// weights (`python3 tools/lpips_weights.py`); without them the run trains and the
+    /// summary's `lpips_note` says why LPIPS is missing.
+    #[arg(long, value_enum, num_args = 0..=1, require_equals = true, default_missing_value = "vgg", value_name = "NETWORK")]
+    pub lpips: Option<super::common::LpipsNetwork>,
     /// Threshold σ of the texture regulariser (paper Eq. 9) on a billboard's per-view impact
     /// (Σ α·T over its pixels): billboards with less impact have their textures pulled to the
     /// initial state. The paper uses 500; the current reference code 100.

@@ -64,7 +64,9 @@
 //! stays the last one saved (from a step whose parameters were checked). In both cases the
 //! error names the step, the view, the value ([`NonFinite`]) and the checkpoint.
 //!
-//! Evaluation PSNR and SSIM are those of [`crate::eval`] (8-bit images). Deterministic: the same
+//! Evaluation PSNR and SSIM are those of [`crate::eval`] (8-bit images); with
+//! [`RunConfig::lpips`], the final evaluation adds LPIPS ([`crate::eval::lpips_u8`]) to the
+//! summary, or the summary says why it has none. Deterministic: the same
 //! trainer, views and settings give the same files for any thread count, and a run stopped and
 //! continued from its checkpoint writes the same files as one that was not.
 
@@ -72,8 +74,9 @@ use super::resolution::{ResolutionSchedule, downscale_view};
 use super::run_time::RunTime;
 use super::{CheckpointError, NonFinite, ParamGroup, StepLog, TrainError, TrainView, Trainer};
 use crate::billboards::ActivatedBillboards;
-use crate::eval::{EvalView, evaluate_views};
+use crate::eval::{EvalView, evaluate_views, lpips_u8};
 use crate::loss::LossError;
+use crate::lpips::Lpips;
 use crate::model_file::scene_mark::SceneMark;
 use crate::model_file::{ModelFileError, ModelMeta, load_model, save_model};
 use crate::raster::{ActivatedRef, RenderSettings};
@@ -128,6 +131,13 @@ pub struct RunConfig {
     /// ([`super::run_time::read_beside`]): the clocks start from it, so the summary reports the
     /// whole run. `None` (the default): they start from zero.
     pub earlier_time: Option<RunTime>,
+    /// The LPIPS network of the final evaluation (`bbsplat train` gives the reference's VGG
+    /// when its weights are set up). `None` (the default): no LPIPS, and the summary's
+    /// `lpips_note` says why ([`RunConfig::lpips_note`]).
+    pub lpips: Option<Arc<Lpips>>,
+    /// Why [`RunConfig::lpips`] is `None`, for the summary (e.g. the weights are not set up);
+    /// `None`: "no LPIPS network was given to the run".
+    pub lpips_note: Option<String>,
     /// How each step's time is measured: the wall clock (the default), or a cost per pixel for
     /// tests of the time budget that must not depend on the machine's load.
     pub step_clock: StepClock,
@@ -161,6 +171,8 @@ impl Default for RunConfig {
             warnings: Vec::new(),
             automatic: Vec::new(),
             earlier_time: None,
+            lpips: None,
+            lpips_note: None,
             step_clock: StepClock::Wall,
         }
     }
@@ -398,6 +410,26 @@ fn evaluate(
     settings: &RenderSettings,
     stop: &StopSignal,
 ) -> Result<Option<(f64, f64, f64)>, LossError> {
+    Ok(evaluate_with_lpips(set, views, settings, stop, None)?.map(|(p, s, ms, _)| (p, s, ms)))
+}
+
+/// What the final evaluation says of LPIPS: its mean over the test views, or why there is none.
+type LpipsOutcome = Result<f64, String>;
+
+/// Mean PSNR, SSIM, render milliseconds and (with a network) LPIPS of an evaluation.
+type Scores = (f64, f64, f64, Option<LpipsOutcome>);
+
+/// [`evaluate`], and with `lpips` the mean LPIPS of the views (or the first view's error, which
+/// does not fail the evaluation: the summary records it).
+fn evaluate_with_lpips(
+    set: &ActivatedRef<'_>,
+    views: &[&TrainView],
+    settings: &RenderSettings,
+    stop: &StopSignal,
+    lpips: Option<&Lpips>,
+) -> Result<Option<Scores>, LossError> {
+    let mut distances: Vec<f64> = Vec::new();
+    let mut lpips_error: Option<String> = None;
     let report = evaluate_views(
         set,
         views.iter().take_while(|_| !stop.is_requested()).map(|v| EvalView {
@@ -407,12 +439,26 @@ fn evaluate(
             rgb: v.rgb.to_f32(),
         }),
         settings,
-        |_, _| {},
+        |view, rendered| {
+            if let Some(net) = lpips
+                && lpips_error.is_none()
+            {
+                let (w, h) = (view.camera.width as usize, view.camera.height as usize);
+                match lpips_u8(net, rendered, &view.rgb, w, h) {
+                    Ok(d) => distances.push(d),
+                    Err(e) => lpips_error = Some(e.to_string()),
+                }
+            }
+        },
     )?;
     if stop.is_requested() {
         return Ok(None);
     }
-    Ok(Some((report.mean_psnr, report.mean_ssim, report.mean_render_ms)))
+    let lpips = lpips.map(|_| match lpips_error {
+        Some(e) => Err(e),
+        None => Ok(distances.iter().sum::<f64>() / distances.len() as f64),
+    });
+    Ok(Some((report.mean_psnr, report.mean_ssim, report.mean_render_ms, lpips)))
 }
 
 /// Writes `text` to `path` with [`crate::train::checkpoint::write_atomic`] (a temporary file in
@@ -848,16 +894,23 @@ impl<'a> RunState<'a> {
         trainer: &Trainer,
         test: &[TrainView],
         saved: Option<&ActivatedBillboards>,
-    ) -> Result<Option<(f64, f64, f64)>, RunError> {
+    ) -> Result<Option<Scores>, RunError> {
         if test.is_empty() {
-            return Ok(Some((f64::NAN, f64::NAN, f64::NAN)));
+            return Ok(Some((f64::NAN, f64::NAN, f64::NAN, None)));
         }
         let all_test: Vec<&TrainView> = test.iter().collect();
         let set = match saved {
             Some(b) => b.borrowed(),
             None => trainer.activated().borrowed(),
         };
-        Ok(evaluate(&set, &all_test, &self.eval_settings, self.stop)?)
+        let lpips = self.config.lpips.as_deref();
+        Ok(evaluate_with_lpips(
+            &set,
+            &all_test,
+            &self.eval_settings,
+            self.stop,
+            lpips,
+        )?)
     }
 
     /// The end: the final evaluation on the curve, the summary and the record
@@ -867,7 +920,7 @@ impl<'a> RunState<'a> {
         mut self,
         trainer: &Trainer,
         test: &[TrainView],
-        (test_psnr, test_ssim, render_ms): (f64, f64, f64),
+        (test_psnr, test_ssim, render_ms, lpips): Scores,
         model_bytes: u64,
         on_event: &mut dyn FnMut(&TrainEvent),
     ) -> Result<RunOutcome, RunError> {
@@ -904,6 +957,20 @@ impl<'a> RunState<'a> {
             threads: rayon::current_num_threads(),
             curve: self.curve,
             command: config.command.clone(),
+            lpips_network: config.lpips.as_ref().map(|net| net.variant().name().to_string()),
+            test_lpips: lpips.as_ref().and_then(|l| l.as_ref().ok().copied()),
+            lpips_note: match (&lpips, &config.lpips) {
+                (Some(Ok(_)), _) => None,
+                (Some(Err(e)), _) => Some(format!("LPIPS not computed: {e}")),
+                (None, Some(_)) => Some("LPIPS not computed: no test views".into()),
+                (None, None) => Some(format!(
+                    "LPIPS not computed: {}",
+                    config
+                        .lpips_note
+                        .as_deref()
+                        .unwrap_or("no LPIPS network was given to the run")
+                )),
+            },
         };
         let record = RunReport {
             automatic: config.automatic.clone(),

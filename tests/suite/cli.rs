@@ -102,6 +102,8 @@ fn train_render_and_eval_run_on_a_tiny_scene() {
         "--eval-every",
         "10",
         "--quiet",
+        // LPIPS-VGG of the final test views into the summary, when its weights are set up.
+        "--lpips",
     ]);
     assert!(printed.contains("test PSNR"), "{printed}");
     let summary: bbsplat::report::TrainSummary =
@@ -135,6 +137,63 @@ fn train_render_and_eval_run_on_a_tiny_scene() {
         report.mean_psnr,
         summary.test_psnr
     );
+    assert!(report.mean_lpips.is_none() && !json.contains("lpips"), "{json}");
+
+    // `eval --lpips` without the weights refuses, naming the setup command, before rendering.
+    let empty_cache = root.join("no-weights");
+    std::fs::create_dir_all(&empty_cache).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_bbsplat"))
+        .args(["eval", model.to_str().unwrap(), data.to_str().unwrap(), "--lpips"])
+        .env("BBSPLAT_CACHE_DIR", &empty_cache)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && out.stdout.is_empty(), "{stderr}");
+    assert!(
+        stderr.contains("python3 tools/lpips_weights.py") && stderr.contains("lpips-vgg.safetensors"),
+        "{stderr}"
+    );
+    // With the weights (set up by .ci/run): LPIPS-VGG per view, its mean, and train's summary
+    // holds the same mean (the 8-bit model, the same views).
+    let weights = bbsplat::lpips::weights_path(bbsplat::lpips::Variant::Vgg).unwrap();
+    if weights.exists() {
+        let json = run_ok(&[
+            "eval",
+            model.to_str().unwrap(),
+            data.to_str().unwrap(),
+            "--lpips",
+            "--json",
+        ]);
+        let report: bbsplat::eval::EvalReport = serde_json::from_str(&json).unwrap();
+        assert_eq!(report.lpips_network.as_deref(), Some("vgg"));
+        let mean = report.mean_lpips.unwrap();
+        assert!(
+            mean > 0.0 && mean < 1.0 && report.views.iter().all(|v| v.lpips.is_some()),
+            "{json}"
+        );
+        assert_eq!(summary.lpips_network.as_deref(), Some("vgg"));
+        assert!(
+            (summary.test_lpips.unwrap() - mean).abs() < 1e-12,
+            "{:?} {mean}",
+            summary.test_lpips
+        );
+        // AlexNet needs 31 pixels a side: the 24-pixel views are refused, naming the view.
+        let out = Command::new(env!("CARGO_BIN_EXE_bbsplat"))
+            .args(["eval", model.to_str().unwrap(), data.to_str().unwrap(), "--lpips=alex"])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && stderr.contains("LPIPS of view") && stderr.contains("too small"),
+            "{stderr}"
+        );
+    } else {
+        assert!(summary.test_lpips.is_none() && summary.lpips_note.as_deref().unwrap().contains("lpips_weights.py"));
+        super::lpips::missing(
+            "train_render_and_eval_run_on_a_tiny_scene (LPIPS part)",
+            "no LPIPS weights set up",
+        );
+    }
     std::fs::remove_dir_all(&root).ok();
 }
 

@@ -25,12 +25,14 @@ fn report_means_and_table() {
             psnr: 20.0,
             ssim: 0.5,
             render_ms: 1.0,
+            lpips: None,
         },
         ViewMetrics {
             name: "b".into(),
             psnr: 30.0,
             ssim: 0.7,
             render_ms: 3.0,
+            lpips: None,
         },
     ];
     let r = EvalReport::from_views(views);
@@ -38,6 +40,20 @@ fn report_means_and_table() {
     assert!((r.mean_ssim - 0.6).abs() < 1e-12);
     let t = r.table();
     assert_eq!(t.lines().count(), 4);
+    assert!(
+        !t.contains("LPIPS") && !serde_json::to_string(&r).unwrap().contains("lpips"),
+        "{t}"
+    );
+    // With LPIPS: a column, per-view values and their mean, in the table and the JSON.
+    let r = r.with_lpips(bbsplat::lpips::Variant::Vgg, &[0.1, 0.3]);
+    assert!((r.mean_lpips.unwrap() - 0.2).abs() < 1e-12 && r.views[1].lpips == Some(0.3));
+    let t = r.table();
+    assert!(
+        t.lines().next().unwrap().ends_with("LPIPS-vgg") && t.lines().last().unwrap().ends_with("0.2000"),
+        "{t}"
+    );
+    let back: EvalReport = serde_json::from_str(&serde_json::to_string(&r).unwrap()).unwrap();
+    assert_eq!(back, r);
     assert!(t.lines().last().unwrap().starts_with("mean"));
 }
 

@@ -35,6 +35,7 @@ mod init_scene;
 mod layering;
 mod loss_normal_consistency;
 mod loss_ssim;
+mod lpips;
 mod memory;
 mod mesh;
 mod model;

@@ -29,6 +29,9 @@ fn summary_round_trips_through_json() {
             ssim: 0.8,
         }],
         command: vec!["bbsplat".into(), "train".into()],
+        lpips_network: Some("vgg".into()),
+        test_lpips: Some(0.125),
+        lpips_note: None,
     };
     let text = serde_json::to_string(&s).unwrap();
     assert_eq!(serde_json::from_str::<TrainSummary>(&text).unwrap(), s);

@@ -53,6 +53,9 @@ mod fake {
             threads: 2,
             curve,
             command: Vec::new(),
+            lpips_network: None,
+            test_lpips: None,
+            lpips_note: None,
         }
     }
 
