@@ -23,6 +23,7 @@ mod export;
 mod export_blender;
 mod export_browser;
 mod export_fixtures;
+mod export_splat;
 mod external_tool;
 mod f64_reference;
 #[cfg(feature = "cli")]
@@ -77,6 +78,7 @@ mod stage_rotation;
 mod stage_sh;
 mod stage_splat_transform;
 mod strategies;
+mod splat_reference;
 mod sweep;
 mod text_bom;
 mod train_adam;
