@@ -69,6 +69,11 @@ pub struct ExportArgs {
 
 /// Runs `bbsplat export`.
 pub fn run(args: ExportArgs) -> Result<()> {
+    anyhow::ensure!(
+        args.max_fit_error.is_finite() && args.max_fit_error >= 0.0,
+        "--max-fit-error must be a finite number ≥ 0, got {}",
+        args.max_fit_error
+    );
     start_threads(args.threads)?;
     let (model, meta, scene) = args.scene_args.load_model_and_scene(&args.model, &args.scene)?;
     anyhow::ensure!(
@@ -131,11 +136,6 @@ pub fn run(args: ExportArgs) -> Result<()> {
             }
         }
         ExportFormat::SplatPly | ExportFormat::GltfSplat => {
-            anyhow::ensure!(
-                args.max_fit_error.is_finite() && args.max_fit_error >= 0.0,
-                "--max-fit-error must be a finite number ≥ 0, got {}",
-                args.max_fit_error
-            );
             let fit = FitRule {
                 max_gaussians: args.max_gaussians as usize,
                 max_error: args.max_fit_error,

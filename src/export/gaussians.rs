@@ -17,7 +17,9 @@
 //!   billboard has fewer than [`FitRule::max_gaussians`] Gaussians and its fit error is above
 //!   [`FitRule::max_error`], the group with the largest share of the error is cut in two by the
 //!   line through its mean across its principal axis (the eigenvector of its covariance with the
-//!   larger eigenvalue); a group that cannot be cut (one side empty) is left as it is.
+//!   larger eigenvalue), each half getting its moment Gaussian; the cut is kept only if it lowers
+//!   the billboard's fit error, and a group whose cut was refused (or that cannot be cut: one
+//!   side empty) is not tried again. So the error never grows with the cap.
 //! - **Fit error** ([`fit_error`]): at every texel centre `p`, the Gaussians' alpha
 //!   `α(p) = 1 − Π_k (1 − o_k·g_k(p))` (how they composite over each other) against the texture's
 //!   `min(a(p), 0.99)`, and their premultiplied colour `α(p)·Σ_k c_k o_k g_k(p) / Σ_k o_k g_k(p)`
@@ -296,16 +298,26 @@ pub fn fit_billboard(texture: &[[f32; 4]], ts: usize, rule: &FitRule) -> (Vec<Uv
                 _ => Some((k, e)),
             });
         let Some((k, _)) = worst else { break };
-        match cut(&groups[k].0, ts, &groups[k].1) {
-            Some((low, high)) => {
-                let (Some(gl), Some(gh)) = (moment_gaussian(texture, ts, &low), moment_gaussian(texture, ts, &high)) else {
-                    groups[k].2 = false;
-                    continue;
-                };
-                groups[k] = (low, gl, true);
-                groups.insert(k + 1, (high, gh, true));
-            }
-            None => groups[k].2 = false,
+        let halves = cut(&groups[k].0, ts, &groups[k].1).and_then(|(low, high)| {
+            let gl = moment_gaussian(texture, ts, &low)?;
+            let gh = moment_gaussian(texture, ts, &high)?;
+            Some(((low, gl), (high, gh)))
+        });
+        let Some(((low, gl), (high, gh))) = halves else {
+            groups[k].2 = false;
+            continue;
+        };
+        // The cut is kept only if it lowers the billboard's error (two overlapping halves can
+        // fit worse than their parent); otherwise the group is not cut again.
+        let mut trial = gaussians.clone();
+        trial[k] = gl;
+        trial.insert(k + 1, gh);
+        let trial_total: f64 = texel_errors(texture, ts, &trial).iter().map(|&e| f64::from(e)).sum();
+        if trial_total < total {
+            groups[k] = (low, gl, true);
+            groups.insert(k + 1, (high, gh, true));
+        } else {
+            groups[k].2 = false;
         }
     }
     let kept: Vec<UvGaussian> = gaussians_of(&groups)

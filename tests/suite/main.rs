@@ -24,6 +24,7 @@ mod export_blender;
 mod export_browser;
 mod export_fixtures;
 mod export_splat;
+mod export_splat_browser;
 mod external_tool;
 mod f64_reference;
 #[cfg(feature = "cli")]

@@ -8,8 +8,9 @@
 //!   `s` has the covariance `Σ = R·diag(s²)·Rᵀ`; with the camera's world-to-view rotation `W` and
 //!   the view-space mean `(x, y, z)` (culled when `z ≤ 0.2`, the billboard renderer's near plane),
 //!   the image-plane covariance is `J·W·Σ·Wᵀ·Jᵀ + 0.3·I` (the Inria dilation of 0.3 pixel², which
-//!   Babylon.js and most viewers add too), `J = [[fx/z, 0, −fx·x/z²], [0, fy/z, −fy·y/z²]]`,
-//!   the mean projects to `(fx·x/z + cx, fy·y/z + cy)`;
+//!   Babylon.js and most viewers add too), `J = [[fx/z, 0, −fx·x/z²], [0, fy/z, −fy·y/z²]]` with
+//!   `x/z` and `y/z` clamped to `±1.3·W/(2fx)` and `±1.3·H/(2fy)` (Inria's guard for Gaussians
+//!   beside the frustum), the mean projects to `(fx·x/z + cx, fy·y/z + cy)`;
 //! - the extent is `3·√λ_max` pixels (the 3σ cut-off); pixel `(i, j)` is sampled at
 //!   `(i + 0.5, j + 0.5)` (the crate's camera convention);
 //! - colour: the real SH (3DGS basis, the f64 reference's [`sh_basis64`]) at the direction from
@@ -130,9 +131,14 @@ pub fn render_splats(splats: &[Splat64], camera: &Camera, sh_degree: u32, backgr
                     .sum();
             }
         }
+        // The Jacobian at the mean, its x/z and y/z clamped to 1.3 times the half field of view
+        // (as Inria's rasterizer does, so that Gaussians beside the frustum do not blow up).
+        let (limit_x, limit_y) = (1.3 * 0.5 * cam.width as f64 / cam.fx, 1.3 * 0.5 * cam.height as f64 / cam.fy);
+        let tx = (view[0] / z).clamp(-limit_x, limit_x) * z;
+        let ty = (view[1] / z).clamp(-limit_y, limit_y) * z;
         let jac = [
-            [cam.fx / z, 0.0, -cam.fx * view[0] / (z * z)],
-            [0.0, cam.fy / z, -cam.fy * view[1] / (z * z)],
+            [cam.fx / z, 0.0, -cam.fx * tx / (z * z)],
+            [0.0, cam.fy / z, -cam.fy * ty / (z * z)],
         ];
         let mut cov2 = [[0.0f64; 2]; 2];
         for i in 0..2 {
