@@ -14,6 +14,9 @@
 //! each 3DGS image beside its render (left 3DGS, right `bbsplat render`).
 //! Used for the figures of docs/export.md.
 
+// The included test files are written for the test suite's lints (tests/suite/main.rs).
+#![allow(clippy::needless_range_loop, clippy::len_without_is_empty)]
+
 #[allow(dead_code)]
 #[path = "../tests/suite/f64_reference/renderer.rs"]
 pub mod renderer;
@@ -49,10 +52,9 @@ fn run() -> Result<(), String> {
     let bytes = std::fs::read(ply).map_err(|e| format!("{ply}: {e}"))?;
     let splats = splat_reference::splats_from_ply(&bytes);
     let meta_path = model.join("bbsplat.json");
-    let meta: serde_json::Value = serde_json::from_slice(
-        &std::fs::read(&meta_path).map_err(|e| format!("{}: {e}", meta_path.display()))?,
-    )
-    .map_err(|e| format!("{}: {e}", meta_path.display()))?;
+    let meta: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&meta_path).map_err(|e| format!("{}: {e}", meta_path.display()))?)
+            .map_err(|e| format!("{}: {e}", meta_path.display()))?;
     let background: [f64; 3] = serde_json::from_value(meta["background"].clone()).map_err(|e| e.to_string())?;
     let sh_degree = meta["sh_degree"].as_u64().ok_or("no sh_degree")? as u32;
     let options = bbsplat::scene::LoadOptions {
@@ -72,7 +74,9 @@ fn run() -> Result<(), String> {
     let mut total = 0.0;
     let mut count = 0;
     for (view, png) in scene.test.iter().zip(&names).take(views) {
-        let expected = image::open(png).map_err(|e| format!("{}: {e}", png.display()))?.to_rgb8();
+        let expected = image::open(png)
+            .map_err(|e| format!("{}: {e}", png.display()))?
+            .to_rgb8();
         let cam = &view.camera;
         if expected.dimensions() != (cam.width, cam.height) {
             return Err(format!("{}: not {}×{}", png.display(), cam.width, cam.height));

@@ -125,7 +125,10 @@ pub fn run(args: ExportArgs) -> Result<()> {
     let files = match args.format {
         ExportFormat::Obj | ExportFormat::Glb => {
             let mesh = plane_mesh(&set, &kept)?;
-            println!("{kept_line}; atlas {}×{}", mesh.atlas.layout.width, mesh.atlas.layout.height);
+            println!(
+                "{kept_line}; atlas {}×{}",
+                mesh.atlas.layout.width, mesh.atlas.layout.height
+            );
             create_output(&args.output)?;
             if args.format == ExportFormat::Obj {
                 write_obj(&args.output, "planes_mesh", &mesh)?

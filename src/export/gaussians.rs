@@ -143,7 +143,12 @@ pub fn symmetric_eigen_2x2(m: Vec3) -> (f32, f32, Vec2) {
     } else {
         let v1 = Vec2::new(b, l1 - a);
         let v2 = Vec2::new(l1 - c, b);
-        if v1.length_squared() >= v2.length_squared() { v1 } else { v2 }.normalize()
+        if v1.length_squared() >= v2.length_squared() {
+            v1
+        } else {
+            v2
+        }
+        .normalize()
     };
     let e = if e.x < 0.0 || (e.x == 0.0 && e.y < 0.0) { -e } else { e };
     (l1, l2.max(0.0), e)
@@ -224,7 +229,11 @@ fn texel_errors(texture: &[[f32; 4]], ts: usize, gaussians: &[UvGaussian]) -> Ve
                 colour += a * g.colour;
             }
             let alpha = 1.0 - transmittance;
-            let premultiplied = if weight > 0.0 { colour * (alpha / weight) } else { Vec3::ZERO };
+            let premultiplied = if weight > 0.0 {
+                colour * (alpha / weight)
+            } else {
+                Vec3::ZERO
+            };
             let target_alpha = texture[i][3].min(MAX_OPACITY);
             let target = Vec3::from_slice(&texture[i][..3]) * target_alpha;
             (alpha - target_alpha).powi(2) + (premultiplied - target).length_squared()

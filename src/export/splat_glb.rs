@@ -104,7 +104,14 @@ pub fn splat_glb_bytes(set: &GaussianSet, cameras: &[NamedCamera<'_>], backgroun
     let scales = set.scales.iter().flat_map(|s| s.to_array());
     let scale = push_attribute(&mut bin, &mut views, &mut accessors, scales, n, "VEC3");
     attributes.insert(format!("{EXTENSION}:SCALE"), json!(scale));
-    let opacity = push_attribute(&mut bin, &mut views, &mut accessors, set.opacities.iter().copied(), n, "SCALAR");
+    let opacity = push_attribute(
+        &mut bin,
+        &mut views,
+        &mut accessors,
+        set.opacities.iter().copied(),
+        n,
+        "SCALAR",
+    );
     attributes.insert(format!("{EXTENSION}:OPACITY"), json!(opacity));
     for (k, name) in sh_attribute_names(set.sh_degree).into_iter().enumerate() {
         let coeffs = (0..n).flat_map(|i| {

@@ -151,11 +151,24 @@ fn export_writes_the_gaussian_formats() {
         .unwrap_or_else(|| panic!("{printed}"));
     assert!(printed.contains("(at most 8)"), "{printed}");
     let ply = std::fs::read(dir.join("gaussians.ply")).unwrap();
-    assert!(printed.contains(&format!("gaussians.ply ({} bytes)", ply.len())), "{printed}");
+    assert!(
+        printed.contains(&format!("gaussians.ply ({} bytes)", ply.len())),
+        "{printed}"
+    );
     let header = String::from_utf8_lossy(&ply[..200]).to_string();
     assert!(header.contains(&format!("element vertex {count}\n")), "{header}");
     // One Gaussian per billboard at most: no more Gaussians than kept billboards.
-    let one = run_ok(&["export", model_s, data_s, "-o", dir_s, "--format", "splat-ply", "--max-gaussians", "1"]);
+    let one = run_ok(&[
+        "export",
+        model_s,
+        data_s,
+        "-o",
+        dir_s,
+        "--format",
+        "splat-ply",
+        "--max-gaussians",
+        "1",
+    ]);
     let kept: usize = one.split_whitespace().nth(1).unwrap().parse().unwrap();
     let one_count: usize = one
         .lines()
@@ -169,12 +182,32 @@ fn export_writes_the_gaussian_formats() {
     let doc: serde_json::Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
     assert_eq!(doc["extensionsUsed"], serde_json::json!(["KHR_gaussian_splatting"]));
     assert_eq!(doc["meshes"][0]["primitives"][0]["mode"], 0);
-    assert_eq!(doc["scenes"][0]["extras"]["gaussians"].as_u64().unwrap() as usize, count);
+    assert_eq!(
+        doc["scenes"][0]["extras"]["gaussians"].as_u64().unwrap() as usize,
+        count
+    );
     let scene = bbsplat::scene::load(&data, &bbsplat::scene::LoadOptions::default()).unwrap();
-    assert_eq!(doc["cameras"].as_array().unwrap().len(), scene.train.len() + scene.test.len());
+    assert_eq!(
+        doc["cameras"].as_array().unwrap().len(),
+        scene.train.len() + scene.test.len()
+    );
     // Bad fit flags are refused before anything is written.
-    for bad in [["--max-gaussians", "0"], ["--max-fit-error", "-1"], ["--max-fit-error", "NaN"]] {
-        let (ok, err) = run(&["export", model_s, data_s, "-o", dir_s, "--format", "gltf-splat", bad[0], bad[1]]);
+    for bad in [
+        ["--max-gaussians", "0"],
+        ["--max-fit-error", "-1"],
+        ["--max-fit-error", "NaN"],
+    ] {
+        let (ok, err) = run(&[
+            "export",
+            model_s,
+            data_s,
+            "-o",
+            dir_s,
+            "--format",
+            "gltf-splat",
+            bad[0],
+            bad[1],
+        ]);
         assert!(!ok && err.contains(bad[0]), "{bad:?}: {err}");
     }
     std::fs::remove_dir_all(&root).ok();

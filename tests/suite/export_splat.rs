@@ -10,8 +10,7 @@ use bbsplat::ActivatedBillboards;
 use bbsplat::billboards::{RandomSceneConfig, random_scene, random_scene_camera};
 use bbsplat::camera::Camera;
 use bbsplat::export::gaussians::{
-    FitRule, GaussianSet, UvGaussian, billboards_as_gaussians, fit_billboard, fit_error, moment_gaussian,
-    texel_centre,
+    FitRule, GaussianSet, UvGaussian, billboards_as_gaussians, fit_billboard, fit_error, moment_gaussian, texel_centre,
 };
 use bbsplat::export::glb::NamedCamera;
 use bbsplat::export::splat_glb::{sh_attribute_names, splat_glb_bytes};
@@ -111,7 +110,10 @@ fn moments_recover_a_sampled_gaussian() {
     let tent = h * h / 6.0;
     assert!((g.mean - truth.mean).length() < 2e-3, "{g:?}");
     let expected = truth.covariance + Vec3::new(tent, 0.0, tent);
-    assert!((g.covariance - expected).abs().max_element() < 2e-3, "{g:?} vs {expected}");
+    assert!(
+        (g.covariance - expected).abs().max_element() < 2e-3,
+        "{g:?} vs {expected}"
+    );
     let widened = truth.opacity
         * ((truth.covariance.x * truth.covariance.z - truth.covariance.y.powi(2))
             / (expected.x * expected.z - expected.y.powi(2)))
@@ -133,7 +135,14 @@ fn splitting_lowers_the_error_within_the_cap() {
         let texture = &set.textures[b * ts * ts..(b + 1) * ts * ts];
         let mut last = f32::INFINITY;
         for cap in [1, 2, 4, 8, 16] {
-            let (fit, error) = fit_billboard(texture, ts, &FitRule { max_gaussians: cap, max_error: 0.0 });
+            let (fit, error) = fit_billboard(
+                texture,
+                ts,
+                &FitRule {
+                    max_gaussians: cap,
+                    max_error: 0.0,
+                },
+            );
             assert!(fit.len() <= cap);
             assert_eq!(error, fit_error(texture, ts, &fit));
             // A cut is kept only when it lowers the error (up to the Gaussians dropped below
@@ -148,7 +157,11 @@ fn splitting_lowers_the_error_within_the_cap() {
     }
     // One or two blobs and a colour gradient: 16 Gaussians fit better than one. Measured: mean
     // fit error 0.0200 with one Gaussian, 0.0168 with up to 16 (2026-12-02).
-    eprintln!("mean fit error: 1 Gaussian {:.4}, up to 16: {:.4}", first / 40.0, last_total / 40.0);
+    eprintln!(
+        "mean fit error: 1 Gaussian {:.4}, up to 16: {:.4}",
+        first / 40.0,
+        last_total / 40.0
+    );
     assert!(last_total < 0.9 * first, "{first} → {last_total}");
     // A transparent billboard has no Gaussian.
     let clear = vec![[0.5f32, 0.5, 0.5, 0.0]; ts * ts];
@@ -198,7 +211,12 @@ fn an_independent_3dgs_renderer_draws_the_gaussians_like_the_billboards() {
         let b = owner(&gaussians, i);
         plain.sh[48 * i..48 * i + 3].copy_from_slice(&set.sh[48 * b..48 * b + 3]);
     }
-    let without = to_bytes(&render_splats(&splats_from_ply(&splat_ply_bytes(&plain)), &camera, 3, bg));
+    let without = to_bytes(&render_splats(
+        &splats_from_ply(&splat_ply_bytes(&plain)),
+        &camera,
+        3,
+        bg,
+    ));
     let psnr_without = psnr_u8(&without, &expected);
     eprintln!("  without the texture colour: {psnr_without:.2} dB");
     assert!(psnr_without < MIN_FIT_PSNR - 6.0, "{psnr_without:.2} dB");
@@ -222,7 +240,10 @@ fn the_ply_has_the_inria_layout() {
     let bytes = splat_ply_bytes(&gaussians);
     let header_end = bytes.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
     let header = std::str::from_utf8(&bytes[..header_end]).unwrap();
-    let mut expected = format!("ply\nformat binary_little_endian 1.0\nelement vertex {}\n", gaussians.len());
+    let mut expected = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {}\n",
+        gaussians.len()
+    );
     let mut names = vec!["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
         .into_iter()
         .map(String::from)
@@ -271,7 +292,10 @@ fn python_with_plyfile(test: &str) -> Option<PathBuf> {
         "{test}: python3 has no plyfile package (BBSPLAT_REQUIRE_TOOLS is set; .ci/run installs plyfile==1.1.5)"
     );
     use std::io::Write;
-    let _ = writeln!(std::io::stderr(), "SKIPPED {test}: the Python package plyfile is not installed");
+    let _ = writeln!(
+        std::io::stderr(),
+        "SKIPPED {test}: the Python package plyfile is not installed"
+    );
     None
 }
 
@@ -314,7 +338,12 @@ json.dump(out, sys.stdout)
     for i in 0..gaussians.len() {
         let row = splat_row(&gaussians, i);
         for (k, value) in row.iter().enumerate() {
-            assert_eq!(bits[k][i].as_u64().unwrap() as u32, value.to_bits(), "Gaussian {i}, {}", splat_property_names()[k]);
+            assert_eq!(
+                bits[k][i].as_u64().unwrap() as u32,
+                value.to_bits(),
+                "Gaussian {i}, {}",
+                splat_property_names()[k]
+            );
         }
     }
     std::fs::remove_dir_all(&dir).ok();
@@ -376,13 +405,19 @@ fn the_glb_follows_khr_gaussian_splatting() {
     let scale = read("KHR_gaussian_splatting:SCALE");
     let opacity = read("KHR_gaussian_splatting:OPACITY");
     let colour = read("COLOR_0");
-    assert_eq!((position.len(), rotation.len(), scale.len(), opacity.len(), colour.len()), (3 * n, 4 * n, 3 * n, n, 4 * n));
+    assert_eq!(
+        (position.len(), rotation.len(), scale.len(), opacity.len(), colour.len()),
+        (3 * n, 4 * n, 3 * n, n, 4 * n)
+    );
     for i in 0..n {
         assert_eq!(&position[3 * i..3 * i + 3], &gaussians.positions[i].to_array());
         let q = gaussians.rotations[i];
         assert_eq!(&rotation[4 * i..4 * i + 4], &[q.x, q.y, q.z, q.w]);
         let r = &rotation[4 * i..4 * i + 4];
-        assert!((r.iter().map(|c| c * c).sum::<f32>() - 1.0).abs() < 1e-5, "a unit quaternion");
+        assert!(
+            (r.iter().map(|c| c * c).sum::<f32>() - 1.0).abs() < 1e-5,
+            "a unit quaternion"
+        );
         // Linear, non-negative scales.
         assert_eq!(&scale[3 * i..3 * i + 3], &gaussians.scales[i].to_array());
         assert!(scale[3 * i..3 * i + 3].iter().all(|&s| s > 0.0));
@@ -394,11 +429,19 @@ fn the_glb_follows_khr_gaussian_splatting() {
         let coeffs = read(name);
         assert_eq!(coeffs.len(), 3 * n);
         for i in 0..n {
-            assert_eq!(&coeffs[3 * i..3 * i + 3], &gaussians.sh_of(i)[3 * k..3 * k + 3], "{name}");
+            assert_eq!(
+                &coeffs[3 * i..3 * i + 3],
+                &gaussians.sh_of(i)[3 * k..3 * k + 3],
+                "{name}"
+            );
         }
     }
     // POSITION has its bounds (core glTF requires them).
-    let accessor = gltf.document.accessors().nth(attributes["POSITION"].as_u64().unwrap() as usize).unwrap();
+    let accessor = gltf
+        .document
+        .accessors()
+        .nth(attributes["POSITION"].as_u64().unwrap() as usize)
+        .unwrap();
     assert!(accessor.min().is_some() && accessor.max().is_some());
     // The camera node.
     assert_eq!(doc["nodes"][1]["name"], "scene");
@@ -409,7 +452,10 @@ fn the_glb_follows_khr_gaussian_splatting() {
     let low_bytes = splat_glb_bytes(&low, &cameras, Vec3::ZERO);
     let low_len = u32::from_le_bytes(low_bytes[12..16].try_into().unwrap()) as usize;
     let low_doc: serde_json::Value = serde_json::from_slice(&low_bytes[20..20 + low_len]).unwrap();
-    let count = low_doc["meshes"][0]["primitives"][0]["attributes"].as_object().unwrap().len();
+    let count = low_doc["meshes"][0]["primitives"][0]["attributes"]
+        .as_object()
+        .unwrap()
+        .len();
     assert_eq!(count, 2 + 3 + 4);
 }
 
@@ -429,7 +475,11 @@ pub fn npm_package(test: &str, package: &str) -> Option<PathBuf> {
         dir.display()
     );
     use std::io::Write;
-    let _ = writeln!(std::io::stderr(), "SKIPPED {test}: the npm package {package} is not in {}", dir.display());
+    let _ = writeln!(
+        std::io::stderr(),
+        "SKIPPED {test}: the npm package {package} is not in {}",
+        dir.display()
+    );
     None
 }
 
@@ -490,7 +540,11 @@ validator.validateBytes(new Uint8Array(fs.readFileSync(process.argv[2])), { maxI
     expected.sort();
     unknown_attributes.sort();
     assert_eq!(unknown_attributes, expected);
-    assert_eq!(issues["numErrors"].as_u64().unwrap() as usize, expected.len(), "{issues}");
+    assert_eq!(
+        issues["numErrors"].as_u64().unwrap() as usize,
+        expected.len(),
+        "{issues}"
+    );
     assert_eq!(issues["numWarnings"], 0, "{issues}");
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -24,7 +24,14 @@ const MIN_PSNR: f64 = 26.0;
 /// The page that draws `glb` with Babylon.js (scripts from `babylon_dir` and `loaders_dir`) at
 /// the camera `#camera=K` of the file (K-th glTF camera), on a `width × height` canvas over
 /// `background`.
-pub fn babylon_page(glb: &Path, babylon_dir: &Path, loaders_dir: &Path, width: u32, height: u32, background: Vec3) -> String {
+pub fn babylon_page(
+    glb: &Path,
+    babylon_dir: &Path,
+    loaders_dir: &Path,
+    width: u32,
+    height: u32,
+    background: Vec3,
+) -> String {
     let bytes = std::fs::read(glb).unwrap();
     format!(
         r#"<!doctype html>
@@ -115,14 +122,26 @@ fn babylon_draws_the_gaussian_glb_like_the_renderer() {
     let psnr = psnr_bytes(shot.as_raw(), &expected);
     // The independent 3DGS renderer on the same Gaussians, for the record.
     let splats = splats_from_ply(&splat_ply_bytes(&gaussians));
-    let reference = to_bytes(&render_splats(&splats, &camera, 3, background.to_array().map(f64::from)));
+    let reference = to_bytes(&render_splats(
+        &splats,
+        &camera,
+        3,
+        background.to_array().map(f64::from),
+    ));
     let to_reference = psnr_bytes(shot.as_raw(), &reference);
     eprintln!("Babylon.js vs bbsplat render: {psnr:.2} dB; vs the tests' 3DGS renderer: {to_reference:.2} dB");
-    assert!(psnr > MIN_PSNR, "Babylon.js screenshot vs renderer: {psnr:.2} dB (kept in {})", dir.display());
+    assert!(
+        psnr > MIN_PSNR,
+        "Babylon.js screenshot vs renderer: {psnr:.2} dB (kept in {})",
+        dir.display()
+    );
     // The other camera's view is a different image: the comparison can fail.
     let wrong = super::export_browser::render_bytes(&set, &other, background);
     let wrong_psnr = psnr_bytes(shot.as_raw(), &wrong);
-    assert!(wrong_psnr < MIN_PSNR - 6.0, "{wrong_psnr:.2} dB against the other camera");
+    assert!(
+        wrong_psnr < MIN_PSNR - 6.0,
+        "{wrong_psnr:.2} dB against the other camera"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -148,10 +167,17 @@ fn measure_babylon_on_an_export() {
     let dir = std::env::temp_dir().join(format!("bbsplat-splat-measure-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let page = dir.join("babylon.html");
-    std::fs::write(&page, babylon_page(&glb, &babylon, &loaders, width, height, Vec3::from_array(background))).unwrap();
+    std::fs::write(
+        &page,
+        babylon_page(&glb, &babylon, &loaders, width, height, Vec3::from_array(background)),
+    )
+    .unwrap();
     let shot = screenshot(&chromium, &page, camera, width, height, &dir.join("shot.png"));
     let psnr = psnr_bytes(shot.as_raw(), render.as_raw());
-    println!("{}: camera {camera}, Babylon.js vs the render: {psnr:.2} dB", glb.display());
+    println!(
+        "{}: camera {camera}, Babylon.js vs the render: {psnr:.2} dB",
+        glb.display()
+    );
     if let Ok(out) = std::env::var("BBSPLAT_SPLAT_SHOT") {
         let mut both = image::RgbImage::new(2 * width, height);
         for y in 0..height {

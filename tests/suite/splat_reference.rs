@@ -37,7 +37,11 @@ pub struct Splat64 {
 /// property names and the rows.
 pub fn parse_float_ply(bytes: &[u8]) -> (Vec<String>, Vec<Vec<f32>>) {
     let end = b"end_header\n";
-    let header_len = bytes.windows(end.len()).position(|w| w == end).expect("an end_header line") + end.len();
+    let header_len = bytes
+        .windows(end.len())
+        .position(|w| w == end)
+        .expect("an end_header line")
+        + end.len();
     let header = std::str::from_utf8(&bytes[..header_len]).expect("an ASCII header");
     let mut lines = header.lines();
     assert_eq!(lines.next(), Some("ply"));
@@ -57,7 +61,11 @@ pub fn parse_float_ply(bytes: &[u8]) -> (Vec<String>, Vec<Vec<f32>>) {
     assert_eq!(body.len(), count * names.len() * 4, "body size");
     let rows = body
         .chunks_exact(names.len() * 4)
-        .map(|r| r.chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().unwrap())).collect())
+        .map(|r| {
+            r.chunks_exact(4)
+                .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+                .collect()
+        })
         .collect();
     (names, rows)
 }
@@ -66,8 +74,20 @@ pub fn parse_float_ply(bytes: &[u8]) -> (Vec<String>, Vec<Vec<f32>>) {
 /// logs, `rot_*` = `w, x, y, z`).
 pub fn splats_from_ply(bytes: &[u8]) -> Vec<Splat64> {
     let (names, rows) = parse_float_ply(bytes);
-    let col = |name: &str| names.iter().position(|n| n == name).unwrap_or_else(|| panic!("no {name}"));
-    let (x, dc, rest, op, sc, rot) = (col("x"), col("f_dc_0"), col("f_rest_0"), col("opacity"), col("scale_0"), col("rot_0"));
+    let col = |name: &str| {
+        names
+            .iter()
+            .position(|n| n == name)
+            .unwrap_or_else(|| panic!("no {name}"))
+    };
+    let (x, dc, rest, op, sc, rot) = (
+        col("x"),
+        col("f_dc_0"),
+        col("f_rest_0"),
+        col("opacity"),
+        col("scale_0"),
+        col("rot_0"),
+    );
     rows.iter()
         .map(|r| {
             let v = |k: usize| f64::from(r[k]);
@@ -133,7 +153,10 @@ pub fn render_splats(splats: &[Splat64], camera: &Camera, sh_degree: u32, backgr
         }
         // The Jacobian at the mean, its x/z and y/z clamped to 1.3 times the half field of view
         // (as Inria's rasterizer does, so that Gaussians beside the frustum do not blow up).
-        let (limit_x, limit_y) = (1.3 * 0.5 * cam.width as f64 / cam.fx, 1.3 * 0.5 * cam.height as f64 / cam.fy);
+        let (limit_x, limit_y) = (
+            1.3 * 0.5 * cam.width as f64 / cam.fx,
+            1.3 * 0.5 * cam.height as f64 / cam.fy,
+        );
         let tx = (view[0] / z).clamp(-limit_x, limit_x) * z;
         let ty = (view[1] / z).clamp(-limit_y, limit_y) * z;
         let jac = [
@@ -156,7 +179,11 @@ pub fn render_splats(splats: &[Splat64], camera: &Camera, sh_degree: u32, backgr
         let mid = 0.5 * (a + c);
         let lambda = mid + (mid * mid - det).max(0.1).sqrt();
         let dir = {
-            let d = [s.position[0] - centre[0], s.position[1] - centre[1], s.position[2] - centre[2]];
+            let d = [
+                s.position[0] - centre[0],
+                s.position[1] - centre[1],
+                s.position[2] - centre[2],
+            ];
             let n = dot(d, d).sqrt();
             [d[0] / n, d[1] / n, d[2] / n]
         };
@@ -220,7 +247,13 @@ pub fn render_splats(splats: &[Splat64], camera: &Camera, sh_degree: u32, backgr
     colour
         .iter()
         .zip(&transmittance)
-        .flat_map(|(c, &t)| [c[0] + t * background[0], c[1] + t * background[1], c[2] + t * background[2]])
+        .flat_map(|(c, &t)| {
+            [
+                c[0] + t * background[0],
+                c[1] + t * background[1],
+                c[2] + t * background[2],
+            ]
+        })
         .collect()
 }
 
