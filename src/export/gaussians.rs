@@ -167,8 +167,8 @@ pub fn symmetric_eigen_2x2(m: Vec3) -> (f32, f32, Vec2) {
 /// assert!((g.mean - glam::Vec2::new(-1.0 + 2.0 * h, -1.0 + h)).length() < 1e-6);
 /// assert!((g.covariance.x - h * h / 6.0).abs() < 1e-7 && g.covariance.y == 0.0);
 /// assert_eq!(g.colour, glam::Vec3::X);
-/// // Mass 0.9·h² spread over 2π·h²/6: clamped to 0.99.
-/// assert_eq!(g.opacity, 0.99);
+/// // Mass 0.9·h² over the Gaussian integral 2π·√det = 2π·h²/6: peak 0.9·6/(2π) ≈ 0.86.
+/// assert!((g.opacity - 0.9 * 6.0 / (2.0 * std::f32::consts::PI)).abs() < 1e-5);
 /// ```
 pub fn moment_gaussian(texture: &[[f32; 4]], ts: usize, members: &[usize]) -> Option<UvGaussian> {
     let mut mass = 0.0f64;
