@@ -192,23 +192,14 @@ fn export_writes_the_gaussian_formats() {
         scene.train.len() + scene.test.len()
     );
     // Bad fit flags are refused before anything is written.
-    for bad in [
-        ["--max-gaussians", "0"],
-        ["--max-fit-error", "-1"],
-        ["--max-fit-error", "NaN"],
+    for (flag, value) in [
+        ("--max-gaussians", "0"),
+        ("--max-fit-error", "-1"),
+        ("--max-fit-error", "NaN"),
     ] {
-        let (ok, err) = run(&[
-            "export",
-            model_s,
-            data_s,
-            "-o",
-            dir_s,
-            "--format",
-            "gltf-splat",
-            bad[0],
-            bad[1],
-        ]);
-        assert!(!ok && err.contains(bad[0]), "{bad:?}: {err}");
+        let arg = format!("{flag}={value}");
+        let (ok, err) = run(&["export", model_s, data_s, "-o", dir_s, "--format", "gltf-splat", &arg]);
+        assert!(!ok && err.contains(flag), "{arg}: {err}");
     }
     std::fs::remove_dir_all(&root).ok();
 }
