@@ -36,9 +36,9 @@ pub struct NamedCamera<'a> {
 const GLB_MAGIC: u32 = 0x4654_6C67; // "glTF"
 const CHUNK_JSON: u32 = 0x4E4F_534A; // "JSON"
 const CHUNK_BIN: u32 = 0x004E_4942; // "BIN\0"
-const FLOAT: u32 = 5126;
+pub(crate) const FLOAT: u32 = 5126;
 const UNSIGNED_INT: u32 = 5125;
-const ARRAY_BUFFER: u32 = 34962;
+pub(crate) const ARRAY_BUFFER: u32 = 34962;
 const ELEMENT_ARRAY_BUFFER: u32 = 34963;
 const LINEAR: u32 = 9729;
 const CLAMP_TO_EDGE: u32 = 33071;
@@ -63,13 +63,15 @@ pub fn gltf_camera_rotation(camera: &Camera) -> Quat {
     Quat::from_mat3(&g).normalize()
 }
 
-fn pad_to_4(bytes: &mut Vec<u8>, fill: u8) {
+/// Pads `bytes` with `fill` to a multiple of 4 bytes (glTF's chunk and buffer-view alignment).
+pub(crate) fn pad_to_4(bytes: &mut Vec<u8>, fill: u8) {
     while !bytes.len().is_multiple_of(4) {
         bytes.push(fill);
     }
 }
 
-fn camera_node(c: &NamedCamera<'_>, index: usize) -> (Value, Value) {
+/// The glTF camera and its node for dataset camera `c`, camera index `index` (module docs).
+pub(crate) fn camera_node(c: &NamedCamera<'_>, index: usize) -> (Value, Value) {
     let cam = c.camera;
     let (w, h) = (cam.width as f32, cam.height as f32);
     let camera = json!({
@@ -179,7 +181,13 @@ pub fn glb_bytes(mesh: &PlaneMesh, cameras: &[NamedCamera<'_>], background: Vec3
     if !gl_cameras.is_empty() {
         doc["cameras"] = Value::Array(gl_cameras);
     }
-    let mut json_bytes = serde_json::to_vec(&doc).expect("a JSON value always serialises");
+    Ok(glb_container(&doc, &bin))
+}
+
+/// The GLB container of the JSON document `doc` and the binary buffer `bin` (already padded to 4
+/// bytes): the 12-byte header, the JSON chunk (padded with spaces), the BIN chunk.
+pub(crate) fn glb_container(doc: &Value, bin: &[u8]) -> Vec<u8> {
+    let mut json_bytes = serde_json::to_vec(doc).expect("a JSON value always serialises");
     pad_to_4(&mut json_bytes, b' ');
 
     let total = 12 + 8 + json_bytes.len() + 8 + bin.len();
@@ -191,8 +199,8 @@ pub fn glb_bytes(mesh: &PlaneMesh, cameras: &[NamedCamera<'_>], background: Vec3
     for word in [bin.len() as u32, CHUNK_BIN] {
         out.extend_from_slice(&word.to_le_bytes());
     }
-    out.extend_from_slice(&bin);
-    Ok(out)
+    out.extend_from_slice(bin);
+    out
 }
 
 /// Writes [`glb_bytes`] to `path`; returns the size written.

@@ -1,5 +1,7 @@
 //! Export of a trained model to ordinary graphics software: textured planes (OBJ + MTL + PNG, and
-//! glTF 2.0 binary), a self-contained WebGL2 viewer page, and an orbit camera path for clips.
+//! glTF 2.0 binary), flat 3D Gaussians fitted to the billboards (3DGS PLY, glTF
+//! `KHR_gaussian_splatting`), a self-contained WebGL2 viewer page, and an orbit camera path for
+//! clips.
 //!
 //! Method: spec §10.3 (the reference's `render.py --save_planes`). Conventions (also in
 //! `docs/export.md`):
@@ -21,13 +23,20 @@
 //! - **glTF**: the same quads and atlas PNG, texture `t = 1 − v` (glTF's origin is the top);
 //!   alpha BLEND, double-sided, `KHR_materials_unlit`; every dataset camera a perspective
 //!   camera node (OpenCV axes turned to glTF's: the camera looks along its −z, y up).
+//! - **Gaussians** ([`gaussians`]): each kept billboard becomes at most `max_gaussians` flat
+//!   Gaussians fitted to its alpha and colour textures (moments, split across the principal axis
+//!   where the fit is poor); written as the Inria 3DGS PLY ([`splat_ply`]) or a glTF with
+//!   `KHR_gaussian_splatting` ([`splat_glb`]).
 
 pub mod atlas;
+pub mod gaussians;
 pub mod glb;
 pub mod obj;
 pub mod orbit;
 pub mod planes;
 pub mod prune;
+pub mod splat_glb;
+pub mod splat_ply;
 pub mod viewer;
 
 use std::path::{Path, PathBuf};

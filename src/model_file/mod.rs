@@ -361,9 +361,7 @@ fn encode(dir: &Path, model: &RawBillboards, meta: &ModelMeta) -> Result<Vec<(&'
         row.extend_from_slice(&[0.0; 3]);
         let sh = &model.sh[i * SH_FLOATS..(i + 1) * SH_FLOATS];
         row.extend_from_slice(&sh[..3]);
-        for c in 0..3 {
-            row.extend((1..16).map(|k| sh[3 * k + c]));
-        }
+        row.extend_from_slice(&crate::stages::sh::channel_major_rest(sh));
         row.extend_from_slice(&model.log_scales[i].to_array());
         row.extend_from_slice(&model.quaternions[i]);
         debug_assert_eq!(row.len(), ply::PLY_FLOATS);

@@ -91,6 +91,26 @@ pub fn sh_to_rgb(s: f32) -> f32 {
     s * SH_C0 + 0.5
 }
 
+/// The 45 higher-degree coefficients of `coeffs` (48 floats, `[coeff][rgb]`) in the channel-major
+/// order of the 3DGS PLY (`f_rest_{15·c + k − 1}` = coefficient `k ≥ 1` of channel `c`): the
+/// layout of the model's and the splat export's PLY files.
+///
+/// ```
+/// use bbsplat::stages::sh::channel_major_rest;
+/// let coeffs: Vec<f32> = (0..48).map(|i| i as f32).collect();
+/// let rest = channel_major_rest(&coeffs);
+/// assert_eq!((rest[0], rest[1], rest[15], rest[44]), (3.0, 6.0, 4.0, 47.0));
+/// ```
+pub fn channel_major_rest(coeffs: &[f32]) -> [f32; 45] {
+    let mut rest = [0.0f32; 45];
+    for c in 0..3 {
+        for k in 1..SH_COEFFS {
+            rest[15 * c + k - 1] = coeffs[3 * k + c];
+        }
+    }
+    rest
+}
+
 #[inline]
 fn check_degree(degree: u32) {
     assert!(degree <= SH_MAX_DEGREE, "SH degree must be 0..=3, got {degree}");

@@ -131,3 +131,75 @@ fn export_view_and_orbit_write_their_files() {
     assert_eq!(decoder.into_frames().count(), 6);
     std::fs::remove_dir_all(&root).ok();
 }
+
+#[test]
+fn export_writes_the_gaussian_formats() {
+    let root = temp("export-splat");
+    let data = export_demo(&root, 24, 100);
+    let out = root.join("out");
+    let data_s = data.to_str().unwrap();
+    let model = train_five_steps(&data, &out, 80);
+    let model_s = model.to_str().unwrap();
+    let dir = root.join("splat");
+    let dir_s = dir.to_str().unwrap();
+    // The command line's default cap is the library's.
+    assert_eq!(bbsplat::export::gaussians::FitRule::default().max_gaussians, 8);
+    let printed = run_ok(&["export", model_s, data_s, "-o", dir_s, "--format", "splat-ply"]);
+    let count: usize = printed
+        .lines()
+        .find_map(|l| l.split(" Gaussians: ").next()?.parse().ok())
+        .unwrap_or_else(|| panic!("{printed}"));
+    assert!(printed.contains("(at most 8)"), "{printed}");
+    let ply = std::fs::read(dir.join("gaussians.ply")).unwrap();
+    assert!(
+        printed.contains(&format!("gaussians.ply ({} bytes)", ply.len())),
+        "{printed}"
+    );
+    let header = String::from_utf8_lossy(&ply[..200]).to_string();
+    assert!(header.contains(&format!("element vertex {count}\n")), "{header}");
+    // One Gaussian per billboard at most: no more Gaussians than kept billboards.
+    let one = run_ok(&[
+        "export",
+        model_s,
+        data_s,
+        "-o",
+        dir_s,
+        "--format",
+        "splat-ply",
+        "--max-gaussians",
+        "1",
+    ]);
+    let kept: usize = one.split_whitespace().nth(1).unwrap().parse().unwrap();
+    let one_count: usize = one
+        .lines()
+        .find_map(|l| l.split(" Gaussians: ").next()?.parse().ok())
+        .unwrap();
+    assert!(one_count <= kept && one_count <= count, "{one}");
+    // The glTF: the extension, POINTS, one camera per dataset view.
+    run_ok(&["export", model_s, data_s, "-o", dir_s, "--format", "gltf-splat"]);
+    let glb = std::fs::read(dir.join("gaussians.glb")).unwrap();
+    let json_len = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+    let doc: serde_json::Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
+    assert_eq!(doc["extensionsUsed"], serde_json::json!(["KHR_gaussian_splatting"]));
+    assert_eq!(doc["meshes"][0]["primitives"][0]["mode"], 0);
+    assert_eq!(
+        doc["scenes"][0]["extras"]["gaussians"].as_u64().unwrap() as usize,
+        count
+    );
+    let scene = bbsplat::scene::load(&data, &bbsplat::scene::LoadOptions::default()).unwrap();
+    assert_eq!(
+        doc["cameras"].as_array().unwrap().len(),
+        scene.train.len() + scene.test.len()
+    );
+    // Bad fit flags are refused before anything is written.
+    for (flag, value) in [
+        ("--max-gaussians", "0"),
+        ("--max-fit-error", "-1"),
+        ("--max-fit-error", "NaN"),
+    ] {
+        let arg = format!("{flag}={value}");
+        let (ok, err) = run(&["export", model_s, data_s, "-o", dir_s, "--format", "gltf-splat", &arg]);
+        assert!(!ok && err.contains(flag), "{arg}: {err}");
+    }
+    std::fs::remove_dir_all(&root).ok();
+}

@@ -74,7 +74,7 @@ pub fn psnr_bytes(a: &[u8], b: &[u8]) -> f64 {
 }
 
 /// Screenshots `page` at dataset camera `camera` with headless Chromium at `width × height`.
-fn screenshot(chromium: &Path, page: &Path, camera: usize, width: u32, height: u32, out: &Path) -> image::RgbImage {
+pub fn screenshot(chromium: &Path, page: &Path, camera: usize, width: u32, height: u32, out: &Path) -> image::RgbImage {
     let profile = out.with_extension("profile");
     let status = Command::new(chromium)
         .args([

@@ -9,7 +9,7 @@ mod discontinuities;
 mod float32_effects;
 mod forward;
 mod gradients;
-mod renderer;
+pub mod renderer;
 mod scenes;
 
 use bbsplat::billboards::ActivatedBillboards;

@@ -23,6 +23,8 @@ mod export;
 mod export_blender;
 mod export_browser;
 mod export_fixtures;
+mod export_splat;
+mod export_splat_browser;
 mod external_tool;
 mod f64_reference;
 #[cfg(feature = "cli")]
@@ -71,6 +73,7 @@ mod scene_registration;
 mod scene_support;
 mod scene_unfold;
 mod shared_data;
+mod splat_reference;
 mod stage_bilinear;
 mod stage_composite;
 mod stage_lanes;
