@@ -62,7 +62,9 @@ mod scene_duplicates;
 mod scene_exif;
 mod scene_fuzz;
 mod scene_image_io;
+mod scene_llff;
 mod scene_load;
+mod scene_neus;
 mod scene_real_data;
 mod scene_registration;
 #[allow(dead_code)]
