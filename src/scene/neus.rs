@@ -80,7 +80,7 @@ pub(crate) fn read_npz(file: &Path) -> Result<Npz, SceneError> {
 }
 
 /// Member `name` of `npz` as a 4×4 matrix (a 3×4 one gets the row `0 0 0 1`).
-fn matrix(npz: &Npz, file: &Path, name: &str) -> Result<DMat4, SceneError> {
+pub(crate) fn matrix(npz: &Npz, file: &Path, name: &str) -> Result<DMat4, SceneError> {
     let npy_error = |problem| SceneError::Npy {
         file: file.to_path_buf(),
         array: Some(name.to_string()),

@@ -35,8 +35,9 @@ pub struct Decomposed {
 /// Decomposes the 3×4 projection `p` (rows). See the module documentation.
 ///
 /// # Errors
-/// A message when `p` is not finite or its 3×3 block is singular (relative determinant under
-/// 1e-12).
+/// A message when `p` is not finite or its 3×3 block is singular or nearly so
+/// (`|det M| < 1e-6 · |m₁|·|m₂|·|m₃|`, the rows `mᵢ`; a real camera's ratio is near 1), or when
+/// rounding left the rotation's rows off orthonormal by more than 1e-9.
 pub fn decompose_projection(p: &[[f64; 4]; 3]) -> Result<Decomposed, String> {
     if p.iter().flatten().any(|v| !v.is_finite()) {
         return Err("the projection matrix is not finite".into());
@@ -46,9 +47,11 @@ pub fn decompose_projection(p: &[[f64; 4]; 3]) -> Result<Decomposed, String> {
     let mut p4 = DVec3::new(p[0][3], p[1][3], p[2][3]);
     let det = m1.dot(m2.cross(m3));
     let size = m1.length() * m2.length() * m3.length();
-    if !(det.abs() > 1e-12 * size) {
+    if !(det.abs() > 1e-6 * size) {
         return Err(format!(
-            "the 3x3 block of the projection matrix is singular (determinant {det:e})"
+            "the 3x3 block of the projection matrix is singular or nearly so (determinant {det:e}, \
+             {:.1e} of the product of its row lengths)",
+            det.abs() / size
         ));
     }
     if det < 0.0 {
@@ -83,6 +86,11 @@ pub fn decompose_projection(p: &[[f64; 4]; 3]) -> Result<Decomposed, String> {
     };
     if out.k.iter().flatten().chain(out.translation.iter()).any(|v| !v.is_finite()) {
         return Err("the projection matrix does not decompose into finite intrinsics".into());
+    }
+    let r = DMat3::from_cols(r1, r2, r3);
+    let off = (r.transpose() * r - DMat3::IDENTITY).to_cols_array();
+    if off.iter().any(|v| !(v.abs() <= 1e-9)) {
+        return Err("the projection matrix is too ill-conditioned to decompose into a rotation".into());
     }
     Ok(out)
 }

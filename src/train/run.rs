@@ -387,6 +387,7 @@ fn evaluate(
             camera: &v.camera,
             // An 8-bit view is converted for its evaluation only.
             rgb: v.rgb.to_f32(),
+            mask: None,
         }),
         settings,
         |_, _| {},
