@@ -291,7 +291,9 @@ pub fn run(args: TrainArgs) -> Result<()> {
         )
     };
     let scores = match masked_summary(&args.output, &test, &test_masks)? {
-        Some((psnr, ssim, n)) => format!("{scores}; masked (over the mask pixels) PSNR {psnr:.2} dB, SSIM {ssim:.4} over {n} views"),
+        Some((psnr, ssim, n)) => {
+            format!("{scores}; masked (over the mask pixels) PSNR {psnr:.2} dB, SSIM {ssim:.4} over {n} views")
+        }
         None => scores,
     };
     println!(
@@ -345,7 +347,11 @@ fn describe_record(record: &RunReport) -> String {
 /// ([`bbsplat::eval::masked_image_metrics`]), added to `<out>/summary.json` as `masked_test`
 /// (beside the whole-image `test_psnr` / `test_ssim`, which are unchanged); returns the means and
 /// the number of views measured.
-fn masked_summary(out: &std::path::Path, test: &[TrainView], masks: &[Option<Vec<u8>>]) -> Result<Option<(f64, f64, usize)>> {
+fn masked_summary(
+    out: &std::path::Path,
+    test: &[TrainView],
+    masks: &[Option<Vec<u8>>],
+) -> Result<Option<(f64, f64, usize)>> {
     if masks.iter().all(Option::is_none) {
         return Ok(None);
     }

@@ -108,7 +108,8 @@ pub fn npy(data: &[u8]) {
         assert_eq!(array.data.len(), array.shape.iter().product::<usize>());
         let header = np::parse_header(data).expect("a parsed array has a header");
         if header.dtype == np::Dtype::F64 {
-            let back = np::parse_npy(&np::write_npy_f64(&array.shape, &array.data)).expect("re-parse of a written array");
+            let back =
+                np::parse_npy(&np::write_npy_f64(&array.shape, &array.data)).expect("re-parse of a written array");
             let bits = |a: &np::NpyArray| a.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
             assert_eq!((back.shape.clone(), bits(&back)), (array.shape.clone(), bits(&array)));
         }
@@ -140,7 +141,12 @@ pub fn npz(data: &[u8]) {
         let p = (world * scale).transpose().to_cols_array_2d();
         if let Ok(d) = projection::decompose_projection(&[p[0], p[1], p[2]]) {
             let r = glam::DMat3::from_cols_array_2d(&d.rotation);
-            assert!((r * r.transpose() - glam::DMat3::IDENTITY).to_cols_array().iter().all(|v| v.abs() < 1e-6));
+            assert!(
+                (r * r.transpose() - glam::DMat3::IDENTITY)
+                    .to_cols_array()
+                    .iter()
+                    .all(|v| v.abs() < 1e-6)
+            );
             assert!((r.determinant() - 1.0).abs() < 1e-6);
             assert!(d.k[0][0] > 0.0 && d.k[1][1] > 0.0 && d.k[2][2] == 1.0);
         }

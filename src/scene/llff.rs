@@ -114,16 +114,11 @@ pub fn parse_poses(bytes: &[u8], file: &Path) -> Result<Vec<LlffPose>, SceneErro
             }
         }
         if pose.hwf.iter().any(|v| *v <= 0.0) {
-            return Err(bad(format!(
-                "height, width and focal {:?} must be positive",
-                pose.hwf
-            )));
+            return Err(bad(format!("height, width and focal {:?} must be positive", pose.hwf)));
         }
         let [near, far] = pose.bounds;
         if !(near > 0.0 && far > near) {
-            return Err(bad(format!(
-                "depth bounds near {near}, far {far}: need 0 < near < far"
-            )));
+            return Err(bad(format!("depth bounds near {near}, far {far}: need 0 < near < far")));
         }
         poses.push(pose);
     }
@@ -168,7 +163,11 @@ fn choose_images_dir(dir: &Path, n: usize, downscale: u32) -> Result<(PathBuf, b
             path: dir.to_path_buf(),
             looked_for: format!(
                 "an image folder (images or images_N) holding the {n} images of {POSES_FILE}; found {}",
-                if found.is_empty() { "none".to_string() } else { found.join(", ") }
+                if found.is_empty() {
+                    "none".to_string()
+                } else {
+                    found.join(", ")
+                }
             ),
         }),
     }
@@ -277,16 +276,9 @@ pub(crate) fn load(file: &Path, options: &LoadOptions, warnings: &mut Vec<String
     let bounds: Vec<[f64; 2]> = poses.iter().map(|p| p.bounds).collect();
     let indexed: Vec<(View, [f64; 2])> = views.into_iter().zip(bounds).collect();
     let (train, test) = split::split_every(indexed, options.test_every);
-    let points = frustum_points(
-        &train.iter().map(|(v, b)| (v, *b)).collect::<Vec<_>>(),
-        POINTS_PER_VIEW,
-    );
+    let points = frustum_points(&train.iter().map(|(v, b)| (v, *b)).collect::<Vec<_>>(), POINTS_PER_VIEW);
     Ok(Scene {
-        name: dir
-            .file_name()
-            .and_then(|n| n.to_str())
-            .unwrap_or("scene")
-            .to_string(),
+        name: dir.file_name().and_then(|n| n.to_str()).unwrap_or("scene").to_string(),
         format: SceneFormat::Llff,
         source: file.to_path_buf(),
         background: options.background,

@@ -64,7 +64,10 @@ pub fn find_mask(dir: &Path, image_name: &str) -> Option<PathBuf> {
                     .extension()
                     .and_then(|e| e.to_str())
                     .is_some_and(|e| MASK_EXTENSIONS.contains(&e));
-                let num = p.file_stem().and_then(|s| s.to_str()).and_then(|s| s.parse::<u64>().ok());
+                let num = p
+                    .file_stem()
+                    .and_then(|s| s.to_str())
+                    .and_then(|s| s.parse::<u64>().ok());
                 ext_ok && num == Some(number)
             })
             .collect();
@@ -72,10 +75,7 @@ pub fn find_mask(dir: &Path, image_name: &str) -> Option<PathBuf> {
         found.into_iter().next()
     });
     by_number.or_else(|| {
-        let p = folder.join(format!(
-            "{}.png",
-            relative.file_name()?.to_str()?
-        ));
+        let p = folder.join(format!("{}.png", relative.file_name()?.to_str()?));
         names_a_file(&p).then_some(p)
     })
 }

@@ -207,11 +207,7 @@ pub(crate) fn load(file: &Path, options: &LoadOptions, warnings: &mut Vec<String
     let views = views::load_all(sources, options, warnings)?;
     let (train, test) = split::split_every(views, options.test_every);
     Ok(Scene {
-        name: dir
-            .file_name()
-            .and_then(|n| n.to_str())
-            .unwrap_or("scene")
-            .to_string(),
+        name: dir.file_name().and_then(|n| n.to_str()).unwrap_or("scene").to_string(),
         format: SceneFormat::Neus,
         source: file.to_path_buf(),
         background: options.background,

@@ -47,7 +47,7 @@ pub fn decompose_projection(p: &[[f64; 4]; 3]) -> Result<Decomposed, String> {
     let mut p4 = DVec3::new(p[0][3], p[1][3], p[2][3]);
     let det = m1.dot(m2.cross(m3));
     let size = m1.length() * m2.length() * m3.length();
-    if !(det.abs() > 1e-6 * size) {
+    if det.is_nan() || size.is_nan() || det.abs() <= 1e-6 * size {
         return Err(format!(
             "the 3x3 block of the projection matrix is singular or nearly so (determinant {det:e}, \
              {:.1e} of the product of its row lengths)",
@@ -84,12 +84,18 @@ pub fn decompose_projection(p: &[[f64; 4]; 3]) -> Result<Decomposed, String> {
         rotation: [r1.to_array(), r2.to_array(), r3.to_array()],
         translation: t.to_array(),
     };
-    if out.k.iter().flatten().chain(out.translation.iter()).any(|v| !v.is_finite()) {
+    if out
+        .k
+        .iter()
+        .flatten()
+        .chain(out.translation.iter())
+        .any(|v| !v.is_finite())
+    {
         return Err("the projection matrix does not decompose into finite intrinsics".into());
     }
     let r = DMat3::from_cols(r1, r2, r3);
     let off = (r.transpose() * r - DMat3::IDENTITY).to_cols_array();
-    if off.iter().any(|v| !(v.abs() <= 1e-9)) {
+    if off.iter().any(|v| v.is_nan() || v.abs() > 1e-9) {
         return Err("the projection matrix is too ill-conditioned to decompose into a rotation".into());
     }
     Ok(out)

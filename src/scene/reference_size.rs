@@ -69,7 +69,7 @@ pub fn scale_to_image(k: &Intrinsics, reference: ReferenceSize, width: u32, heig
             let (fx, fy) = (2.0 * k.cx / w, 2.0 * k.cy / h);
             let n = fx.round();
             let off = |f: f64| (f - n).abs() / n;
-            if !(n >= 1.0) || off(fx) > FACTOR_TOLERANCE || off(fy) > FACTOR_TOLERANCE {
+            if n.is_nan() || n < 1.0 || off(fx) > FACTOR_TOLERANCE || off(fy) > FACTOR_TOLERANCE {
                 return Err(format!(
                     "the principal point ({}, {}) is not near the centre of the {width}x{height} image or of a size \
                      an integer number of times larger (2·cx/width = {fx:.3}, 2·cy/height = {fy:.3}): the size the \

@@ -199,8 +199,14 @@ fn load_view(s: ViewSource, options: &LoadOptions) -> Result<LoadedView, SceneEr
             Some(if undistort::needs_undistortion(&intrinsics.distortion) {
                 let grey = Image::from_raw(iw, ih, m.iter().flat_map(|&v| [v; 3]).collect());
                 let f = undistort::resample(&plan, &grey, [0.0; 3]);
-                let small = image_io::resize_area(&f, plan.width as usize, plan.height as usize, nw as usize, nh as usize);
-                image_io::quantise(nw, nh, &small).as_bytes().iter().step_by(3).copied().collect()
+                let small =
+                    image_io::resize_area(&f, plan.width as usize, plan.height as usize, nw as usize, nh as usize);
+                image_io::quantise(nw, nh, &small)
+                    .as_bytes()
+                    .iter()
+                    .step_by(3)
+                    .copied()
+                    .collect()
             } else {
                 image_io::resize_area_u8(&m, iw as usize, ih as usize, nw as usize, nh as usize)
             })

@@ -77,7 +77,10 @@ fn masked_metrics_count_only_the_mask_pixels() {
     }
     let whole = bbsplat::eval::image_metrics(&render, &truth, w, h).unwrap();
     let masked = masked_image_metrics(&render, &truth, &mask, w, h).unwrap().unwrap();
-    assert!(whole.psnr.is_finite() && masked.psnr.is_infinite(), "{whole:?} {masked:?}");
+    assert!(
+        whole.psnr.is_finite() && masked.psnr.is_infinite(),
+        "{whole:?} {masked:?}"
+    );
     // SSIM windows reach across the mask edge: masked SSIM is higher, still below 1.
     assert!(masked.ssim > whole.ssim && masked.ssim < 1.0, "{whole:?} {masked:?}");
     // An error inside the mask: the masked MSE is the squared error over 3 x the mask pixels.
@@ -86,10 +89,23 @@ fn masked_metrics_count_only_the_mask_pixels() {
     let d = bbsplat::loss::psnr::quantize_u8(inside[0]) as f64 - bbsplat::loss::psnr::quantize_u8(truth[0]) as f64;
     let mse = (d / 255.0).powi(2) / (3 * w * h / 2) as f64;
     let m = masked_image_metrics(&inside, &truth, &mask, w, h).unwrap().unwrap();
-    assert!((m.psnr + 10.0 * mse.log10()).abs() < 1e-5, "{} against {}", m.psnr, -10.0 * mse.log10());
+    assert!(
+        (m.psnr + 10.0 * mse.log10()).abs() < 1e-5,
+        "{} against {}",
+        m.psnr,
+        -10.0 * mse.log10()
+    );
     assert!(masked_image_metrics(&render, &truth, &mask[1..], w, h).is_err());
     // The report and the table label them.
-    let cam = Camera::look_at(glam::Vec3::Z * 3.0, glam::Vec3::ZERO, glam::Vec3::Y, 8.0, 8.0, w as u32, h as u32);
+    let cam = Camera::look_at(
+        glam::Vec3::Z * 3.0,
+        glam::Vec3::ZERO,
+        glam::Vec3::Y,
+        8.0,
+        8.0,
+        w as u32,
+        h as u32,
+    );
     let b = bbsplat::billboards::ActivatedBillboards::empty(4);
     let v = EvalView {
         name: "v",

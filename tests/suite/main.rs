@@ -11,6 +11,7 @@ mod cli_bounds;
 #[cfg(feature = "cli")]
 mod cli_export;
 mod cli_full_disk;
+mod cli_masks;
 #[cfg(feature = "cli")]
 mod cli_reliability;
 mod cli_resume_time;

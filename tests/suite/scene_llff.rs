@@ -55,10 +55,19 @@ fn fern_cameras_face_forward_and_see_the_bounded_points() {
                     .is_some_and(|(x, y)| (0.0..504.0).contains(&x) && (0.0..378.0).contains(&y))
             })
             .count();
-        assert!(inside * 2 > sample.len(), "{}: {inside} of {} points in the image", v.name, sample.len());
+        assert!(
+            inside * 2 > sample.len(),
+            "{}: {inside} of {} points in the image",
+            v.name,
+            sample.len()
+        );
     }
     // The point colours are the images' (not a grey placeholder).
-    let spread = points.colours.iter().map(|c| c[1]).fold((1.0f32, 0.0f32), |(a, b), g| (a.min(g), b.max(g)));
+    let spread = points
+        .colours
+        .iter()
+        .map(|c| c[1])
+        .fold((1.0f32, 0.0f32), |(a, b), g| (a.min(g), b.max(g)));
     assert!(spread.1 - spread.0 > 0.3, "colours {spread:?}");
 }
 
@@ -117,8 +126,20 @@ fn synthetic_round_trip_recovers_the_cameras() {
     for (v, c) in views.iter().zip(&cams) {
         let got = &v.camera;
         assert_eq!((got.fx, got.fy, got.cx, got.cy), (50.0, 50.0, 40.0, 30.0), "{}", v.name);
-        assert!((got.rotation - c.rotation).to_cols_array().iter().fold(0.0f32, |m, v| m.max(v.abs())) < 1e-6, "{}", v.name);
-        assert!((got.translation - c.translation).abs().max_element() < 1e-6, "{}", v.name);
+        assert!(
+            (got.rotation - c.rotation)
+                .to_cols_array()
+                .iter()
+                .fold(0.0f32, |m, v| m.max(v.abs()))
+                < 1e-6,
+            "{}",
+            v.name
+        );
+        assert!(
+            (got.translation - c.translation).abs().max_element() < 1e-6,
+            "{}",
+            v.name
+        );
     }
     // Points in front of every camera between the bounds.
     for p in &scene.points.as_ref().unwrap().positions {
@@ -187,7 +208,10 @@ fn bad_pose_files_are_refused_naming_the_file() {
     };
     let e = with(write_npy_f64(&[9, 15], &good[..135]));
     assert!(matches!(npy(&e), NpyError::Shape { .. }), "{e}");
-    assert!(e.to_string().contains("poses_bounds.npy") && e.to_string().contains("(N, 17)"), "{e}");
+    assert!(
+        e.to_string().contains("poses_bounds.npy") && e.to_string().contains("(N, 17)"),
+        "{e}"
+    );
     let body: Vec<u8> = good.iter().flat_map(|v| v.to_be_bytes()).collect();
     let e = with(write_npy_raw(">f8", &[9, 17], &body));
     assert!(matches!(npy(&e), NpyError::BigEndian(_)), "{e}");
@@ -205,15 +229,24 @@ fn bad_pose_files_are_refused_naming_the_file() {
     let mut bounds = good.clone();
     bounds[17 * 3 + 15] = 30.0;
     let e = with(write_npy_f64(&[9, 17], &bounds));
-    assert!(matches!(e, SceneError::Parse { .. }) && e.to_string().contains("row 3"), "{e}");
+    assert!(
+        matches!(e, SceneError::Parse { .. }) && e.to_string().contains("row 3"),
+        "{e}"
+    );
     let mut skewed = good.clone();
     skewed[17 * 5] = 2.0;
     let e = with(write_npy_f64(&[9, 17], &skewed));
-    assert!(e.to_string().contains("row 5") && e.to_string().contains("not a rotation"), "{e}");
+    assert!(
+        e.to_string().contains("row 5") && e.to_string().contains("not a rotation"),
+        "{e}"
+    );
     let mut nan = good.clone();
     nan[17 * 2 + 3] = f64::NAN;
     let e = with(write_npy_f64(&[9, 17], &nan));
-    assert!(e.to_string().contains("row 2") && e.to_string().contains("not finite"), "{e}");
+    assert!(
+        e.to_string().contains("row 2") && e.to_string().contains("not finite"),
+        "{e}"
+    );
     // Another aspect ratio than hwf's.
     let mut tall = good.clone();
     for r in 0..9 {

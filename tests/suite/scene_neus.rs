@@ -22,7 +22,10 @@ fn dtu_scan65_cameras_look_at_the_unit_sphere() {
     };
     let scene = load(&dir, &quiet()).unwrap();
     assert_eq!(scene.format, SceneFormat::Neus);
-    println!("dtu_scan65: view 0 {:?}; warnings {:?}", scene.test[0].camera, scene.warnings);
+    println!(
+        "dtu_scan65: view 0 {:?}; warnings {:?}",
+        scene.test[0].camera, scene.warnings
+    );
     // 49 views, index % 8 == 0 held out: 0, 8, ..., 48.
     assert_eq!((scene.train.len(), scene.test.len()), (42, 7));
     assert_eq!(scene.test[1].name, "000008.png");
@@ -30,18 +33,36 @@ fn dtu_scan65_cameras_look_at_the_unit_sphere() {
         let c = &v.camera;
         assert_eq!((c.width, c.height), (400, 300), "{}", v.name);
         // The 1600x1200 intrinsics scaled by 1/4: fx about 2890/4, principal point near the centre.
-        assert!(c.fx > 600.0 && c.fx < 800.0 && (c.fx - c.fy).abs() < 0.01 * c.fx, "{}: {c:?}", v.name);
-        assert!((c.cx - 200.0).abs() < 30.0 && (c.cy - 150.0).abs() < 30.0, "{}: {c:?}", v.name);
+        assert!(
+            c.fx > 600.0 && c.fx < 800.0 && (c.fx - c.fy).abs() < 0.01 * c.fx,
+            "{}: {c:?}",
+            v.name
+        );
+        assert!(
+            (c.cx - 200.0).abs() < 30.0 && (c.cy - 150.0).abs() < 30.0,
+            "{}: {c:?}",
+            v.name
+        );
         // Outside the unit sphere, looking at its centre: the origin projects near the image
         // centre, and points of the sphere are in front of the camera and inside the image.
         let distance = c.centre().length();
         assert!(distance > 1.5 && distance < 10.0, "{}: centre at {distance}", v.name);
         let (x, y) = c.project(Vec3::ZERO).expect("the origin is in front");
-        assert!((x - 200.0).abs() < 80.0 && (y - 150.0).abs() < 60.0, "{}: origin at ({x}, {y})", v.name);
+        assert!(
+            (x - 200.0).abs() < 80.0 && (y - 150.0).abs() < 60.0,
+            "{}: origin at ({x}, {y})",
+            v.name
+        );
         for p in [Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z] {
             let q = p * 0.5;
-            let (qx, qy) = c.project(q).unwrap_or_else(|| panic!("{}: {q} behind the camera", v.name));
-            assert!((0.0..400.0).contains(&qx) && (0.0..300.0).contains(&qy), "{}: {q} at ({qx}, {qy})", v.name);
+            let (qx, qy) = c
+                .project(q)
+                .unwrap_or_else(|| panic!("{}: {q} behind the camera", v.name));
+            assert!(
+                (0.0..400.0).contains(&qx) && (0.0..300.0).contains(&qy),
+                "{}: {q} at ({qx}, {qy})",
+                v.name
+            );
         }
         // The object mask: loaded, the object at the image's middle, the corners background,
         // and the image composited on the black background outside it.
@@ -59,11 +80,24 @@ fn dtu_scan65_cameras_look_at_the_unit_sphere() {
                 (px - x).hypot(py - y) > radius * 1.05
             })
             .count();
-        assert!(outside * 1000 < object, "{}: {outside} of {object} mask pixels outside the unit sphere's image", v.name);
-        let (mx, my) = (0..400 * 300).filter(|&i| mask[i] >= 128).fold((0.0, 0.0), |(a, b), i| {
-            (a + (i % 400) as f32 / object as f32, b + (i / 400) as f32 / object as f32)
-        });
-        assert!((mx - x).hypot(my - y) < 0.5 * radius, "{}: mask centroid ({mx}, {my}), origin at ({x}, {y})", v.name);
+        assert!(
+            outside * 1000 < object,
+            "{}: {outside} of {object} mask pixels outside the unit sphere's image",
+            v.name
+        );
+        let (mx, my) = (0..400 * 300)
+            .filter(|&i| mask[i] >= 128)
+            .fold((0.0, 0.0), |(a, b), i| {
+                (
+                    a + (i % 400) as f32 / object as f32,
+                    b + (i / 400) as f32 / object as f32,
+                )
+            });
+        assert!(
+            (mx - x).hypot(my - y) < 0.5 * radius,
+            "{}: mask centroid ({mx}, {my}), origin at ({x}, {y})",
+            v.name
+        );
         assert_eq!(v.image.pixel(0, 0), [0, 0, 0], "{}", v.name);
     }
     let ignored = load(
@@ -74,14 +108,21 @@ fn dtu_scan65_cameras_look_at_the_unit_sphere() {
         },
     )
     .unwrap();
-    let bright = ignored.train.iter().filter(|v| v.image.pixel(0, 0) != [0, 0, 0]).count();
-    assert!(bright > 0, "with --mask-mode ignore the photographs keep their background");
+    let bright = ignored
+        .train
+        .iter()
+        .filter(|v| v.image.pixel(0, 0) != [0, 0, 0])
+        .count();
+    assert!(
+        bright > 0,
+        "with --mask-mode ignore the photographs keep their background"
+    );
     assert!(ignored.train[0].mask.is_some());
 }
 
 /// A NeuS dataset in `dir` whose views are `cameras` (at 4× their image size in the archive,
 /// scaled by the world-to-sphere `scale`), with grey images of `width × height` and masks.
-fn write_neus(dir: &Path, cameras: &[Camera], scale: DMat4, factor: f64) {
+pub(crate) fn write_neus(dir: &Path, cameras: &[Camera], scale: DMat4, factor: f64) {
     std::fs::create_dir_all(dir.join("image")).unwrap();
     std::fs::create_dir_all(dir.join("mask")).unwrap();
     let mut members = Vec::new();
@@ -120,7 +161,7 @@ fn write_neus(dir: &Path, cameras: &[Camera], scale: DMat4, factor: f64) {
     std::fs::write(dir.join("cameras_sphere.npz"), write_npz(&refs).unwrap()).unwrap();
 }
 
-fn known_cameras() -> Vec<Camera> {
+pub(crate) fn known_cameras() -> Vec<Camera> {
     (0..10)
         .map(|k| {
             let a = k as f32 * 0.6;
@@ -154,8 +195,20 @@ fn synthetic_round_trip_recovers_the_cameras() {
         for (a, b) in [(got.fx, c.fx), (got.fy, c.fy), (got.cx, c.cx), (got.cy, c.cy)] {
             assert!((a - b).abs() < 1e-3, "{}: {got:?} against {c:?}", v.name);
         }
-        assert!((got.rotation - c.rotation).to_cols_array().iter().fold(0.0f32, |m, v| m.max(v.abs())) < 1e-5, "{}", v.name);
-        assert!((got.translation - c.translation).abs().max_element() < 1e-4, "{}", v.name);
+        assert!(
+            (got.rotation - c.rotation)
+                .to_cols_array()
+                .iter()
+                .fold(0.0f32, |m, v| m.max(v.abs()))
+                < 1e-5,
+            "{}",
+            v.name
+        );
+        assert!(
+            (got.translation - c.translation).abs().max_element() < 1e-4,
+            "{}",
+            v.name
+        );
         let mask = v.mask.as_ref().unwrap();
         assert_eq!((mask[0], mask[63]), (255, 0));
         // Composited on black outside the mask.
@@ -170,6 +223,9 @@ fn tempfile_dir(name: &str) -> std::path::PathBuf {
     std::fs::create_dir_all(&dir).unwrap();
     dir
 }
+
+/// Whether an npy problem is the expected one.
+type ProblemCheck = fn(&NpyError) -> bool;
 
 #[test]
 fn bad_archives_are_refused_naming_the_file_and_array() {
@@ -186,10 +242,15 @@ fn bad_archives_are_refused_naming_the_file_and_array() {
     // A missing scale_mat.
     let e = with(vec![("world_mat_0.npy", eye.clone()), ("world_mat_1.npy", eye.clone())]);
     assert!(matches!(e, SceneError::Parse { .. }), "{e}");
-    assert!(e.to_string().contains("cameras_sphere.npz") && e.to_string().contains("scale_mat_0"), "{e}");
+    assert!(
+        e.to_string().contains("cameras_sphere.npz") && e.to_string().contains("scale_mat_0"),
+        "{e}"
+    );
     // A big-endian, a Fortran-order, a wrong-shape, a truncated and an integer array.
-    let cases: Vec<(Vec<u8>, fn(&NpyError) -> bool)> = vec![
-        (write_npy_raw(">f8", &[4, 4], &[0; 128]), |p| matches!(p, NpyError::BigEndian(_))),
+    let cases: Vec<(Vec<u8>, ProblemCheck)> = vec![
+        (write_npy_raw(">f8", &[4, 4], &[0; 128]), |p| {
+            matches!(p, NpyError::BigEndian(_))
+        }),
         (
             {
                 let mut b = write_npy_raw("<f8", &[4, 4], &[0; 128]);
@@ -199,9 +260,15 @@ fn bad_archives_are_refused_naming_the_file_and_array() {
             },
             |p| matches!(p, NpyError::FortranOrder),
         ),
-        (write_npy_f64(&[2, 4], &[0.0; 8]), |p| matches!(p, NpyError::Shape { .. })),
-        (write_npy_raw("<f8", &[4, 4], &[0; 100]), |p| matches!(p, NpyError::Truncated { .. })),
-        (write_npy_raw("<i8", &[4, 4], &[0; 128]), |p| matches!(p, NpyError::UnsupportedDtype(_))),
+        (write_npy_f64(&[2, 4], &[0.0; 8]), |p| {
+            matches!(p, NpyError::Shape { .. })
+        }),
+        (write_npy_raw("<f8", &[4, 4], &[0; 100]), |p| {
+            matches!(p, NpyError::Truncated { .. })
+        }),
+        (write_npy_raw("<i8", &[4, 4], &[0; 128]), |p| {
+            matches!(p, NpyError::UnsupportedDtype(_))
+        }),
         (b"\x93NUMPZ\x01\x00".to_vec(), |p| matches!(p, NpyError::BadMagic)),
     ];
     for (bytes, want) in cases {
@@ -219,7 +286,10 @@ fn bad_archives_are_refused_naming_the_file_and_array() {
             }
             other => panic!("expected an npy error, got {other}"),
         }
-        assert!(e.to_string().contains("cameras_sphere.npz") && e.to_string().contains("world_mat_0"), "{e}");
+        assert!(
+            e.to_string().contains("cameras_sphere.npz") && e.to_string().contains("world_mat_0"),
+            "{e}"
+        );
     }
     // A singular projection.
     let e = with(vec![
@@ -232,7 +302,16 @@ fn bad_archives_are_refused_naming_the_file_and_array() {
     // Not a zip.
     std::fs::write(&npz, b"not a zip").unwrap();
     let e = load(&dir, &quiet()).unwrap_err();
-    assert!(matches!(e, SceneError::Npy { problem: NpyError::Zip(_), .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            SceneError::Npy {
+                problem: NpyError::Zip(_),
+                ..
+            }
+        ),
+        "{e}"
+    );
     // A missing mask, then a mask of the wrong size, each named.
     std::fs::write(&npz, &good).unwrap();
     std::fs::remove_file(dir.join("mask/001.png")).unwrap();
@@ -276,6 +355,9 @@ fn masks_dir_applies_to_any_format_matched_by_stem() {
     std::fs::remove_file(other.join("000002.png")).unwrap();
     let e = load(&dir, &options).unwrap_err();
     assert!(matches!(e, SceneError::MissingMask { .. }), "{e}");
-    assert!(e.to_string().contains("000002.png") && e.to_string().contains("my_masks"), "{e}");
+    assert!(
+        e.to_string().contains("000002.png") && e.to_string().contains("my_masks"),
+        "{e}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
