@@ -17,7 +17,7 @@
 //!
 //! | step | items | module |
 //! |---|---|---|
-//! | load posed photographs (COLMAP, NeRF-synthetic, instant-ngp) | [`load`], [`LoadOptions`], [`Scene`], [`SceneError`] | [`scene`] |
+//! | load posed photographs (COLMAP, NeRF-synthetic, instant-ngp, NeuS/IDR, LLFF; object masks) | [`load`], [`LoadOptions`], [`Scene`], [`SceneError`] | [`scene`] |
 //! | the settings `bbsplat train` would use, chosen for the scene and the run length, each with its reason | [`TrainPlan`], [`TrainRequest`], [`RunLength`], [`load_with_data_background`] | [`plan`] |
 //! | initial billboards from the scene's points | [`TrainPlan::init_model`], [`init_model`], [`InitError`] | [`init`] |
 //! | the three forms of the billboard set: raw optimised parameters (saved), activated (owned), activated (borrowed, what the renderer reads) | [`RawBillboards`], [`ActivatedBillboards`], [`ActivatedRef`] | [`model`], [`billboards`], [`raster`] |

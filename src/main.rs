@@ -44,7 +44,7 @@ enum Command {
         #[arg(long)]
         export: Option<PathBuf>,
     },
-    /// Train a billboard model on a dataset (COLMAP, NeRF-synthetic or instant-ngp, detected).
+    /// Train a billboard model on a dataset (COLMAP, NeRF-synthetic, instant-ngp, NeuS/IDR or LLFF, detected).
     Train(cli::train_args::TrainArgs),
     /// Render a saved model from a dataset's cameras to PNG files.
     Render(cli::render::RenderArgs),

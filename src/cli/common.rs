@@ -6,6 +6,7 @@ use bbsplat::model::RawBillboards;
 use bbsplat::model_file::scene_mark::SceneMark;
 use bbsplat::model_file::{ModelMeta, load_model};
 use bbsplat::scene::data_background::{BackgroundChoice, load_with_data_background};
+use bbsplat::scene::mask::MaskMode;
 use bbsplat::scene::{Background, LoadOptions, Scene, View};
 use clap::{Args, ValueEnum};
 use std::path::Path;
@@ -58,6 +59,34 @@ pub struct SceneArgs {
     /// 180 degrees onto the rest) as given, instead of turning its passes back (docs/scene.md).
     #[arg(long)]
     pub keep_folded: bool,
+    /// A folder of object masks (8-bit images, white = keep), one per image, matched by file
+    /// stem (`<stem>.png` or `.jpg`; docs/scene.md, "Masks"). Replaces a NeuS dataset's own
+    /// `mask/`.
+    #[arg(long, value_name = "DIR")]
+    pub masks: Option<std::path::PathBuf>,
+    /// What training does with the masks: `composite` the photographs onto the background
+    /// outside them (NeuS/2DGS practice on DTU), or `ignore` them (they still serve `eval
+    /// --masked`).
+    #[arg(long, value_enum, default_value_t = MaskModeArg::Composite)]
+    pub mask_mode: MaskModeArg,
+}
+
+/// `--mask-mode`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MaskModeArg {
+    /// Composite the photographs onto the background outside the mask at load.
+    Composite,
+    /// Leave the photographs as they are.
+    Ignore,
+}
+
+impl From<MaskModeArg> for MaskMode {
+    fn from(m: MaskModeArg) -> Self {
+        match m {
+            MaskModeArg::Composite => MaskMode::Composite,
+            MaskModeArg::Ignore => MaskMode::Ignore,
+        }
+    }
 }
 
 impl SceneArgs {
@@ -73,6 +102,8 @@ impl SceneArgs {
             print_warnings: true,
             allow_damaged_images: self.allow_damaged_images,
             unfold: !self.keep_folded,
+            masks_dir: self.masks.clone(),
+            mask_mode: self.mask_mode.into(),
             ..LoadOptions::default()
         }
     }

@@ -69,10 +69,18 @@ pub struct EvalArgs {
     /// tools/lpips_weights.py` (docs/lpips.md).
     #[arg(long, value_enum, num_args = 0..=1, require_equals = true, default_missing_value = "vgg", value_name = "NETWORK")]
     pub lpips: Option<LpipsNetwork>,
+    /// Also report PSNR and SSIM over each view's mask pixels (mask value at least 128: the
+    /// NeuS `mask/`, `--masks DIR`, or the image's alpha), labelled "masked", beside the
+    /// whole-image figures.
+    #[arg(long)]
+    pub masked: bool,
 }
 
+/// Renders and measures the views of `common`; with `masked`, also over each view's mask (or
+/// its image's alpha) where it has one.
 fn run_views(
     common: &ModelSceneArgs,
+    masked: bool,
     mut on_render: impl FnMut(usize, &str, &[f32], &[f32], u32, u32) -> Result<()>,
 ) -> Result<EvalReport> {
     start_threads(common.threads)?;
@@ -99,6 +107,11 @@ fn run_views(
             name: &v.name,
             camera: &v.camera,
             rgb: std::borrow::Cow::Owned(v.image.to_f32_rgb()),
+            mask: if masked {
+                v.mask.as_deref().or(v.coverage.as_deref())
+            } else {
+                None
+            },
         }),
         &settings,
         |view, rendered| {
@@ -131,7 +144,7 @@ pub fn render(args: RenderArgs) -> Result<()> {
     // Created as the first render is written (after the model and scene loaded), removed again
     // if the command fails.
     let mut output: Option<OutputDir> = None;
-    let report = run_views(&args.common, |i, name, rendered, truth, w, h| {
+    let report = run_views(&args.common, false, |i, name, rendered, truth, w, h| {
         if output.is_none() {
             output = Some(OutputDir::create(&args.output)?);
         }
@@ -164,7 +177,7 @@ pub fn eval(args: EvalArgs) -> Result<()> {
         None => None,
     };
     let mut lpips = Vec::new();
-    let mut report = run_views(&args.common, |_, name, rendered, truth, w, h| {
+    let mut report = run_views(&args.common, args.masked, |_, name, rendered, truth, w, h| {
         if let Some(net) = &net {
             let d = lpips_u8(net, rendered, truth, w as usize, h as usize)
                 .with_context(|| format!("LPIPS of view {name}"))?;
@@ -174,6 +187,12 @@ pub fn eval(args: EvalArgs) -> Result<()> {
     })?;
     if let Some(net) = &net {
         report = report.with_lpips(net.variant(), &lpips);
+    }
+    if args.masked && report.mean_masked_psnr.is_none() {
+        eprintln!(
+            "warning: --masked: no evaluated view of {} has a mask (mask/, --masks or an alpha channel); only whole-image figures",
+            args.common.scene.display()
+        );
     }
     let json = serde_json::to_string_pretty(&report).context("encoding the report")?;
     if let Some(path) = &args.report {

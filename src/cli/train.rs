@@ -176,6 +176,8 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let mut scene_warnings = scene.warnings;
     scene_warnings.extend(resume_warnings);
     let train: Vec<TrainView> = scene.train.into_iter().map(TrainView::from_owned_view).collect();
+    // The test views' masks (NeuS mask/, --masks), for the masked figures of the summary.
+    let test_masks: Vec<Option<Vec<u8>>> = scene.test.iter().map(|v| v.mask.clone()).collect();
     let test: Vec<TrainView> = scene.test.into_iter().map(TrainView::from_owned_view).collect();
     // From here on a signal stops the run with a checkpoint instead of ending the process.
     let stop = signals.arm();
@@ -312,6 +314,12 @@ pub fn run(args: TrainArgs) -> Result<()> {
             summary.test_psnr, summary.test_ssim, summary.test_views
         )
     };
+    let scores = match masked_summary(&args.output, &test, &test_masks)? {
+        Some((psnr, ssim, n)) => {
+            format!("{scores}; masked (over the mask pixels) PSNR {psnr:.2} dB, SSIM {ssim:.4} over {n} views")
+        }
+        None => scores,
+    };
     println!(
         "trained {} steps in {:.1} s ({:.2} it/s): {scores}; {} billboards ({} alive); model {:.2} MB; peak memory {:.0} MB",
         summary.iterations,
@@ -357,4 +365,56 @@ fn describe_record(record: &RunReport) -> String {
         record.other_seconds
     ));
     out
+}
+
+/// When test views have masks: PSNR and SSIM of the saved model over their mask pixels
+/// ([`bbsplat::eval::masked_image_metrics`]), added to `<out>/summary.json` as `masked_test`
+/// (beside the whole-image `test_psnr` / `test_ssim`, which are unchanged); returns the means and
+/// the number of views measured.
+fn masked_summary(
+    out: &std::path::Path,
+    test: &[TrainView],
+    masks: &[Option<Vec<u8>>],
+) -> Result<Option<(f64, f64, usize)>> {
+    if masks.iter().all(Option::is_none) {
+        return Ok(None);
+    }
+    let model_dir = out.join(bbsplat::train::run::MODEL_DIR);
+    let (raw, meta) = super::common::read_model(&model_dir)?;
+    let activated = raw.activate();
+    let settings = bbsplat::raster::RenderSettings {
+        background: glam::Vec3::from_array(meta.background),
+        sh_degree: meta.sh_degree,
+        ..Default::default()
+    };
+    let views = test.iter().zip(masks).map(|(v, m)| bbsplat::eval::EvalView {
+        name: "",
+        camera: &v.camera,
+        rgb: v.rgb.to_f32(),
+        mask: m.as_deref(),
+    });
+    let report = bbsplat::eval::evaluate_views(&activated.borrowed(), views, &settings, |_, _| {})
+        .context("the masked evaluation of the test views")?;
+    let (Some(psnr), Some(ssim)) = (report.mean_masked_psnr, report.mean_masked_ssim) else {
+        return Ok(None);
+    };
+    let n = report.views.iter().filter(|v| v.masked_psnr.is_some()).count();
+    let path = out.join(bbsplat::train::run::SUMMARY_FILE);
+    let text = bbsplat::file_io::read_text_bounded(&path, bbsplat::file_io::JSON_FILE)?;
+    let mut summary: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("reading back {}", path.display()))?;
+    if let Some(fields) = summary.as_object_mut() {
+        fields.insert(
+            "masked_test".into(),
+            serde_json::json!({
+                "psnr": psnr,
+                "ssim": ssim,
+                "views": n,
+                "what": "mean PSNR (dB) and SSIM of the saved model over the pixels of each test view's mask (value at least 128); test_psnr and test_ssim are over whole images",
+            }),
+        );
+    }
+    let json = serde_json::to_string_pretty(&summary).context("encoding the summary")?;
+    super::common::write_text_atomic(&path, &json).with_context(|| format!("writing {}", path.display()))?;
+    Ok(Some((psnr, ssim, n)))
 }

@@ -14,7 +14,8 @@ use super::common::SceneArgs;
 /// Flags of `bbsplat train`.
 #[derive(Args, Clone, Debug)]
 pub struct TrainArgs {
-    /// The dataset: a COLMAP folder, a NeRF-synthetic folder or a transforms.json (auto-detected).
+    /// The dataset: a COLMAP, NeRF-synthetic, NeuS/IDR (cameras_sphere.npz) or LLFF
+    /// (poses_bounds.npy) folder, or a transforms.json (auto-detected).
     pub scene: PathBuf,
     /// Output folder (model, checkpoints, summary.json).
     #[arg(short, long)]

@@ -8,31 +8,15 @@ use std::path::Path;
 use zip::write::SimpleFileOptions;
 use zip::{CompressionMethod, DateTime, ZipArchive, ZipWriter};
 
-const MAGIC: &[u8; 6] = b"\x93NUMPY";
 /// Largest `.npy` header we accept (numpy itself writes 118 bytes for our arrays).
 const MAX_HEADER: usize = 4096;
 
 /// The `.npy` v1.0 bytes of a C-order `uint8` array of `shape`. The header is padded with
-/// spaces and ends with `\n` so that the data starts at a multiple of 64 bytes (numpy ≥ 1.18).
+/// spaces and ends with `\n` so that the data starts at a multiple of 64 bytes (numpy ≥ 1.18);
+/// the writer is [`crate::scene::npy::write_npy_raw`].
 pub(crate) fn npy_u8(shape: &[usize], data: &[u8]) -> Vec<u8> {
     debug_assert_eq!(shape.iter().product::<usize>(), data.len());
-    let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
-    let tuple = if dims.len() == 1 {
-        format!("({},)", dims[0])
-    } else {
-        format!("({})", dims.join(", "))
-    };
-    let mut header = format!("{{'descr': '|u1', 'fortran_order': False, 'shape': {tuple}, }}");
-    let unpadded = MAGIC.len() + 2 + 2 + header.len() + 1;
-    header.push_str(&" ".repeat((64 - unpadded % 64) % 64));
-    header.push('\n');
-    let mut out = Vec::with_capacity(10 + header.len() + data.len());
-    out.extend_from_slice(MAGIC);
-    out.extend_from_slice(&[1, 0]);
-    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    out.extend_from_slice(header.as_bytes());
-    out.extend_from_slice(data);
-    out
+    crate::scene::npy::write_npy_raw("|u1", shape, data)
 }
 
 /// A zip archive with one deflated member `name` (e.g. `texture_alpha.npy`) holding `npy`, with
@@ -94,44 +78,15 @@ pub(crate) fn read_npz_u8(
 }
 
 /// Parses a `.npy` header (versions 1.0-3.0) of a C-order `uint8` array: the shape and the
-/// offset of the data.
+/// offset of the data. The parser is [`crate::scene::npy::parse_header`]; other dtypes are
+/// refused here.
 pub(crate) fn parse_npy_header(npy: &[u8]) -> Result<(Vec<usize>, usize), String> {
-    if npy.len() < 10 || &npy[..6] != MAGIC {
-        return Err("not a .npy array (bad magic)".into());
+    let header = crate::scene::npy::parse_header(npy).map_err(|e| e.to_string())?;
+    if header.dtype != crate::scene::npy::Dtype::U8 {
+        return Err(format!("dtype {:?} is not uint8", header.dtype));
     }
-    let (len, start) = match npy[6] {
-        1 => (u16::from_le_bytes([npy[8], npy[9]]) as usize, 10),
-        2 | 3 if npy.len() >= 12 => (u32::from_le_bytes([npy[8], npy[9], npy[10], npy[11]]) as usize, 12),
-        v => return Err(format!("unsupported .npy version {v}.{}", npy[7])),
-    };
-    if len > MAX_HEADER || start + len > npy.len() {
-        return Err(format!("header of {len} bytes does not fit"));
+    if header.data_offset > 10 + MAX_HEADER {
+        return Err(format!("header of {} bytes is too long", header.data_offset - 10));
     }
-    let header = std::str::from_utf8(&npy[start..start + len]).map_err(|_| "header is not text".to_string())?;
-    let value = |key: &str| -> Result<&str, String> {
-        let k = header
-            .find(&format!("'{key}':"))
-            .ok_or_else(|| format!("header has no '{key}'"))?;
-        Ok(header[k + key.len() + 3..].trim_start())
-    };
-    let descr = value("descr")?;
-    if !(descr.starts_with("'|u1'") || descr.starts_with("'<u1'") || descr.starts_with("'u1'")) {
-        let end = descr.find(',').unwrap_or(descr.len());
-        return Err(format!("dtype {} is not uint8", &descr[..end]));
-    }
-    if !value("fortran_order")?.starts_with("False") {
-        return Err("Fortran-order arrays are not supported".into());
-    }
-    let shape = value("shape")?;
-    let close = shape.find(')').ok_or("unterminated shape")?;
-    if !shape.starts_with('(') {
-        return Err("shape is not a tuple".into());
-    }
-    let dims: Result<Vec<usize>, String> = shape[1..close]
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(|s| s.parse::<usize>().map_err(|_| format!("bad dimension {s:?}")))
-        .collect();
-    Ok((dims?, start + len))
+    Ok((header.shape, header.data_offset))
 }

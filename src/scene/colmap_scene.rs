@@ -155,6 +155,7 @@ pub(crate) fn load(model_dir: &Path, options: &LoadOptions, warnings: &mut Vec<S
             },
             rotation,
             translation,
+            mask: None,
         });
     }
     sources.sort_by(|a, b| a.name.cmp(&b.name));

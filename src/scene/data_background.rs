@@ -26,7 +26,7 @@ pub struct BackgroundChoice {
 pub fn tentative_background(format: SceneFormat) -> Background {
     match format {
         SceneFormat::NerfSynthetic => Background::White,
-        SceneFormat::Colmap | SceneFormat::Transforms => Background::Black,
+        SceneFormat::Colmap | SceneFormat::Transforms | SceneFormat::Neus | SceneFormat::Llff => Background::Black,
     }
 }
 

@@ -162,6 +162,7 @@ mod tests {
             camera: Camera::identity(2, 1),
             image: Image::new(2, 1, pixels.to_vec()).unwrap(),
             coverage: None,
+            mask: None,
         }
     }
 

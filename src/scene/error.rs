@@ -128,6 +128,29 @@ pub enum SceneError {
         /// The camera or frame record.
         location: Location,
     },
+    /// No mask for an image in the mask folder ([`crate::scene::LoadOptions::masks_dir`], or a
+    /// NeuS dataset's `mask/`).
+    #[error(
+        "{}: no mask for this image in {} (looked for the image's stem with .png, .jpg or .jpeg, and the same number with other leading zeros)",
+        image.display(), masks_dir.display()
+    )]
+    MissingMask {
+        /// The image.
+        image: PathBuf,
+        /// The mask folder.
+        masks_dir: PathBuf,
+    },
+    /// An `.npy` array or `.npz` archive of a dataset is malformed or of a kind not read
+    /// ([`crate::scene::npy::NpyError`]).
+    #[error("{}: {}{problem}", file.display(), array.as_ref().map_or(String::new(), |a| format!("array {a:?}: ")))]
+    Npy {
+        /// The `.npy` or `.npz` file.
+        file: PathBuf,
+        /// The member of an `.npz` archive, when the problem is in one.
+        array: Option<String>,
+        /// What is wrong.
+        problem: crate::scene::npy::NpyError,
+    },
     /// A dataset holds no usable view (or no training view after the split).
     #[error("{}: empty dataset: {reason}", path.display())]
     Empty {

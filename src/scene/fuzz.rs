@@ -9,14 +9,21 @@
 //!   NaN keypoints compare equal);
 //! - transforms JSON: intrinsics resolve without panicking for a few image sizes;
 //! - PLY: positions are finite and colours lie in `[0, 1]`.
+//! - `.npy` (LLFF `poses_bounds.npy`): the values fill the shape; an f8 array written back
+//!   parses to the same bits; rows of a pose file have `0 < near < far`.
+//! - `.npz` (NeuS `cameras_sphere.npz`): every member parses or fails without a panic; every
+//!   camera that decomposes has a rotation with orthonormal rows and `det = +1` and intrinsics
+//!   with a positive diagonal.
 //!
 //! ```
 //! bbsplat::scene::fuzz::colmap_binary(&[0, 1, 0, 0, 0, 0, 0, 0, 0]);
 //! bbsplat::scene::fuzz::colmap_text(b"\x01# comment\n1 2 3");
 //! bbsplat::scene::fuzz::transforms(b"{\"frames\": []}");
+//! bbsplat::scene::fuzz::npy(b"\x93NUMPY\x01\x00");
+//! bbsplat::scene::fuzz::npz(b"PK\x05\x06");
 //! ```
 
-use super::{colmap_binary as bin, colmap_text as txt, nerf_json, ply};
+use super::{colmap_binary as bin, colmap_text as txt, llff, nerf_json, neus, npy as np, ply, projection};
 use std::path::Path;
 
 /// `data[0] % 3` selects `cameras.bin`, `images.bin` or `points3D.bin`; the rest is the file.
@@ -91,5 +98,57 @@ pub fn ply(data: &[u8]) {
         assert_eq!(cloud.positions.len(), cloud.colours.len());
         assert!(cloud.positions.iter().all(|p| p.is_finite()));
         assert!(cloud.colours.iter().flatten().all(|c| (0.0..=1.0).contains(c)));
+    }
+}
+
+/// An `.npy` array, then the same bytes as an LLFF `poses_bounds.npy`.
+pub fn npy(data: &[u8]) {
+    let f = Path::new("poses_bounds.npy");
+    if let Ok(array) = np::parse_npy(data) {
+        assert_eq!(array.data.len(), array.shape.iter().product::<usize>());
+        let header = np::parse_header(data).expect("a parsed array has a header");
+        if header.dtype == np::Dtype::F64 {
+            let back =
+                np::parse_npy(&np::write_npy_f64(&array.shape, &array.data)).expect("re-parse of a written array");
+            let bits = |a: &np::NpyArray| a.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!((back.shape.clone(), bits(&back)), (array.shape.clone(), bits(&array)));
+        }
+    }
+    if let Ok(poses) = llff::parse_poses(data, f) {
+        for p in &poses {
+            assert!(p.bounds[0] > 0.0 && p.bounds[1] > p.bounds[0]);
+            assert!(p.hwf.iter().all(|v| *v > 0.0));
+        }
+    }
+}
+
+/// An `.npz` archive, read as NeuS/IDR cameras (`world_mat_i` · `scale_mat_i`, or `world_mat_i`
+/// alone when the scale is missing).
+pub fn npz(data: &[u8]) {
+    let f = Path::new("cameras_sphere.npz");
+    let Ok(archive) = np::Npz::parse(data) else {
+        return;
+    };
+    let names: Vec<String> = archive.names().map(str::to_string).collect();
+    for name in &names {
+        let _ = archive.array(name).expect("a listed member exists");
+    }
+    for i in 0..names.len() {
+        let Ok(world) = neus::matrix(&archive, f, &format!("world_mat_{i}")) else {
+            continue;
+        };
+        let scale = neus::matrix(&archive, f, &format!("scale_mat_{i}")).unwrap_or(glam::DMat4::IDENTITY);
+        let p = (world * scale).transpose().to_cols_array_2d();
+        if let Ok(d) = projection::decompose_projection(&[p[0], p[1], p[2]]) {
+            let r = glam::DMat3::from_cols_array_2d(&d.rotation);
+            assert!(
+                (r * r.transpose() - glam::DMat3::IDENTITY)
+                    .to_cols_array()
+                    .iter()
+                    .all(|v| v.abs() < 1e-6)
+            );
+            assert!((r.determinant() - 1.0).abs() < 1e-6);
+            assert!(d.k[0][0] > 0.0 && d.k[1][1] > 0.0 && d.k[2][2] == 1.0);
+        }
     }
 }

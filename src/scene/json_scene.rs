@@ -97,6 +97,7 @@ fn sources_of(
             },
             rotation,
             translation,
+            mask: None,
         });
     }
     Ok(out)

@@ -1,5 +1,6 @@
-//! Scene input: posed photographs from COLMAP (binary and text), NeRF-synthetic and
-//! instant-ngp / nerfstudio datasets, undistorted to pinhole cameras.
+//! Scene input: posed photographs from COLMAP (binary and text), NeRF-synthetic,
+//! instant-ngp / nerfstudio, NeuS/IDR (`cameras_sphere.npz`, DTU) and LLFF
+//! (`poses_bounds.npy`) datasets, undistorted to pinhole cameras, with optional object masks.
 //!
 //! [`load`] detects the format of a folder (or takes it from [`LoadOptions::format`]), reads the
 //! cameras, undistorts and downscales every image once, splits the views into training and test
@@ -36,8 +37,14 @@ mod error;
 pub mod fuzz;
 pub(crate) mod image_io;
 mod json_scene;
+mod llff;
+pub mod mask;
 pub mod nerf_json;
+mod neus;
+pub mod npy;
 pub mod ply;
+pub mod projection;
+pub mod reference_size;
 pub mod registration;
 pub mod split;
 pub mod undistort;
@@ -149,6 +156,12 @@ pub struct View {
     /// (e.g. NeRF-synthetic renders). Used by the visual-hull initialisation
     /// ([`crate::init::hull`]); never by the loss.
     pub coverage: Option<Vec<u8>>,
+    /// The view's object mask at the final resolution (`camera.width × camera.height` values,
+    /// row-major, 255 = keep), when one was loaded: NeuS `mask/`, or
+    /// [`LoadOptions::masks_dir`] ([`mask`]). With [`mask::MaskMode::Composite`] (the default)
+    /// `image` is already composited onto the background outside it. Masked evaluation uses it
+    /// (or else `coverage`).
+    pub mask: Option<Vec<u8>>,
 }
 
 /// A point cloud (for initialisation), world coordinates.
@@ -169,6 +182,11 @@ pub enum SceneFormat {
     NerfSynthetic,
     /// instant-ngp / nerfstudio: `transforms.json`.
     Transforms,
+    /// NeuS / IDR (DTU, BlendedMVS as NeuS ships them): `cameras_sphere.npz` with `image/` and
+    /// `mask/`.
+    Neus,
+    /// LLFF (the NeRF forward-facing scenes): `poses_bounds.npy` with `images_N/`.
+    Llff,
 }
 
 impl fmt::Display for SceneFormat {
@@ -177,6 +195,8 @@ impl fmt::Display for SceneFormat {
             SceneFormat::Colmap => "COLMAP",
             SceneFormat::NerfSynthetic => "NeRF-synthetic",
             SceneFormat::Transforms => "instant-ngp/nerfstudio transforms.json",
+            SceneFormat::Neus => "NeuS/IDR cameras_sphere.npz",
+            SceneFormat::Llff => "LLFF poses_bounds.npy",
         })
     }
 }
@@ -246,6 +266,12 @@ pub struct LoadOptions {
     /// Turn back the passes of a COLMAP registration that folded an orbit video onto itself
     /// ([`unfold`]; reported in [`Scene::warnings`]). Default true.
     pub unfold: bool,
+    /// A folder of object masks, one per image, matched by file stem ([`mask::find_mask`]);
+    /// it replaces a NeuS dataset's own `mask/`. Default none.
+    pub masks_dir: Option<PathBuf>,
+    /// What loading does with the masks ([`mask::MaskMode`]; default: composite the images onto
+    /// the background outside them).
+    pub mask_mode: mask::MaskMode,
 }
 
 impl Default for LoadOptions {
@@ -261,6 +287,8 @@ impl Default for LoadOptions {
             print_warnings: true,
             allow_damaged_images: false,
             unfold: true,
+            masks_dir: None,
+            mask_mode: mask::MaskMode::Composite,
         }
     }
 }
@@ -298,7 +326,9 @@ pub struct Scene {
 /// Detection, in order: a `transforms_train.json` file or folder entry → NeRF-synthetic; a
 /// `transforms.json` → instant-ngp/nerfstudio; a COLMAP model (`cameras.bin`/`.txt`) in the
 /// folder itself, in `sparse/`, or in `sparse/*/` (with several models, the one with the most
-/// registered images) → COLMAP.
+/// registered images) → COLMAP; a `cameras_sphere.npz` (or IDR's `cameras.npz`) → NeuS/IDR; a
+/// `poses_bounds.npy` → LLFF. A file path is read as the format its name says
+/// (`cameras_sphere.npz`, `cameras.npz` and `poses_bounds.npy` included).
 pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
     if options.downscale == 0 {
         return Err(SceneError::InvalidOption("downscale must be at least 1".into()));
@@ -312,6 +342,8 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
         SceneFormat::Colmap => colmap_scene::load(&source, options, &mut warnings)?,
         SceneFormat::NerfSynthetic => json_scene::load_nerf_synthetic(&source, options, &mut warnings)?,
         SceneFormat::Transforms => json_scene::load_transforms(&source, options, &mut warnings)?,
+        SceneFormat::Neus => neus::load(&source, options, &mut warnings)?,
+        SceneFormat::Llff => llff::load(&source, options, &mut warnings)?,
     };
     duplicates::leave_out(&mut scene.train, &mut scene.test, &mut warnings);
     if scene.train.is_empty() {
@@ -400,6 +432,10 @@ pub fn detect(path: &Path, forced: Option<SceneFormat>) -> Result<(SceneFormat, 
         let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
         let format = forced.unwrap_or(if name.ends_with("transforms_train.json") {
             SceneFormat::NerfSynthetic
+        } else if name.ends_with(".npz") {
+            SceneFormat::Neus
+        } else if name.ends_with(".npy") {
+            SceneFormat::Llff
         } else {
             SceneFormat::Transforms
         });
@@ -416,6 +452,8 @@ pub fn detect(path: &Path, forced: Option<SceneFormat>) -> Result<(SceneFormat, 
     match forced {
         Some(SceneFormat::NerfSynthetic) => return Ok((SceneFormat::NerfSynthetic, synthetic)),
         Some(SceneFormat::Transforms) => return Ok((SceneFormat::Transforms, transforms)),
+        Some(SceneFormat::Neus) => return Ok((SceneFormat::Neus, neus::camera_file(path))),
+        Some(SceneFormat::Llff) => return Ok((SceneFormat::Llff, path.join(llff::POSES_FILE))),
         Some(SceneFormat::Colmap) => {}
         None if names_a_file(&synthetic) => return Ok((SceneFormat::NerfSynthetic, synthetic)),
         None if names_a_file(&transforms) => return Ok((SceneFormat::Transforms, transforms)),
@@ -423,10 +461,17 @@ pub fn detect(path: &Path, forced: Option<SceneFormat>) -> Result<(SceneFormat, 
     }
     match colmap_scene::find_model(path)? {
         Some(dir) => Ok((SceneFormat::Colmap, dir)),
+        None if forced.is_none() && names_a_file(&neus::camera_file(path)) => {
+            Ok((SceneFormat::Neus, neus::camera_file(path)))
+        }
+        None if forced.is_none() && names_a_file(&path.join(llff::POSES_FILE)) => {
+            Ok((SceneFormat::Llff, path.join(llff::POSES_FILE)))
+        }
         None => Err(SceneError::NotDetected {
             path: path.to_path_buf(),
-            looked_for: "looked for transforms_train.json, transforms.json, and a COLMAP model \
-                         (cameras.bin or cameras.txt) in the folder, in sparse/ and in sparse/*/"
+            looked_for: "looked for transforms_train.json, transforms.json, a COLMAP model \
+                         (cameras.bin or cameras.txt) in the folder, in sparse/ and in sparse/*/, \
+                         cameras_sphere.npz or cameras.npz (NeuS/IDR) and poses_bounds.npy (LLFF)"
                 .into(),
         }),
     }

@@ -1,11 +1,14 @@
 //! Turning a posed image reference into a [`View`]: decode, check the size, undistort,
-//! downscale, build the pinhole camera.
+//! downscale, build the pinhole camera; decode, resample and apply the view's mask
+//! ([`super::mask`]).
 
 use super::colmap::Intrinsics;
 use super::error::{Location, SceneError};
+use super::mask::{self, MaskMode};
 use super::nerf_json::IntrinsicFields;
+use super::reference_size::{ReferenceSize, scale_to_image};
 use super::undistort;
-use super::{LoadOptions, View, image_io};
+use super::{Image, LoadOptions, View, image_io};
 use crate::camera::Camera;
 use crate::file_io::{FileKind, kind_of, not_regular};
 use glam::{Mat3, Vec3};
@@ -25,6 +28,12 @@ pub(crate) enum CameraSpec {
         frame: Box<IntrinsicFields>,
         scene: Box<IntrinsicFields>,
     },
+    /// Intrinsics stated for another image size (NeuS, LLFF), scaled to the image found
+    /// ([`scale_to_image`]).
+    Scaled {
+        intrinsics: Intrinsics,
+        reference: ReferenceSize,
+    },
 }
 
 /// Everything needed to load one view.
@@ -39,6 +48,9 @@ pub(crate) struct ViewSource {
     /// World-to-camera rotation and translation (OpenCV axes).
     pub rotation: Mat3,
     pub translation: Vec3,
+    /// The view's mask file, when the format has one (NeuS `mask/`); `LoadOptions::masks_dir`
+    /// replaces it.
+    pub mask: Option<PathBuf>,
 }
 
 impl ViewSource {
@@ -60,6 +72,25 @@ pub(crate) fn load_all(
     options: &LoadOptions,
     warnings: &mut Vec<String>,
 ) -> Result<Vec<View>, SceneError> {
+    let mut sources = sources;
+    if let Some(dir) = &options.masks_dir {
+        if !dir.is_dir() {
+            return Err(SceneError::NotDetected {
+                path: dir.clone(),
+                looked_for: "the mask folder (--masks, LoadOptions::masks_dir) is not a folder".into(),
+            });
+        }
+        for s in &mut sources {
+            let found = mask::find_mask(dir, &s.name);
+            let Some(found) = found else {
+                return Err(SceneError::MissingMask {
+                    image: s.image_path.clone(),
+                    masks_dir: dir.clone(),
+                });
+            };
+            s.mask = Some(found);
+        }
+    }
     for s in &sources {
         match kind_of(&s.image_path) {
             Ok(FileKind::Regular) => {}
@@ -118,6 +149,14 @@ fn load_view(s: ViewSource, options: &LoadOptions) -> Result<LoadedView, SceneEr
             let (k, w, h) = frame.resolve(scene, iw, ih).map_err(perr)?;
             (k, w as u64, h as u64)
         }
+        CameraSpec::Scaled { intrinsics, reference } => {
+            let k = scale_to_image(intrinsics, *reference, iw, ih)
+                .map_err(|m| perr(format!("{}: {m}", s.image_path.display())))?;
+            if let Some(problem) = k.implausibility(iw, ih) {
+                return Err(perr(format!("{}: {problem}", s.image_path.display())));
+            }
+            (k, iw as u64, ih as u64)
+        }
     };
     if (cw, ch) != (iw as u64, ih as u64) {
         return Err(SceneError::ImageSize {
@@ -153,6 +192,26 @@ fn load_view(s: ViewSource, options: &LoadOptions) -> Result<LoadedView, SceneEr
     let coverage = alpha
         .filter(|_| !undistort::needs_undistortion(&intrinsics.distortion))
         .map(|a| image_io::resize_area_u8(&a, iw as usize, ih as usize, nw as usize, nh as usize));
+    let mask = match &s.mask {
+        None => None,
+        Some(path) => {
+            let m = mask::decode_mask(path, &s.image_path, &s.location, iw, ih)?;
+            Some(if undistort::needs_undistortion(&intrinsics.distortion) {
+                let grey = Image::from_raw(iw, ih, m.iter().flat_map(|&v| [v; 3]).collect());
+                let f = undistort::resample(&plan, &grey, [0.0; 3]);
+                let small =
+                    image_io::resize_area(&f, plan.width as usize, plan.height as usize, nw as usize, nh as usize);
+                image_io::quantise(nw, nh, &small)
+                    .as_bytes()
+                    .iter()
+                    .step_by(3)
+                    .copied()
+                    .collect()
+            } else {
+                image_io::resize_area_u8(&m, iw as usize, ih as usize, nw as usize, nh as usize)
+            })
+        }
+    };
     let image = if !undistort::needs_undistortion(&intrinsics.distortion) {
         if (nw, nh) == (iw, ih) {
             image
@@ -165,6 +224,14 @@ fn load_view(s: ViewSource, options: &LoadOptions) -> Result<LoadedView, SceneEr
         let f = undistort::resample(&plan, &image, background);
         let small = image_io::resize_area(&f, plan.width as usize, plan.height as usize, nw as usize, nh as usize);
         image_io::quantise(nw, nh, &small)
+    };
+    let image = match (&mask, options.mask_mode) {
+        (Some(m), MaskMode::Composite) => {
+            let mut rgb = image.into_bytes();
+            mask::composite_outside(&mut rgb, m, background);
+            Image::from_raw(nw, nh, rgb)
+        }
+        _ => image,
     };
     let sx = nw as f64 / plan.width as f64;
     let sy = nh as f64 / plan.height as f64;
@@ -193,6 +260,7 @@ fn load_view(s: ViewSource, options: &LoadOptions) -> Result<LoadedView, SceneEr
         camera,
         image,
         coverage,
+        mask,
     };
     Ok((view, damage, turn))
 }

@@ -437,6 +437,7 @@ fn evaluate_with_lpips(
             camera: &v.camera,
             // An 8-bit view is converted for its evaluation only.
             rgb: v.rgb.to_f32(),
+            mask: None,
         }),
         settings,
         |view, rendered| {

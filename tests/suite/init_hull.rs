@@ -37,6 +37,7 @@ fn ball_views(size: u32) -> Vec<View> {
                 camera,
                 image: Image::new(size, size, rgb).unwrap(),
                 coverage: Some(coverage),
+                mask: None,
             }
         })
         .collect()

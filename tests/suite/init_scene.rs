@@ -35,6 +35,7 @@ fn scene(format: SceneFormat, cameras: Vec<Camera>, points: Option<PointCloud>) 
             camera,
             image: Image::new(1, 1, vec![0; 3]).unwrap(),
             coverage: None,
+            mask: None,
         })
         .collect();
     Scene {

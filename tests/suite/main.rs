@@ -11,6 +11,7 @@ mod cli_bounds;
 #[cfg(feature = "cli")]
 mod cli_export;
 mod cli_full_disk;
+mod cli_masks;
 #[cfg(feature = "cli")]
 mod cli_reliability;
 mod cli_resume_time;
@@ -66,7 +67,9 @@ mod scene_duplicates;
 mod scene_exif;
 mod scene_fuzz;
 mod scene_image_io;
+mod scene_llff;
 mod scene_load;
+mod scene_neus;
 mod scene_real_data;
 mod scene_registration;
 #[allow(dead_code)]

@@ -474,7 +474,10 @@ fn empty_datasets() {
     let d = temp_dir("empty_folder");
     expect(
         load_err(&d),
-        &["no dataset found: looked for transforms_train.json, transforms.json, and a COLMAP model"],
+        &[
+            "no dataset found: looked for transforms_train.json, transforms.json, a COLMAP model",
+            "cameras_sphere.npz or cameras.npz (NeuS/IDR) and poses_bounds.npy (LLFF)",
+        ],
     );
     // Only test views left.
     let d = temp_dir("only_test");

@@ -118,6 +118,17 @@ fn seeds_parse_cleanly() {
     for s in seeds("ply") {
         assert!(!ply::parse_point_cloud(&s, f).unwrap().positions.is_empty());
     }
+    let npy = seeds("npy");
+    assert_eq!(npy.len(), 3);
+    for s in &npy {
+        bbsplat::scene::npy::parse_npy(s).unwrap();
+    }
+    for s in seeds("npz") {
+        let archive = bbsplat::scene::npy::Npz::parse(&s).unwrap();
+        assert_eq!(archive.names().count(), 4);
+        let world = archive.array("world_mat_1").unwrap().unwrap();
+        assert_eq!(world.shape, vec![4, 4]);
+    }
 }
 
 proptest! {
@@ -153,6 +164,18 @@ proptest! {
         fuzz::ply(&mutate(&s[i.index(s.len())], &ops));
     }
 
+    #[test]
+    fn npy_mutations_never_panic(i in any::<prop::sample::Index>(), ops in ops()) {
+        let s = seeds("npy");
+        fuzz::npy(&mutate(&s[i.index(s.len())], &ops));
+    }
+
+    #[test]
+    fn npz_mutations_never_panic(i in any::<prop::sample::Index>(), ops in ops()) {
+        let s = seeds("npz");
+        fuzz::npz(&mutate(&s[i.index(s.len())], &ops));
+    }
+
     /// Arbitrary bytes, not derived from seeds.
     #[test]
     fn random_bytes_never_panic(data in prop::collection::vec(any::<u8>(), 0..300)) {
@@ -160,5 +183,7 @@ proptest! {
         fuzz::colmap_text(&data);
         fuzz::transforms(&data);
         fuzz::ply(&data);
+        fuzz::npy(&data);
+        fuzz::npz(&data);
     }
 }

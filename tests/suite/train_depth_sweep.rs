@@ -64,6 +64,7 @@ fn views(n: usize, fill: Option<[f32; 3]>) -> Vec<View> {
                 image: render(&camera, fill),
                 camera,
                 coverage: None,
+                mask: None,
             }
         })
         .collect()
