@@ -15,8 +15,6 @@ use bbsplat::export::gaussians::{
 use bbsplat::export::glb::NamedCamera;
 use bbsplat::export::splat_glb::{sh_attribute_names, splat_glb_bytes};
 use bbsplat::export::splat_ply::{SPLAT_PLY_FLOATS, splat_ply_bytes, splat_property_names, splat_row};
-use bbsplat::loss::psnr::quantize_u8;
-use bbsplat::raster::{RenderSettings, render};
 use bbsplat::rng::Rng;
 use glam::{Vec2, Vec3};
 use std::path::{Path, PathBuf};
@@ -66,19 +64,6 @@ pub fn smooth_scene(n: usize, width: u32, height: u32, seed: u64) -> ActivatedBi
         }
     }
     set
-}
-
-fn render_u8(set: &ActivatedBillboards, camera: &Camera, background: Vec3) -> Vec<u8> {
-    let settings = RenderSettings {
-        background,
-        sh_degree: 3,
-        ..RenderSettings::default()
-    };
-    render(&set.borrowed(), camera, &settings)
-        .rgb
-        .iter()
-        .map(|&c| quantize_u8(c))
-        .collect()
 }
 
 fn psnr_u8(a: &[u8], b: &[u8]) -> f64 {
@@ -197,7 +182,7 @@ fn fitted_scene() -> (ActivatedBillboards, Camera, GaussianSet) {
 fn an_independent_3dgs_renderer_draws_the_gaussians_like_the_billboards() {
     let (set, camera, gaussians) = fitted_scene();
     let background = Vec3::new(0.2, 0.3, 0.4);
-    let expected = render_u8(&set, &camera, background);
+    let expected = crate::export_browser::render_bytes(&set, &camera, background);
     let splats = splats_from_ply(&splat_ply_bytes(&gaussians));
     let bg = background.to_array().map(f64::from);
     let got = to_bytes(&render_splats(&splats, &camera, 3, bg));
