@@ -26,12 +26,7 @@ pub const SPLAT_PLY_FLOATS: usize = 3 + 3 + 3 + 45 + 1 + 3 + 4;
 /// assert_eq!((names[6].as_str(), names[54].as_str(), names[61].as_str()), ("f_dc_0", "opacity", "rot_3"));
 /// ```
 pub fn splat_property_names() -> Vec<String> {
-    let mut names: Vec<String> = ["x", "y", "z", "nx", "ny", "nz"]
-        .iter()
-        .map(|s| s.to_string())
-        .collect();
-    names.extend((0..3).map(|i| format!("f_dc_{i}")));
-    names.extend((0..45).map(|i| format!("f_rest_{i}")));
+    let mut names = crate::stages::sh::ply_position_and_sh_names();
     names.push("opacity".to_string());
     names.extend((0..3).map(|i| format!("scale_{i}")));
     names.extend((0..4).map(|i| format!("rot_{i}")));

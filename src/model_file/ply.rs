@@ -12,12 +12,7 @@ pub const PLY_FLOATS: usize = 3 + 3 + 3 + 45 + 2 + 4;
 
 /// The property names, in file order.
 pub fn property_names() -> Vec<String> {
-    let mut names: Vec<String> = ["x", "y", "z", "nx", "ny", "nz"]
-        .iter()
-        .map(|s| s.to_string())
-        .collect();
-    names.extend((0..3).map(|i| format!("f_dc_{i}")));
-    names.extend((0..45).map(|i| format!("f_rest_{i}")));
+    let mut names = crate::stages::sh::ply_position_and_sh_names();
     names.extend((0..2).map(|i| format!("scale_{i}")));
     names.extend((0..4).map(|i| format!("rot_{i}")));
     names

@@ -91,6 +91,24 @@ pub fn sh_to_rgb(s: f32) -> f32 {
     s * SH_C0 + 0.5
 }
 
+/// The property names of a 3DGS PLY vertex up to its SH coefficients, in file order: `x y z nx
+/// ny nz f_dc_0..2 f_rest_0..44` (the f_rest values in [`channel_major_rest`]'s order); the model's
+/// PLY and the splat export's PLY each append their own shape properties.
+///
+/// ```
+/// let names = bbsplat::stages::sh::ply_position_and_sh_names();
+/// assert_eq!((names.len(), names[6].as_str(), names[53].as_str()), (54, "f_dc_0", "f_rest_44"));
+/// ```
+pub fn ply_position_and_sh_names() -> Vec<String> {
+    let mut names: Vec<String> = ["x", "y", "z", "nx", "ny", "nz"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    names.extend((0..3).map(|i| format!("f_dc_{i}")));
+    names.extend((0..45).map(|i| format!("f_rest_{i}")));
+    names
+}
+
 /// The 45 higher-degree coefficients of `coeffs` (48 floats, `[coeff][rgb]`) in the channel-major
 /// order of the 3DGS PLY (`f_rest_{15·c + k − 1}` = coefficient `k ≥ 1` of channel `c`): the
 /// layout of the model's and the splat export's PLY files.
