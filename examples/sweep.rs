@@ -13,7 +13,9 @@
 //! `psnr_vs_time.svg`, `psnr_vs_size.svg`, `curves.svg`) are rewritten in `<out>/` after every
 //! run.
 use anyhow::{Context, Result, bail};
-use bbsplat::sweep::{SubprocessRunner, SweepGrid, run_grid, write_outputs};
+use bbsplat::sweep::{
+    SlurmOptions, SubprocessRunner, SweepGrid, run_grid, slurm_scripts, write_outputs, write_slurm_scripts,
+};
 use clap::Parser;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -64,6 +66,23 @@ struct Args {
     /// Print the commands and exit.
     #[arg(long)]
     dry_run: bool,
+    /// Write the sweep as Slurm jobs into `<out>/slurm/` instead of running it: `sweep.sbatch`
+    /// (one array task per setting), `collect.sbatch` (this command without the Slurm flags,
+    /// after every task succeeded) and `submit.sh`, which submits both (docs/cluster.md).
+    #[arg(long)]
+    slurm: bool,
+    /// With --slurm: CPUs per task (`bbsplat` gets as many threads).
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    cpus_per_task: u32,
+    /// With --slurm: memory per task in MB.
+    #[arg(long)]
+    mem: Option<u64>,
+    /// With --slurm: time limit per task, in Slurm's syntax (e.g. `30:00`).
+    #[arg(long)]
+    time: Option<String>,
+    /// With --slurm: the partition.
+    #[arg(long)]
+    partition: Option<String>,
     /// Flags passed to every `bbsplat train` run.
     #[arg(last = true)]
     train_args: Vec<String>,
@@ -86,8 +105,65 @@ fn default_exe() -> Result<PathBuf> {
     })
 }
 
+/// The Slurm flags of this command, with the number of values each takes.
+const SLURM_FLAGS: [(&str, usize); 5] = [
+    ("--slurm", 0),
+    ("--cpus-per-task", 1),
+    ("--mem", 1),
+    ("--time", 1),
+    ("--partition", 1),
+];
+
+/// This command line without its Slurm flags, the executable as an absolute path: the collect
+/// job's command.
+fn collect_command() -> Result<Vec<String>> {
+    let exe = std::env::current_exe().context("locating this executable")?;
+    let mut out = vec![exe.display().to_string()];
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        if a == "--" {
+            out.push(a);
+            out.extend(args.by_ref());
+            break;
+        }
+        match SLURM_FLAGS
+            .iter()
+            .find(|(f, _)| a == *f || a.starts_with(&format!("{f}=")))
+        {
+            Some((f, n)) if a == *f => {
+                for _ in 0..*n {
+                    args.next();
+                }
+            }
+            Some(_) => {}
+            None => out.push(a),
+        }
+    }
+    Ok(out)
+}
+
+fn write_slurm(args: &Args, runner: &SubprocessRunner, settings: &[bbsplat::sweep::Setting]) -> Result<()> {
+    let dir = args.out.join("slurm");
+    let options = SlurmOptions {
+        cpus_per_task: args.cpus_per_task,
+        mem_mb: args.mem,
+        time: args.time.clone(),
+        partition: args.partition.clone(),
+    };
+    let scripts = slurm_scripts(runner, settings, &collect_command()?, &dir, &options);
+    let paths = write_slurm_scripts(&dir, &scripts).with_context(|| format!("writing {}", dir.display()))?;
+    for p in &paths {
+        println!("wrote {}", p.display());
+    }
+    println!("{} settings; submit with: sh {}", settings.len(), paths[2].display());
+    Ok(())
+}
+
 fn main() -> Result<()> {
-    let args = Args::parse();
+    let mut args = Args::parse();
+    // Absolute paths: the jobs may start in another folder, on another machine.
+    args.out = std::path::absolute(&args.out).context("resolving --out")?;
+    args.scene = std::path::absolute(&args.scene).context("resolving the scene path")?;
     let mut grid = match &args.grid {
         Some(path) => SweepGrid::from_json_file(path)?,
         None => SweepGrid::default(),
@@ -106,7 +182,7 @@ fn main() -> Result<()> {
             grid.set_axis(axis, list)?;
         }
     }
-    let exe = match args.exe {
+    let exe = match args.exe.clone() {
         Some(exe) => exe,
         None => default_exe()?,
     };
@@ -114,6 +190,9 @@ fn main() -> Result<()> {
     runner.extra_args = args.train_args.clone();
     runner.verbose = true;
     let settings = grid.settings()?;
+    if args.slurm {
+        return write_slurm(&args, &runner, &settings);
+    }
     if args.dry_run {
         for s in &settings {
             println!("{} {}", runner.exe.display(), runner.args(s).join(" "));

@@ -17,6 +17,7 @@ mod cli_reliability;
 mod cli_resume_time;
 mod cli_scene_mark;
 mod cli_serve;
+mod cluster_slurm;
 mod demo;
 mod eval;
 mod exp_f32;

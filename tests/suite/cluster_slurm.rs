@@ -1,0 +1,185 @@
+//! A sweep on a real single-node Slurm cluster (`tools/slurm_single_node.sh`, started here;
+//! `.ci/run` installs it): `examples/sweep --slurm` writes an array job and a collect job, both
+//! run under Slurm; one task is requeued while it trains and resumes from its checkpoint; every
+//! setting's model is bit for bit the model of the same setting run locally, and the collect job
+//! writes the sweep's table.
+//!
+//! Needs root (the daemons) and `sbatch`: skipped with "SKIPPED" otherwise, failing instead when
+//! `BBSPLAT_REQUIRE_TOOLS` is set.
+
+use crate::cli::{export_demo, temp};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+/// How long the jobs may take in all (measured: about 20 s, with the requeue).
+const DEADLINE: Duration = Duration::from_secs(300);
+
+/// The cluster's `SLURM_CONF`, after starting it; `None` (said as SKIPPED) without root.
+fn cluster(test: &str) -> Option<String> {
+    let root = Command::new("id").arg("-u").output().is_ok_and(|o| o.stdout == b"0\n");
+    if !root {
+        assert!(
+            std::env::var_os("BBSPLAT_REQUIRE_TOOLS").is_none(),
+            "{test}: the single-node cluster needs root (BBSPLAT_REQUIRE_TOOLS is set)"
+        );
+        let _ = writeln!(std::io::stderr(), "SKIPPED {test}: the single-node cluster needs root");
+        return None;
+    }
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/slurm_single_node.sh");
+    let out = Command::new(&script).output().expect("the cluster script runs");
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    if !out.status.success() {
+        assert!(
+            std::env::var_os("BBSPLAT_REQUIRE_TOOLS").is_none(),
+            "{test}: the cluster did not start: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let _ = writeln!(
+            std::io::stderr(),
+            "SKIPPED {test}: no Slurm: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        return None;
+    }
+    let conf = text
+        .trim()
+        .strip_prefix("export SLURM_CONF=")
+        .expect("the script prints SLURM_CONF");
+    Some(conf.to_string())
+}
+
+/// `program args` with `SLURM_CONF`, which must succeed; its standard output.
+fn slurm(conf: &str, program: &str, args: &[&str]) -> String {
+    let out = Command::new(program)
+        .args(args)
+        .env("SLURM_CONF", conf)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{program} {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// Waits (bounded by [`DEADLINE`] from `start`) until `done` holds.
+fn wait_until(start: Instant, what: &str, mut done: impl FnMut() -> bool) {
+    while !done() {
+        assert!(start.elapsed() < DEADLINE, "{what} after {:?}", start.elapsed());
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+/// The model files (the PLY and the textures; not `bbsplat.json`, which names its folder).
+fn model_bytes(run: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(run.join("model"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x != "json"))
+        .map(|p| {
+            (
+                p.file_name().unwrap().to_string_lossy().into_owned(),
+                std::fs::read(&p).unwrap(),
+            )
+        })
+        .collect();
+    files.sort();
+    files
+}
+
+#[test]
+fn a_sweep_runs_as_slurm_jobs_and_a_requeued_task_resumes_to_the_local_result() {
+    let test = "a_sweep_runs_as_slurm_jobs";
+    let Some(conf) = cluster(test) else { return };
+    let root = temp("slurm-sweep");
+    let data = export_demo(&root, 24, 100);
+    let bbsplat = PathBuf::from(env!("CARGO_BIN_EXE_bbsplat"));
+    let sweep = bbsplat.parent().unwrap().join("examples").join("sweep");
+    assert!(
+        sweep.is_file(),
+        "cargo test builds the sweep example: {}",
+        sweep.display()
+    );
+    let train_args = ["--texture-size", "4", "--eval-every", "0", "--save-every", "20"];
+    let sweep_args = |out: &Path, extra: &[&str]| {
+        let mut a: Vec<String> = [
+            data.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--exe",
+            bbsplat.to_str().unwrap(),
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        a.extend(["--billboards", "60,120", "--iterations", "300"].map(String::from));
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a.push("--".into());
+        a.extend(train_args.map(String::from));
+        a
+    };
+    // The local sweep.
+    let local = root.join("local");
+    let ok = Command::new(&sweep).args(sweep_args(&local, &[])).output().unwrap();
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    // The same sweep as Slurm jobs.
+    let remote = root.join("slurm");
+    let ok = Command::new(&sweep)
+        .args(sweep_args(&remote, &["--slurm", "--cpus-per-task", "1"]))
+        .output()
+        .unwrap();
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    let start = Instant::now();
+    let submitted = slurm(&conf, "sh", &[remote.join("slurm/submit.sh").to_str().unwrap()]);
+    let ids: Vec<&str> = submitted
+        .trim()
+        .split([' ', ','])
+        .filter(|w| w.chars().all(|c| c.is_ascii_digit()) && !w.is_empty())
+        .collect();
+    let [array, collect] = ids[..] else {
+        panic!("two job ids in {submitted:?}")
+    };
+    // Requeue task 1 once it has saved a checkpoint (it trains 300 steps, saving every 20).
+    let run1 = remote.join("runs/it300_bb120");
+    wait_until(start, "no checkpoint of task 1", || {
+        run1.join("checkpoint.bin").is_file()
+    });
+    let task = format!("{array}_1");
+    slurm(&conf, "scontrol", &["requeue", &task]);
+    // A requeued job is held back before it may start again (its begin time is set about two
+    // minutes ahead): once it is pending, let it start now.
+    wait_until(start, "task 1 was not pending again", || {
+        slurm(&conf, "squeue", &["-h", "-j", &task, "-o", "%T"]).trim() == "PENDING"
+    });
+    slurm(
+        &conf,
+        "scontrol",
+        &["update", &format!("JobId={task}"), "StartTime=now"],
+    );
+    wait_until(start, "the collect job did not end", || {
+        slurm(&conf, "squeue", &["-h", "-j", collect]).trim().is_empty()
+    });
+    let log = std::fs::read_to_string(run1.join("train.log")).unwrap();
+    println!("{log}");
+    assert!(
+        log.contains("interrupted at step") && log.contains("resuming at step"),
+        "task 1 was not interrupted and resumed: {log}"
+    );
+    for slug in ["it300_bb60", "it300_bb120"] {
+        let (a, b) = (
+            model_bytes(&local.join("runs").join(slug)),
+            model_bytes(&remote.join("runs").join(slug)),
+        );
+        assert!(
+            a.len() >= 2 && a == b,
+            "{slug}: the Slurm model differs from the local one"
+        );
+    }
+    let table = std::fs::read_to_string(remote.join("sweep.md")).expect("the collect job wrote the table");
+    assert!(table.contains("it300_bb60") && table.contains("it300_bb120"), "{table}");
+    println!("jobs done in {:?}", start.elapsed());
+    std::fs::remove_dir_all(&root).ok();
+}
