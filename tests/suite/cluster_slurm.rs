@@ -183,3 +183,28 @@ fn a_sweep_runs_as_slurm_jobs_and_a_requeued_task_resumes_to_the_local_result() 
     println!("jobs done in {:?}", start.elapsed());
     std::fs::remove_dir_all(&root).ok();
 }
+
+/// Every argument of a task survives the shell: `shell_quote`d words read back by `sh` are the
+/// words (spaces, quotes, `$`, backslashes, empty, non-ASCII).
+#[test]
+fn shell_quoted_words_read_back_unchanged() {
+    use bbsplat::sweep::shell_quote;
+    let words = [
+        "plain",
+        "with space",
+        "it's",
+        "$HOME",
+        "a\\b",
+        "",
+        "naïve",
+        "--x=1,2",
+        "*",
+    ];
+    let script = format!(
+        "for w in {}; do printf '%s\\n' \"$w\"; done",
+        words.iter().map(|w| shell_quote(w)).collect::<Vec<_>>().join(" ")
+    );
+    let out = Command::new("sh").args(["-c", &script]).output().unwrap();
+    let back: Vec<&str> = std::str::from_utf8(&out.stdout).unwrap().lines().collect();
+    assert_eq!(back, words);
+}
