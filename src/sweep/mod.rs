@@ -45,7 +45,7 @@ mod runner;
 pub use grid::{AXES, Setting, SweepGrid, parse_list};
 pub use output::{CSV_HEADER, SweepFiles, csv_table, markdown_table, write_atomic, write_outputs};
 pub use pareto::pareto_front;
-pub use plot::{plot_curves_svg, plot_psnr_vs_size_svg, plot_psnr_vs_time_svg};
+pub use plot::{plot_curves_svg, plot_lines_svg, plot_psnr_vs_size_svg, plot_psnr_vs_time_svg};
 pub use runner::{SubprocessRunner, subprocess_runner};
 
 use crate::report::TrainSummary;
