@@ -187,7 +187,9 @@ impl BenchmarkRow {
         let value: serde_json::Value = serde_json::from_str(&text).map_err(invalid)?;
         let file: SummaryFile = serde_json::from_value(value.clone()).map_err(invalid)?;
         let s = file.summary;
-        let masked = value.get("masked_test").and_then(|m| Some((m.get("psnr")?.as_f64()?, m.get("ssim")?.as_f64()?)));
+        let masked = value
+            .get("masked_test")
+            .and_then(|m| Some((m.get("psnr")?.as_f64()?, m.get("ssim")?.as_f64()?)));
         let finite = |v: f64| v.is_finite().then_some(v);
         Ok(Self {
             name: name.into(),
@@ -231,7 +233,10 @@ pub fn markdown_table(rows: &[BenchmarkRow], minutes: f64) -> String {
     );
     for r in rows {
         let paper = r.paper.map_or("not in Table 9".into(), |p| {
-            format!("{:.2} / {:.4} / {:.4} ({} {})", p.psnr, p.ssim, p.lpips, p.dataset, p.scene)
+            format!(
+                "{:.2} / {:.4} / {:.4} ({} {})",
+                p.psnr, p.ssim, p.lpips, p.dataset, p.scene
+            )
         });
         if r.error.is_some() {
             out.push_str(&format!("| {} | failed | | | | | | | | | {paper} |\n", r.name));
@@ -242,7 +247,9 @@ pub fn markdown_table(rows: &[BenchmarkRow], minutes: f64) -> String {
             r.name,
             cell(r.psnr, 2),
             cell(r.ssim, 4),
-            r.lpips.as_ref().map_or("-".into(), |(net, d)| format!("{d:.4} ({net})")),
+            r.lpips
+                .as_ref()
+                .map_or("-".into(), |(net, d)| format!("{d:.4} ({net})")),
             r.masked.map_or("-".into(), |(p, s)| format!("{p:.2} / {s:.4}")),
             r.test_views.map_or("-".into(), |n| n.to_string()),
             cell(r.train_seconds, 1),
@@ -253,7 +260,12 @@ pub fn markdown_table(rows: &[BenchmarkRow], minutes: f64) -> String {
     }
     for r in rows {
         if let Some(error) = &r.error {
-            out.push_str(&format!("\n{} ({}) failed: {}\n", r.name, r.scene, error.replace('\n', " ")));
+            out.push_str(&format!(
+                "\n{} ({}) failed: {}\n",
+                r.name,
+                r.scene,
+                error.replace('\n', " ")
+            ));
         }
     }
     out

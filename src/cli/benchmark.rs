@@ -110,7 +110,9 @@ fn check_budget(row: BenchmarkRow, summary: &Path, minutes: f64) -> BenchmarkRow
     match budget {
         Some(b) if (b - minutes).abs() <= 1e-9 * minutes.max(1.0) => row,
         other => {
-            let what = other.map_or("a run without --minutes".to_string(), |b| format!("a --minutes {b} run"));
+            let what = other.map_or("a run without --minutes".to_string(), |b| {
+                format!("a --minutes {b} run")
+            });
             BenchmarkRow::failed(
                 &row.name,
                 &row.scene,
@@ -140,7 +142,9 @@ fn train_scene(args: &BenchmarkArgs, scene: &Path, out: &Path, resume: Option<&P
         return Ok(());
     }
     // The error block `bbsplat train` ends with ("Error: ..." and its causes), on one line.
-    let error = stderr.rfind("Error: ").map_or("no message", |at| &stderr[at + "Error: ".len()..]);
+    let error = stderr
+        .rfind("Error: ")
+        .map_or("no message", |at| &stderr[at + "Error: ".len()..]);
     let error = error.split_whitespace().collect::<Vec<_>>().join(" ");
     anyhow::bail!("bbsplat train {} ({}): {error}", scene.display(), output.status)
 }
@@ -173,12 +177,17 @@ pub fn run(args: BenchmarkArgs) -> Result<()> {
     }
     if args.curve {
         let lines: Vec<(String, Vec<(f64, f64)>)> = rows.iter().map(|r| (r.name.clone(), r.curve.clone())).collect();
-        let svg = bbsplat::sweep::plot_lines_svg(&lines, "Test PSNR during training", "training time (min)", "curve.svg")?;
+        let svg =
+            bbsplat::sweep::plot_lines_svg(&lines, "Test PSNR during training", "training time (min)", "curve.svg")?;
         let path = args.output.join("curve.svg");
         super::common::write_text_atomic(&path, &svg).with_context(|| format!("writing {}", path.display()))?;
     }
     print!("{}", markdown_table(&rows, args.minutes));
-    let failed: Vec<&str> = rows.iter().filter(|r| r.error.is_some()).map(|r| r.name.as_str()).collect();
+    let failed: Vec<&str> = rows
+        .iter()
+        .filter(|r| r.error.is_some())
+        .map(|r| r.name.as_str())
+        .collect();
     anyhow::ensure!(
         failed.is_empty(),
         "{} of {} scenes failed: {} (their errors are in {})",
@@ -193,7 +202,11 @@ pub fn run(args: BenchmarkArgs) -> Result<()> {
 /// Writes `OUT/benchmark.md` and `OUT/benchmark.json` for `rows`.
 fn write_tables(args: &BenchmarkArgs, rows: &[BenchmarkRow]) -> Result<()> {
     let md = args.output.join("benchmark.md");
-    let text = format!("# bbsplat benchmark, {} minutes per scene\n\n{}", args.minutes, markdown_table(rows, args.minutes));
+    let text = format!(
+        "# bbsplat benchmark, {} minutes per scene\n\n{}",
+        args.minutes,
+        markdown_table(rows, args.minutes)
+    );
     super::common::write_text_atomic(&md, &text).with_context(|| format!("writing {}", md.display()))?;
     let json = serde_json::json!({
         "minutes": args.minutes,

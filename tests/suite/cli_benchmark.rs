@@ -34,7 +34,10 @@ fn benchmark_tables_hold_each_run_and_a_rerun_trains_nothing() {
         a.extend(extra.iter().map(|s| s.to_string()));
         a
     };
-    let first = Command::new(env!("CARGO_BIN_EXE_bbsplat")).args(args(&[])).output().unwrap();
+    let first = Command::new(env!("CARGO_BIN_EXE_bbsplat"))
+        .args(args(&[]))
+        .output()
+        .unwrap();
     let (stdout, stderr) = (
         String::from_utf8_lossy(&first.stdout).into_owned(),
         String::from_utf8_lossy(&first.stderr).into_owned(),
@@ -53,7 +56,10 @@ fn benchmark_tables_hold_each_run_and_a_rerun_trains_nothing() {
     let error = failed["error"].as_str().unwrap();
     assert!(error.contains(&missing.display().to_string()), "{error}");
     assert!(md.contains("| no_such_scene | failed |"), "{md}");
-    assert!(md.contains(&format!("no_such_scene ({}) failed:", missing.display())), "{md}");
+    assert!(
+        md.contains(&format!("no_such_scene ({}) failed:", missing.display())),
+        "{md}"
+    );
     for (row, name) in [(&rows[0], "scene_a"), (&rows[2], "dtu_scan65")] {
         assert_eq!(row["name"], name);
         assert!(row["error"].is_null(), "{row}");
@@ -71,7 +77,10 @@ fn benchmark_tables_hold_each_run_and_a_rerun_trains_nothing() {
         }
         assert!(s["iterations"].as_u64().unwrap() > 0 && s["peak_rss_bytes"].as_u64().unwrap() > 0);
         assert_eq!(s["plan"]["budget_minutes"], 0.02, "trained with the benchmark's budget");
-        assert_eq!(row["curve"].as_array().unwrap().len(), s["curve"].as_array().unwrap().len());
+        assert_eq!(
+            row["curve"].as_array().unwrap().len(),
+            s["curve"].as_array().unwrap().len()
+        );
         // The markdown row holds the same figures, rounded as printed.
         let line = md
             .lines()
@@ -80,12 +89,19 @@ fn benchmark_tables_hold_each_run_and_a_rerun_trains_nothing() {
         let psnr = format!("| {:.2} |", s["test_psnr"].as_f64().unwrap());
         let steps = format!("| {} |", s["iterations"]);
         let billboards = format!("| {} |", s["billboards"]);
-        assert!(line.contains(&psnr) && line.contains(&steps) && line.contains(&billboards), "{line}");
+        assert!(
+            line.contains(&psnr) && line.contains(&steps) && line.contains(&billboards),
+            "{line}"
+        );
     }
     // The paper's row beside the scene it has, "not in Table 9" beside the other.
     assert_eq!(rows[2]["paper"]["psnr"], 29.67);
     assert!(rows[0]["paper"].is_null());
-    assert!(md.lines().any(|l| l.starts_with("| scene_a |") && l.ends_with("not in Table 9 |")), "{md}");
+    assert!(
+        md.lines()
+            .any(|l| l.starts_with("| scene_a |") && l.ends_with("not in Table 9 |")),
+        "{md}"
+    );
     assert!(md.contains("29.67 / 0.8754 / 0.2803 (DTU Scan65)"), "{md}");
     let svg = std::fs::read_to_string(out.join("curve.svg")).unwrap();
     assert!(svg.starts_with("<svg") && svg.contains("scene_a") && svg.contains("dtu_scan65"));
@@ -121,7 +137,10 @@ fn benchmark_tables_hold_each_run_and_a_rerun_trains_nothing() {
     let stderr = String::from_utf8_lossy(&other.stderr);
     assert!(!other.status.success());
     let md = std::fs::read_to_string(out.join("benchmark.md")).unwrap();
-    assert!(md.contains("holds a --minutes 0.02 run, not --minutes 0.05"), "{md}\n{stderr}");
+    assert!(
+        md.contains("holds a --minutes 0.02 run, not --minutes 0.05"),
+        "{md}\n{stderr}"
+    );
     std::fs::remove_dir_all(&root).ok();
 }
 
@@ -136,6 +155,9 @@ fn benchmark_refuses_two_scenes_of_one_name() {
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success() && stderr.contains("two scenes are named lego"), "{stderr}");
+    assert!(
+        !out.status.success() && stderr.contains("two scenes are named lego"),
+        "{stderr}"
+    );
     assert!(!root.join("bench").exists(), "nothing written");
 }
