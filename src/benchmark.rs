@@ -132,6 +132,8 @@ pub struct BenchmarkRow {
     pub scene: String,
     /// Why the scene has no figures (the error of its run); `None` when it ran.
     pub error: Option<String>,
+    /// The run's time budget (`--minutes`), from its plan; `None` for a run of a step count.
+    pub budget_minutes: Option<f64>,
     /// Mean test PSNR, dB.
     pub psnr: Option<f64>,
     /// Mean test SSIM.
@@ -163,6 +165,7 @@ impl BenchmarkRow {
             name: name.into(),
             scene: scene.into(),
             error: Some(error),
+            budget_minutes: None,
             psnr: None,
             ssim: None,
             lpips: None,
@@ -195,6 +198,7 @@ impl BenchmarkRow {
             name: name.into(),
             scene: scene.into(),
             error: None,
+            budget_minutes: file.record.plan.map(|p| p.budget_minutes),
             psnr: finite(s.test_psnr),
             ssim: finite(s.test_ssim),
             lpips: s.lpips_network.zip(s.test_lpips),

@@ -103,11 +103,7 @@ fn bench_scene(args: &BenchmarkArgs, scene: &Path, name: &str) -> BenchmarkRow {
 
 /// A finished run of another budget is not a row of this table: failed, saying so.
 fn check_budget(row: BenchmarkRow, summary: &Path, minutes: f64) -> BenchmarkRow {
-    let budget = bbsplat::file_io::read_text_bounded(summary, bbsplat::file_io::JSON_FILE)
-        .ok()
-        .and_then(|t| serde_json::from_str::<bbsplat::report::SummaryFile>(&t).ok())
-        .and_then(|f| f.record.plan.map(|p| p.budget_minutes));
-    match budget {
+    match row.budget_minutes {
         Some(b) if (b - minutes).abs() <= 1e-9 * minutes.max(1.0) => row,
         other => {
             let what = other.map_or("a run without --minutes".to_string(), |b| {

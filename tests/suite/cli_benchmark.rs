@@ -77,6 +77,7 @@ fn benchmark_tables_hold_each_run_and_a_rerun_trains_nothing() {
         }
         assert!(s["iterations"].as_u64().unwrap() > 0 && s["peak_rss_bytes"].as_u64().unwrap() > 0);
         assert_eq!(s["plan"]["budget_minutes"], 0.02, "trained with the benchmark's budget");
+        assert_eq!(row["budget_minutes"], 0.02);
         assert_eq!(
             row["curve"].as_array().unwrap().len(),
             s["curve"].as_array().unwrap().len()
