@@ -115,6 +115,7 @@
 // the index arithmetic the docs describe.
 #![allow(clippy::needless_range_loop)]
 
+pub mod benchmark;
 pub mod billboards;
 pub mod camera;
 pub mod cpu;

@@ -55,6 +55,9 @@ enum Command {
     /// Extract a triangle mesh (PLY) by fusing the model's rendered depth of the training views
     /// into a TSDF volume (marching cubes, largest components kept).
     Mesh(cli::mesh::MeshArgs),
+    /// Train each scene with the defaults for `--minutes` and write a table of test PSNR, SSIM,
+    /// LPIPS, time, steps, billboards and peak memory beside the paper's published figures.
+    Benchmark(cli::benchmark::BenchmarkArgs),
     /// Write a self-contained WebGL2 viewer page of a saved model (optionally serve it locally).
     View(cli::view::ViewArgs),
 }
@@ -81,5 +84,6 @@ fn main() -> Result<()> {
         Command::Export(args) => cli::export::run(args),
         Command::Mesh(args) => cli::mesh::run(args),
         Command::View(args) => cli::view::run(args),
+        Command::Benchmark(args) => cli::benchmark::run(args),
     }
 }

@@ -1,6 +1,7 @@
 //! Subcommands of the `bbsplat` binary (the library does the work; these parse flags, print and
 //! write files).
 
+pub mod benchmark;
 pub mod common;
 pub mod demo;
 pub mod export;

@@ -46,7 +46,7 @@ pub mod slurm;
 pub use grid::{AXES, Setting, SweepGrid, parse_list};
 pub use output::{CSV_HEADER, SweepFiles, csv_table, markdown_table, write_atomic, write_outputs};
 pub use pareto::pareto_front;
-pub use plot::{plot_curves_svg, plot_psnr_vs_size_svg, plot_psnr_vs_time_svg};
+pub use plot::{plot_curves_svg, plot_lines_svg, plot_psnr_vs_size_svg, plot_psnr_vs_time_svg};
 pub use runner::{SubprocessRunner, subprocess_runner};
 pub use slurm::{SlurmOptions, SlurmScripts, shell_quote, slurm_scripts, write_slurm_scripts};
 

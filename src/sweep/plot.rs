@@ -119,18 +119,38 @@ pub fn plot_psnr_vs_size_svg(records: &[SweepRecord]) -> Result<String, SweepErr
 /// SVG of test PSNR (dB) against training time (s) during each run (its `curve`), one coloured
 /// line per run labelled with its slug. Runs without curve points are left out.
 pub fn plot_curves_svg(records: &[SweepRecord]) -> Result<String, SweepError> {
+    let lines: Vec<(String, Vec<(f64, f64)>)> = records
+        .iter()
+        .map(|r| {
+            let points = r.summary.curve.iter().map(|c| (c.seconds, c.psnr)).collect();
+            (r.setting.slug(), points)
+        })
+        .collect();
+    plot_lines_svg(&lines, "Test PSNR during training", "training time (s)", "curves.svg")
+}
+
+/// SVG of test PSNR (dB, the y axis) against `x_desc` (the x axis, which always includes 0): one
+/// coloured line with markers per `(label, points)`, labelled in a legend. Non-finite points are
+/// left out, and lines left without points are not drawn. `file_name` names the plot in an error.
+///
+/// ```
+/// let lines = vec![("a".to_string(), vec![(0.5, 20.0), (1.0, 24.0)])];
+/// let svg = bbsplat::sweep::plot_lines_svg(&lines, "PSNR", "minutes", "p.svg").unwrap();
+/// assert!(svg.starts_with("<svg") && svg.contains("minutes"));
+/// ```
+pub fn plot_lines_svg(
+    lines: &[(String, Vec<(f64, f64)>)],
+    title: &str,
+    x_desc: &str,
+    file_name: &str,
+) -> Result<String, SweepError> {
     let draw = || -> Result<String, Box<dyn std::error::Error>> {
-        let finite = |r: &SweepRecord| -> Vec<(f64, f64)> {
-            r.summary
-                .curve
-                .iter()
-                .map(|c| (c.seconds, c.psnr))
-                .filter(|p| p.0.is_finite() && p.1.is_finite())
-                .collect()
-        };
-        let lines: Vec<(String, Vec<(f64, f64)>)> = records
+        let lines: Vec<(&str, Vec<(f64, f64)>)> = lines
             .iter()
-            .map(|r| (r.setting.slug(), finite(r)))
+            .map(|(label, l)| {
+                let finite = l.iter().copied().filter(|p| p.0.is_finite() && p.1.is_finite());
+                (label.as_str(), finite.collect::<Vec<_>>())
+            })
             .filter(|(_, l)| !l.is_empty())
             .collect();
         let all = || lines.iter().flat_map(|(_, l)| l.iter().copied());
@@ -140,21 +160,17 @@ pub fn plot_curves_svg(records: &[SweepRecord]) -> Result<String, SweepError> {
             root.fill(&WHITE)?;
             let x = padded_range(all().map(|p| p.0).chain(std::iter::once(0.0)));
             let mut chart = ChartBuilder::on(&root)
-                .caption("Test PSNR during training", ("sans-serif", 20))
+                .caption(title, ("sans-serif", 20))
                 .margin(12)
                 .x_label_area_size(45)
                 .y_label_area_size(60)
                 .build_cartesian_2d(x, padded_range(all().map(|p| p.1)))?;
-            chart
-                .configure_mesh()
-                .x_desc("training time (s)")
-                .y_desc("test PSNR (dB)")
-                .draw()?;
-            for (i, (slug, line)) in lines.iter().enumerate() {
+            chart.configure_mesh().x_desc(x_desc).y_desc("test PSNR (dB)").draw()?;
+            for (i, (label, line)) in lines.iter().enumerate() {
                 let colour = Palette99::pick(i).to_rgba();
                 chart
                     .draw_series(LineSeries::new(line.iter().copied(), colour.stroke_width(2)))?
-                    .label(slug.as_str())
+                    .label(*label)
                     .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2)));
                 chart.draw_series(line.iter().map(|&p| Circle::new(p, 3, colour.filled())))?;
             }
@@ -170,5 +186,5 @@ pub fn plot_curves_svg(records: &[SweepRecord]) -> Result<String, SweepError> {
         }
         Ok(svg)
     };
-    draw().map_err(|e| plot_error("curves.svg", e))
+    draw().map_err(|e| plot_error(file_name, e))
 }

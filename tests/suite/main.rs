@@ -7,6 +7,7 @@ mod bench_scene;
 mod camera;
 #[cfg(feature = "cli")]
 mod cli;
+mod cli_benchmark;
 mod cli_bounds;
 #[cfg(feature = "cli")]
 mod cli_export;
