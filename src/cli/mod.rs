@@ -7,6 +7,7 @@ pub mod demo;
 pub mod export;
 pub mod flag_parsers;
 pub mod http;
+pub mod live;
 pub mod mesh;
 pub mod preflight;
 pub mod render;

@@ -175,6 +175,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
     // The views' 8-bit images move into the training views (converted to floats per step).
     let mut scene_warnings = scene.warnings;
     scene_warnings.extend(resume_warnings);
+    let train_names: Vec<String> = scene.train.iter().map(|v| v.name.clone()).collect();
     let train: Vec<TrainView> = scene.train.into_iter().map(TrainView::from_owned_view).collect();
     // The test views' masks (NeuS mask/, --masks), for the masked figures of the summary.
     let test_masks: Vec<Option<Vec<u8>>> = scene.test.iter().map(|v| v.mask.clone()).collect();
@@ -224,9 +225,27 @@ pub fn run(args: TrainArgs) -> Result<()> {
         lpips,
         lpips_note,
         step_clock: bbsplat::train::StepClock::Wall,
+        snapshot_every: if args.view { args.view_every as usize } else { 0 },
+    };
+    let live = if args.view {
+        let cameras = train_names.into_iter().zip(&train).map(|(name, v)| (name, v.camera)).collect();
+        let config = trainer.config();
+        let (live, address) = super::live::LiveView::start(
+            args.view_port,
+            trainer.activated(),
+            trainer.step_index(),
+            cameras,
+            config.sh_degree,
+            config.background,
+        )?;
+        println!("live view at http://{address}/");
+        std::io::Write::flush(&mut std::io::stdout())?;
+        Some(live)
+    } else {
+        None
     };
     let last_record = std::cell::RefCell::new(None::<RunReport>);
-    let on_event = |event: &TrainEvent| match event {
+    let print_event = |event: &TrainEvent| match event {
         TrainEvent::Started {
             train_views,
             test_views,
@@ -266,6 +285,23 @@ pub fn run(args: TrainArgs) -> Result<()> {
         }),
         TrainEvent::Record(record) => *last_record.borrow_mut() = Some((**record).clone()),
         _ => {}
+    };
+    let on_event = |event: &TrainEvent| {
+        if let Some(live) = &live {
+            match event {
+                TrainEvent::Step {
+                    log,
+                    iterations,
+                    running_psnr,
+                    ..
+                } => live.step(log.step, *iterations, log.loss, *running_psnr, log.view),
+                TrainEvent::Evaluation { psnr, .. } => live.evaluation(*psnr),
+                TrainEvent::Snapshot { step, billboards } => live.snapshot(*step, billboards),
+                TrainEvent::Finished(_) | TrainEvent::Stopped { .. } => live.done(),
+                _ => {}
+            }
+        }
+        print_event(event)
     };
     let outcome = bbsplat::train::run(&mut trainer, &train, &test, &run_config, &stop, on_event);
     let summary = match outcome {

@@ -62,6 +62,17 @@ pub struct TrainArgs {
     /// No progress bar or per-evaluation lines; the final summary is still printed.
     #[arg(long)]
     pub quiet: bool,
+    /// Serve a live view of the training on http://127.0.0.1:<port>/ (printed as `live view at
+    /// ...`): the WebGL2 viewer page, its model refreshed every --view-every steps, with the
+    /// step's camera, loss and PSNR (to this machine only, as `view --serve`; docs/export.md).
+    #[arg(long)]
+    pub view: bool,
+    /// Port of --view (0: any free port).
+    #[arg(long, default_value_t = 0, requires = "view")]
+    pub view_port: u16,
+    /// Steps between two models handed to --view (at least 1).
+    #[arg(long, default_value_t = 100, requires = "view", value_parser = clap::value_parser!(u64).range(1..))]
+    pub view_every: u64,
     /// Also compute LPIPS of the final test views (8-bit images, as `bbsplat eval --lpips`) into
     /// summary.json: `--lpips` is VGG16 as the reference evaluates, `--lpips=alex` AlexNet. Off
     /// by default: VGG costs seconds per 400×400 view on 2 cores (docs/lpips.md). Needs the

@@ -70,8 +70,22 @@ pub struct ViewerCamera<'a> {
     pub camera: &'a Camera,
 }
 
-/// The viewer page of `set` (SH evaluated up to `sh_degree`) over `background`, with `cameras`.
-pub fn viewer_html(set: &ActivatedRef<'_>, sh_degree: u32, background: Vec3, cameras: &[ViewerCamera<'_>]) -> String {
+/// The model and cameras the viewer page embeds, as JSON (what `bbsplat train --view` serves as
+/// `/model`; the page's `loadModel` reads it): `count`, `texture_size`, `sh_degree` (at most 3),
+/// `background` (linear RGB in 0-1), `target` (world point the orbit turns about), base64
+/// little-endian `f32` arrays `positions` (3 per billboard), `axes` (the scaled u then v axes, 6),
+/// `sh` (3 per coefficient), 8-bit RGBA `textures` (row-major TS×TS per billboard) and `cameras`
+/// (world-to-camera rotation rows, translation, pinhole intrinsics in pixels).
+///
+/// ```
+/// use bbsplat::billboards::ActivatedBillboards;
+/// let set = ActivatedBillboards::empty(4);
+/// let json = bbsplat::export::viewer::viewer_data(&set.borrowed(), 0, glam::Vec3::ONE, &[]);
+/// let data: serde_json::Value = serde_json::from_str(&json).unwrap();
+/// assert_eq!(data["count"], 0);
+/// assert_eq!(data["texture_size"], 4);
+/// ```
+pub fn viewer_data(set: &ActivatedRef<'_>, sh_degree: u32, background: Vec3, cameras: &[ViewerCamera<'_>]) -> String {
     let n = set.len();
     let positions = f32_base64(set.positions.iter().flat_map(|p| p.to_array()));
     let axes = f32_base64((0..n).flat_map(|i| {
@@ -111,9 +125,18 @@ pub fn viewer_html(set: &ActivatedRef<'_>, sh_degree: u32, background: Vec3, cam
         "textures": base64(&textures),
         "cameras": cams,
     });
+    data.to_string()
+}
+
+/// The page around `data` (a [`viewer_data`] JSON text).
+pub fn page_of_data(data: &str) -> String {
     // `</` inside a script element would end it early.
-    let text = data.to_string().replace("</", "<\\/");
-    TEMPLATE.replacen(DATA_MARK, &text, 1)
+    TEMPLATE.replacen(DATA_MARK, &data.replace("</", "<\\/"), 1)
+}
+
+/// The viewer page of `set` (SH evaluated up to `sh_degree`) over `background`, with `cameras`.
+pub fn viewer_html(set: &ActivatedRef<'_>, sh_degree: u32, background: Vec3, cameras: &[ViewerCamera<'_>]) -> String {
+    page_of_data(&viewer_data(set, sh_degree, background, cameras))
 }
 
 /// Writes [`viewer_html`] to `path`; returns the size written.

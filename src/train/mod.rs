@@ -478,6 +478,9 @@ pub fn relocation_due(step: usize, iterations: usize, every: usize) -> bool {
 pub struct StepLog {
     /// Steps done, this one included.
     pub step: usize,
+    /// Index of the step's view in the views passed to [`Trainer::step`] (the coarse views keep
+    /// the training views' order, so it indexes those too).
+    pub view: usize,
     /// Total loss of the step: photometric + texture + opacity regularisers (+ the geometry
     /// regularisers when on).
     pub loss: f64,
@@ -1031,6 +1034,7 @@ impl Trainer {
         }
         Ok(StepLog {
             step: self.step,
+            view: vi,
             loss: total,
             photometric: loss.loss,
             texture_reg,

@@ -141,6 +141,9 @@ pub struct RunConfig {
     /// How each step's time is measured: the wall clock (the default), or a cost per pixel for
     /// tests of the time budget that must not depend on the machine's load.
     pub step_clock: StepClock,
+    /// Every how many steps [`TrainEvent::Snapshot`] hands over a copy of the activated
+    /// billboards (0: never; `bbsplat train --view`).
+    pub snapshot_every: usize,
 }
 
 /// How [`run`] measures the time of a step, which the time budget plans on and the summary
@@ -174,6 +177,7 @@ impl Default for RunConfig {
             lpips: None,
             lpips_note: None,
             step_clock: StepClock::Wall,
+            snapshot_every: 0,
         }
     }
 }
@@ -307,6 +311,15 @@ pub enum TrainEvent {
     /// What was chosen and what happened (the [`RunReport`] of `summary.json`), just before
     /// `Finished`.
     Record(Box<RunReport>),
+    /// A copy of the activated billboards after a step, every [`RunConfig::snapshot_every`]
+    /// steps, for a live view: the copy is shared, so handing
+    /// it to another thread costs nothing more. Taking it changes nothing in the run.
+    Snapshot {
+        /// Steps done.
+        step: usize,
+        /// The activated billboards after that step.
+        billboards: Arc<ActivatedBillboards>,
+    },
     /// The run is complete.
     Finished(Box<TrainSummary>),
 }
@@ -807,6 +820,12 @@ impl<'a> RunState<'a> {
     ) -> Result<(), RunError> {
         let config = self.config;
         let iterations = trainer.config().iterations;
+        if config.snapshot_every > 0 && step.is_multiple_of(config.snapshot_every) {
+            on_event(&TrainEvent::Snapshot {
+                step,
+                billboards: Arc::new(trainer.activated().clone()),
+            });
+        }
         if config.save_every > 0 && step.is_multiple_of(config.save_every) {
             self.last_checkpoint = self.save(trainer, on_event)?;
         }

@@ -75,6 +75,13 @@ pub fn psnr_bytes(a: &[u8], b: &[u8]) -> f64 {
 
 /// Screenshots `page` at dataset camera `camera` with headless Chromium at `width × height`.
 pub fn screenshot(chromium: &Path, page: &Path, camera: usize, width: u32, height: u32, out: &Path) -> image::RgbImage {
+    let url = format!("file://{}#camera={camera}&ui=0", page.display());
+    screenshot_url(chromium, &url, width, height, out)
+}
+
+/// Screenshots `url` with headless Chromium at `width × height` into `out`, after 20 s of the
+/// page's virtual time.
+pub fn screenshot_url(chromium: &Path, url: &str, width: u32, height: u32, out: &Path) -> image::RgbImage {
     let profile = out.with_extension("profile");
     let status = Command::new(chromium)
         .args([
@@ -90,7 +97,7 @@ pub fn screenshot(chromium: &Path, page: &Path, camera: usize, width: u32, heigh
         .arg(format!("--user-data-dir={}", profile.display()))
         .arg(format!("--window-size={width},{height}"))
         .arg(format!("--screenshot={}", out.display()))
-        .arg(format!("file://{}#camera={camera}&ui=0", page.display()))
+        .arg(url)
         .output()
         .expect("chromium runs");
     assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));

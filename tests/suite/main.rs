@@ -11,6 +11,7 @@ mod cli_benchmark;
 mod cli_bounds;
 #[cfg(feature = "cli")]
 mod cli_export;
+mod cli_live;
 mod cli_full_disk;
 mod cli_masks;
 #[cfg(feature = "cli")]
