@@ -187,7 +187,11 @@ impl LiveView {
 
     /// Records an intermediate test PSNR.
     pub fn evaluation(&self, psnr: f64) {
-        self.shared.progress.lock().unwrap_or_else(PoisonError::into_inner).test_psnr = Some(psnr);
+        self.shared
+            .progress
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .test_psnr = Some(psnr);
     }
 
     /// Marks the run as ended.

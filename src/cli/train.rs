@@ -228,7 +228,11 @@ pub fn run(args: TrainArgs) -> Result<()> {
         snapshot_every: if args.view { args.view_every as usize } else { 0 },
     };
     let live = if args.view {
-        let cameras = train_names.into_iter().zip(&train).map(|(name, v)| (name, v.camera)).collect();
+        let cameras = train_names
+            .into_iter()
+            .zip(&train)
+            .map(|(name, v)| (name, v.camera))
+            .collect();
         let config = trainer.config();
         let (live, address) = super::live::LiveView::start(
             args.view_port,

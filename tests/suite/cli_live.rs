@@ -29,7 +29,14 @@ impl Drop for Training {
 fn start(data: &std::path::Path, out: &std::path::Path, billboards: &str, view_every: &str) -> Training {
     let mut child = Command::new(env!("CARGO_BIN_EXE_bbsplat"))
         .args(["train", data.to_str().unwrap(), "-o", out.to_str().unwrap()])
-        .args(["--iterations", "1000000", "--billboards", billboards, "--texture-size", "4"])
+        .args([
+            "--iterations",
+            "1000000",
+            "--billboards",
+            billboards,
+            "--texture-size",
+            "4",
+        ])
         .args(["--eval-every", "0", "--quiet", "--view", "--view-every", view_every])
         .stdout(Stdio::piped())
         .spawn()
@@ -74,7 +81,10 @@ fn status_until(address: &str, done: impl Fn(&serde_json::Value) -> bool) -> ser
         if done(&status) {
             return status;
         }
-        assert!(Instant::now() < deadline, "the status did not move in a minute: {status}");
+        assert!(
+            Instant::now() < deadline,
+            "the status did not move in a minute: {status}"
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
 }
@@ -91,7 +101,10 @@ fn train_view_serves_status_model_and_page_to_loopback_only() {
     assert!(first["loss"].as_f64().unwrap().is_finite(), "{first}");
     assert!(first["running_psnr"].as_f64().unwrap() > 0.0, "{first}");
     let camera = &first["camera"];
-    assert!(camera["name"].is_string() && camera["fx"].as_f64().unwrap() > 0.0, "{first}");
+    assert!(
+        camera["name"].is_string() && camera["fx"].as_f64().unwrap() > 0.0,
+        "{first}"
+    );
     assert_eq!(camera["width"], 16);
     // The step advances, and a newer model is encoded (every 5 steps).
     let later = status_until(&address, |s| {
@@ -133,14 +146,23 @@ fn train_view_changes_nothing_in_the_run() {
     let data = data.to_str().unwrap();
     let (plain, viewed) = (root.join("plain"), root.join("viewed"));
     run_ok(&tiny_train_args(data, plain.to_str().unwrap(), &[]));
-    run_ok(&tiny_train_args(data, viewed.to_str().unwrap(), &["--view", "--view-every", "3"]));
+    run_ok(&tiny_train_args(
+        data,
+        viewed.to_str().unwrap(),
+        &["--view", "--view-every", "3"],
+    ));
     let checkpoint = |dir: &std::path::Path| std::fs::read(dir.join("checkpoint.bin")).unwrap();
     assert!(checkpoint(&plain) == checkpoint(&viewed), "the checkpoints differ");
     let files = |dir: &std::path::Path| {
         let folder = dir.join("model");
         let mut files: Vec<_> = walk(&folder)
             .into_iter()
-            .map(|p| (p.strip_prefix(&folder).unwrap().to_path_buf(), std::fs::read(&p).unwrap()))
+            .map(|p| {
+                (
+                    p.strip_prefix(&folder).unwrap().to_path_buf(),
+                    std::fs::read(&p).unwrap(),
+                )
+            })
             .collect();
         files.sort();
         files
@@ -202,6 +224,10 @@ fn the_live_view_in_headless_chromium_draws_the_training() {
     // background need not show; a page that failed shows one colour or its message on grey).
     let colours: std::collections::HashSet<[u8; 3]> = shot.pixels().map(|p| p.0).collect();
     eprintln!("live view in chromium: {} distinct colours", colours.len());
-    assert!(colours.len() > 200, "the live page drew {} distinct colours", colours.len());
+    assert!(
+        colours.len() > 200,
+        "the live page drew {} distinct colours",
+        colours.len()
+    );
     std::fs::remove_dir_all(&root).ok();
 }

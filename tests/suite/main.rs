@@ -11,8 +11,8 @@ mod cli_benchmark;
 mod cli_bounds;
 #[cfg(feature = "cli")]
 mod cli_export;
-mod cli_live;
 mod cli_full_disk;
+mod cli_live;
 mod cli_masks;
 #[cfg(feature = "cli")]
 mod cli_reliability;
