@@ -145,8 +145,13 @@ impl LiveView {
         };
         let first = shared.encode(initial);
         // The page embeds the first model and is told it is live (`data.live`).
-        let first_text = String::from_utf8_lossy(&first).into_owned();
-        let page = Arc::new(page_of_data(&first_text.replacen('{', "{\"live\":true,", 1)).into_bytes());
+        let mut data: serde_json::Value =
+            anyhow::Context::context(serde_json::from_slice(&first), "the viewer's model data")?;
+        let Some(fields) = data.as_object_mut() else {
+            anyhow::bail!("the viewer's model data is not a JSON object");
+        };
+        fields.insert("live".into(), serde_json::Value::Bool(true));
+        let page = Arc::new(page_of_data(&data.to_string()).into_bytes());
         shared.model.get_mut().unwrap_or_else(PoisonError::into_inner).json = Arc::new(first);
         let shared = Arc::new(shared);
         let (snapshots, received) = sync_channel(1);
