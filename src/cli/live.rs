@@ -12,7 +12,9 @@
 //! - the encoder thread turns a snapshot into the viewer's model JSON
 //!   ([`bbsplat::export::viewer::viewer_data`]) and bumps the model version;
 //! - the server answers `/` (the viewer page, live), `/status` (JSON: step, loss, running PSNR,
-//!   last test PSNR, the step's camera, the model version) and `/model` (the latest model JSON).
+//!   last test PSNR, the step's camera, the model version), `/model` (the latest model JSON) and
+//!   `/refresh` (raises the run's [`SnapshotRequest`]: the model after the next step is encoded,
+//!   whatever `--view-every` says; the page's "refresh now" button and its `r` key ask it).
 //!   A response's body is an `Arc` taken under the lock and written after it is released, so a
 //!   slow client holds nothing.
 
@@ -21,6 +23,7 @@ use anyhow::Result;
 use bbsplat::billboards::ActivatedBillboards;
 use bbsplat::camera::Camera;
 use bbsplat::export::viewer::{ViewerCamera, page_of_data, viewer_data};
+use bbsplat::train::SnapshotRequest;
 use glam::Vec3;
 use serde_json::json;
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
@@ -117,7 +120,8 @@ pub struct LiveView {
 
 impl LiveView {
     /// Binds 127.0.0.1:`port` (0: any free port), starts the encoder and the server threads with
-    /// `initial` as the first model, and returns the view and the address it serves.
+    /// `initial` as the first model, and returns the view and the address it serves. A `GET
+    /// /refresh` raises `refresh` (the run's [`bbsplat::train::RunConfig::snapshot_request`]).
     pub fn start(
         port: u16,
         initial: &ActivatedBillboards,
@@ -125,6 +129,7 @@ impl LiveView {
         cameras: Vec<(String, Camera)>,
         sh_degree: u32,
         background: Vec3,
+        refresh: SnapshotRequest,
     ) -> Result<(Self, std::net::SocketAddr)> {
         let listener = http::bind(port)?;
         let address = listener.local_addr()?;
@@ -169,6 +174,11 @@ impl LiveView {
                     "application/json",
                     Arc::clone(&server.model.lock().unwrap_or_else(PoisonError::into_inner).json),
                 ),
+                // Loopback only, like every path here; asking twice before a step asks once.
+                "/refresh" => {
+                    refresh.request();
+                    ("application/json", Arc::new(br#"{"requested":true}"#.to_vec()))
+                }
                 _ => return None,
             };
             Some(http::Response {

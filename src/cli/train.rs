@@ -226,6 +226,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         lpips_note,
         step_clock: bbsplat::train::StepClock::Wall,
         snapshot_every: if args.view { args.view_every as usize } else { 0 },
+        snapshot_request: args.view.then(bbsplat::train::SnapshotRequest::new),
     };
     let live = if args.view {
         let cameras = train_names
@@ -241,6 +242,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
             cameras,
             config.sh_degree,
             config.background,
+            run_config.snapshot_request.clone().unwrap_or_default(),
         )?;
         println!("live view at http://{address}/");
         std::io::Write::flush(&mut std::io::stdout())?;

@@ -66,7 +66,9 @@ use geometry::GeometryLoss;
 use glam::Vec3;
 use regularise::{RegulariserValues, RowGradient, TextureTerm, gaussian_opacity_grad, regularise, regulariser_rows};
 use relocate::{apply_relocation, plan_relocation, split_alpha_logit};
-pub use run::{RunConfig, RunError, RunOutcome, RunWarning, StepClock, StopReason, StopSignal, TrainEvent, run};
+pub use run::{
+    RunConfig, RunError, RunOutcome, RunWarning, SnapshotRequest, StepClock, StopReason, StopSignal, TrainEvent, run,
+};
 use serde::{Deserialize, Serialize};
 pub use view_pixels::ViewPixels;
 

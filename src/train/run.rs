@@ -144,6 +144,9 @@ pub struct RunConfig {
     /// Every how many steps [`TrainEvent::Snapshot`] hands over a copy of the activated
     /// billboards (0: never; `bbsplat train --view`).
     pub snapshot_every: usize,
+    /// A request for one [`TrainEvent::Snapshot`] after the next step, whatever
+    /// [`RunConfig::snapshot_every`] says (`bbsplat train --view`'s "refresh now"); `None`: none.
+    pub snapshot_request: Option<SnapshotRequest>,
 }
 
 /// How [`run`] measures the time of a step, which the time budget plans on and the summary
@@ -178,6 +181,7 @@ impl Default for RunConfig {
             lpips_note: None,
             step_clock: StepClock::Wall,
             snapshot_every: 0,
+            snapshot_request: None,
         }
     }
 }
@@ -201,6 +205,35 @@ impl StopSignal {
     /// True once [`StopSignal::request`] was called.
     pub fn is_requested(&self) -> bool {
         self.0.load(Ordering::SeqCst)
+    }
+}
+
+/// A request for a snapshot shared with another thread (e.g. a live view's server): [`run`]
+/// takes it after each step and hands over one [`TrainEvent::Snapshot`] when it was raised.
+/// Clones share the request, and are the ones equal to each other.
+#[derive(Clone, Debug, Default)]
+pub struct SnapshotRequest(Arc<AtomicBool>);
+
+impl PartialEq for SnapshotRequest {
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.0, &other.0)
+    }
+}
+
+impl SnapshotRequest {
+    /// A request not raised.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Asks for a snapshot after the next step (requests before the run takes one count once).
+    pub fn request(&self) {
+        self.0.store(true, Ordering::SeqCst);
+    }
+
+    /// Whether a snapshot was asked for since the last call, clearing the request.
+    pub fn take(&self) -> bool {
+        self.0.swap(false, Ordering::SeqCst)
     }
 }
 
@@ -820,7 +853,9 @@ impl<'a> RunState<'a> {
     ) -> Result<(), RunError> {
         let config = self.config;
         let iterations = trainer.config().iterations;
-        if config.snapshot_every > 0 && step.is_multiple_of(config.snapshot_every) {
+        // Both are asked (the request is taken even at a scheduled snapshot: it is then served).
+        let requested = config.snapshot_request.as_ref().is_some_and(SnapshotRequest::take);
+        if requested || (config.snapshot_every > 0 && step.is_multiple_of(config.snapshot_every)) {
             on_event(&TrainEvent::Snapshot {
                 step,
                 billboards: Arc::new(trainer.activated().clone()),

@@ -126,7 +126,7 @@ fn train_view_serves_status_model_and_page_to_loopback_only() {
     assert!(page.contains("\"live\":true") && page.contains("startLive"));
 
     // Another Host is refused on every path, as by `view --serve`.
-    for path in ["/", "/status", "/model"] {
+    for path in ["/", "/status", "/model", "/refresh"] {
         for host in ["attacker.example", "localhost.attacker.example", "127.0.0.1.nip.io"] {
             let (status, body) = get(&address, path, host);
             assert_eq!(status, "HTTP/1.1 403 Forbidden", "{path} with Host {host}");
@@ -135,6 +135,34 @@ fn train_view_serves_status_model_and_page_to_loopback_only() {
     }
     let (status, _) = get(&address, "/checkpoint.bin", "localhost");
     assert_eq!(status, "HTTP/1.1 404 Not Found");
+    drop(training);
+    std::fs::remove_dir_all(&root).ok();
+}
+
+#[test]
+fn train_view_refreshes_the_model_on_request() {
+    let root = temp("live-refresh");
+    let data = export_demo(&root, 16, 40);
+    // A scheduled refresh never comes within the test: only the request brings a new model.
+    let training = start(&data, &root.join("run"), "40", "100000000");
+    let address = training.address.clone();
+    let before = status_until(&address, |s| s["step"].as_u64().unwrap() >= 3);
+    assert_eq!(before["model_version"], 1, "{before}");
+    std::thread::sleep(Duration::from_millis(300));
+    let still = get_json(&address, "/status");
+    assert!(still["step"].as_u64().unwrap() > before["step"].as_u64().unwrap());
+    assert_eq!(still["model_version"], 1, "no request, no new model: {still}");
+
+    assert_eq!(get_json(&address, "/refresh")["requested"], true);
+    let after = status_until(&address, |s| s["model_version"].as_u64().unwrap() > 1);
+    assert_eq!(after["model_version"], 2, "{after}");
+    assert!(
+        after["model_step"].as_u64().unwrap() > still["step"].as_u64().unwrap(),
+        "the model of a step after the request: {after}"
+    );
+    // One request, one model.
+    std::thread::sleep(Duration::from_millis(300));
+    assert_eq!(get_json(&address, "/status")["model_version"], 2);
     drop(training);
     std::fs::remove_dir_all(&root).ok();
 }
