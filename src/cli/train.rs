@@ -209,6 +209,8 @@ pub fn run(args: TrainArgs) -> Result<()> {
             }
         },
     };
+    // Raised by the live view's `/refresh`, taken by the run after each step.
+    let refresh = bbsplat::train::SnapshotRequest::new();
     let run_config = RunConfig {
         eval_every: args.eval_every,
         eval_views: args.eval_views,
@@ -226,7 +228,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         lpips_note,
         step_clock: bbsplat::train::StepClock::Wall,
         snapshot_every: if args.view { args.view_every as usize } else { 0 },
-        snapshot_request: args.view.then(bbsplat::train::SnapshotRequest::new),
+        snapshot_request: args.view.then(|| refresh.clone()),
     };
     let live = if args.view {
         let cameras = train_names
@@ -242,7 +244,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
             cameras,
             config.sh_degree,
             config.background,
-            run_config.snapshot_request.clone().unwrap_or_default(),
+            refresh,
         )?;
         println!("live view at http://{address}/");
         std::io::Write::flush(&mut std::io::stdout())?;

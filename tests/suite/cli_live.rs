@@ -146,23 +146,23 @@ fn train_view_refreshes_the_model_on_request() {
     // A scheduled refresh never comes within the test: only the request brings a new model.
     let training = start(&data, &root.join("run"), "40", "100000000");
     let address = training.address.clone();
-    let before = status_until(&address, |s| s["step"].as_u64().unwrap() >= 3);
+    let step = |s: &serde_json::Value| s["step"].as_u64().unwrap();
+    let before = status_until(&address, |s| step(s) >= 3);
     assert_eq!(before["model_version"], 1, "{before}");
-    std::thread::sleep(Duration::from_millis(300));
-    let still = get_json(&address, "/status");
-    assert!(still["step"].as_u64().unwrap() > before["step"].as_u64().unwrap());
+    // Progress, not time: 20 more steps and still the first model.
+    let still = status_until(&address, |s| step(s) >= step(&before) + 20);
     assert_eq!(still["model_version"], 1, "no request, no new model: {still}");
 
     assert_eq!(get_json(&address, "/refresh")["requested"], true);
     let after = status_until(&address, |s| s["model_version"].as_u64().unwrap() > 1);
     assert_eq!(after["model_version"], 2, "{after}");
     assert!(
-        after["model_step"].as_u64().unwrap() > still["step"].as_u64().unwrap(),
+        after["model_step"].as_u64().unwrap() > step(&still),
         "the model of a step after the request: {after}"
     );
-    // One request, one model.
-    std::thread::sleep(Duration::from_millis(300));
-    assert_eq!(get_json(&address, "/status")["model_version"], 2);
+    // One request, one model: 20 steps later still the second.
+    let later = status_until(&address, |s| step(s) >= step(&after) + 20);
+    assert_eq!(later["model_version"], 2, "{later}");
     drop(training);
     std::fs::remove_dir_all(&root).ok();
 }
