@@ -17,6 +17,9 @@
 //!   whatever `--view-every` says; the page's "refresh now" button and its `r` key ask it).
 //!   A response's body is an `Arc` taken under the lock and written after it is released, so a
 //!   slow client holds nothing.
+//!
+//! The encoder and the server run at the lowest scheduling priority (nice 19, Linux): they use
+//! the time the training leaves idle.
 
 use super::http;
 use anyhow::Result;
@@ -163,7 +166,10 @@ impl LiveView {
         let encoder = Arc::clone(&shared);
         std::thread::Builder::new()
             .name("bbsplat-live-encode".into())
-            .spawn(move || encode_loop(&encoder, &received))?;
+            .spawn(move || {
+                lowest_priority();
+                encode_loop(&encoder, &received)
+            })?;
         let server = Arc::clone(&shared);
         let handler = move |target: &str| {
             let path = target.split(['?', '#']).next().unwrap_or_default();
@@ -189,7 +195,11 @@ impl LiveView {
         };
         std::thread::Builder::new()
             .name("bbsplat-live-serve".into())
-            .spawn(move || http::serve(listener, Arc::new(handler)))?;
+            .spawn(move || {
+                // The connection threads it starts inherit the priority.
+                lowest_priority();
+                http::serve(listener, Arc::new(handler))
+            })?;
         Ok((Self { shared, snapshots }, address))
     }
 
@@ -220,6 +230,21 @@ impl LiveView {
         match self.snapshots.try_send((step, Arc::clone(billboards))) {
             Ok(()) | Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {}
         }
+    }
+}
+
+/// Lowers the calling thread's scheduling priority to the lowest (nice 19; Linux keeps one per
+/// thread, and threads started from it inherit it), so that the live view runs on time the
+/// training leaves idle: on a machine whose cores the training's workers keep busy, a worker
+/// sharing its core with the encoder would hold up every fork-join of the step. Elsewhere, and
+/// if the call fails, the priority stays as it is (the view still works).
+fn lowest_priority() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: `gettid` takes no argument and returns the calling thread's id; `setpriority` with
+    // `PRIO_PROCESS` and that id changes only this thread's nice value and reads no memory.
+    unsafe {
+        let thread = libc::syscall(libc::SYS_gettid) as libc::id_t;
+        libc::setpriority(libc::PRIO_PROCESS, thread, 19);
     }
 }
 
