@@ -30,6 +30,9 @@ enum Command {
         /// Image side in pixels.
         #[arg(long, default_value_t = 96)]
         resolution: u32,
+        /// Training views (the 8 test views come on top).
+        #[arg(long, default_value_t = 32)]
+        views: usize,
         /// Seed of the scene, the initialisation and the view order.
         #[arg(long, default_value_t = 0)]
         seed: u64,
@@ -70,13 +73,19 @@ fn main() -> Result<()> {
             billboards,
             texture_size,
             resolution,
+            views,
             seed,
             output,
             threads,
             export,
         } => {
             cli::common::start_threads(threads)?;
-            cli::demo::run(iterations, billboards, texture_size, resolution, seed, output, export)
+            let scene = cli::demo::DemoSize {
+                resolution,
+                train_views: views,
+                billboards,
+            };
+            cli::demo::run(iterations, scene, texture_size, seed, output, export)
         }
         Command::Train(args) => cli::train::run(args),
         Command::Render(args) => cli::render::render(args),

@@ -45,7 +45,7 @@ use crate::model_file::MAX_TEXTURE_SIZE;
 use crate::report::AutoChoice;
 use crate::scene::Scene;
 use crate::scene::data_background::BackgroundChoice;
-use crate::train::footprint::training_bytes;
+use crate::train::footprint::scene_training_bytes;
 use crate::train::geometry::GeometryRegularisers;
 use crate::train::resolution::ResolutionSchedule;
 use crate::train::run::RunConfig;
@@ -454,11 +454,9 @@ impl TrainPlan {
     }
 
     /// Estimated peak memory of training this plan on `scene`, bytes
-    /// ([`crate::train::footprint::training_bytes`], before growth).
+    /// ([`crate::train::footprint::scene_training_bytes`] of the larger of the initial count
+    /// and the growth cap).
     pub fn training_bytes(&self, scene: &Scene) -> u64 {
-        let views = scene.train.iter().chain(&scene.test);
-        let view_pixels: u64 = views.clone().map(|v| v.camera.pixel_count() as u64).sum();
-        let largest_view = views.map(|v| v.camera.pixel_count() as u64).max().unwrap_or(0);
-        training_bytes(self.billboards, self.texture_size, view_pixels, largest_view)
+        scene_training_bytes(self.billboards.max(self.config.growth_cap), self.texture_size, scene)
     }
 }

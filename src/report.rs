@@ -49,6 +49,10 @@ pub struct TrainSummary {
     pub model_bytes: u64,
     /// Peak resident memory of the process (`VmHWM`), bytes; 0 where unavailable.
     pub peak_rss_bytes: u64,
+    /// The pre-flight estimate of the peak ([`crate::train::footprint::training_bytes`]) when
+    /// the caller made one (`bbsplat train` does); absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estimated_peak_bytes: Option<u64>,
     /// The seed of the run.
     pub seed: u64,
     /// Rayon worker threads used.

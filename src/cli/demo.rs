@@ -14,22 +14,36 @@ use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 use std::time::Instant;
 
+/// The size of the demo scene: `demo --resolution`, `--views` and `--billboards`.
+#[derive(Clone, Copy, Debug)]
+pub struct DemoSize {
+    /// Image side in pixels.
+    pub resolution: u32,
+    /// Training views (the generator's 8 test views come on top).
+    pub train_views: usize,
+    /// Billboard budget (the scene has twice as many surface points).
+    pub billboards: usize,
+}
+
 /// Runs `bbsplat demo`: generates the demo scene, trains it with [`bbsplat::train::run`] (no
 /// files written, no intermediate evaluation) and reports the test PSNR before and after.
-#[allow(clippy::too_many_arguments)]
 pub fn run(
     iterations: usize,
-    billboards: usize,
+    size: DemoSize,
     texture_size: usize,
-    resolution: u32,
     seed: u64,
     output: Option<PathBuf>,
     export: Option<PathBuf>,
 ) -> Result<()> {
-    super::validate::demo_args(iterations, billboards, texture_size, resolution)?;
+    let DemoSize {
+        resolution,
+        train_views,
+        billboards,
+    } = size;
+    super::validate::demo_args(iterations, billboards, texture_size, resolution, train_views)?;
     let defaults = DemoConfig::default();
     let pixels = resolution as u64 * resolution as u64;
-    let views = (defaults.train_views + defaults.test_views) as u64;
+    let views = (train_views + defaults.test_views) as u64;
     // The demo's views are float images (12 bytes a pixel), traced with as much again.
     let view_bytes = views.saturating_mul(pixels).saturating_mul(24);
     let needed = if export.is_some() {
@@ -39,13 +53,14 @@ pub fn run(
     };
     super::validate::memory(
         &format!(
-            "the demo at --resolution {resolution} with --billboards {billboards} at --texture-size {texture_size}"
+            "the demo at --resolution {resolution} with --views {train_views} and --billboards {billboards} at --texture-size {texture_size}"
         ),
         needed,
     )?;
     let start = Instant::now();
     let scene = generate(&DemoConfig {
         resolution,
+        train_views,
         seed,
         points: billboards.max(1) * 2,
         ..DemoConfig::default()

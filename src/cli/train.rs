@@ -8,7 +8,7 @@ use anyhow::{Context, Result};
 use bbsplat::plan::{RunLength, TrainPlan};
 use bbsplat::report::RunReport;
 use bbsplat::train::RunError;
-use bbsplat::train::footprint::{output_bytes, training_bytes};
+use bbsplat::train::footprint::{output_bytes, scene_training_bytes, training_bytes};
 use bbsplat::train::run_time;
 use bbsplat::train::{RunConfig, RunOutcome, StopReason, TrainEvent, TrainView, Trainer};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -89,6 +89,8 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let mut automatic = Vec::new();
     // The time of the run a checkpoint continues, or why it is not known.
     let mut earlier_time = None;
+    // The pre-flight estimate of the peak memory, printed and recorded beside the measured one.
+    let estimated_peak;
     let mut resume_warnings = Vec::new();
     let mut trainer = match &args.resume {
         Some(path) => {
@@ -119,6 +121,15 @@ pub fn run(args: TrainArgs) -> Result<()> {
             if let Some(note) = resume::check(path, t.run_record(), &record)? {
                 eprintln!("{note}");
             }
+            let (n, ts) = (t.model().len().max(t.config().growth_cap), t.model().texture_size);
+            estimated_peak = scene_training_bytes(n, ts, &scene);
+            validate::memory(
+                &format!(
+                    "resuming {n} billboards at texture size {ts} on {} views",
+                    scene.train.len() + scene.test.len()
+                ),
+                estimated_peak,
+            )?;
             preflight::free_space(&args.output, output_bytes(t.model().len(), t.model().texture_size))?;
             println!("resuming at step {} from {}", t.step_index(), path.display());
             match run_time::read_beside(path, t.step_index()) {
@@ -144,13 +155,14 @@ pub fn run(args: TrainArgs) -> Result<()> {
             }
             automatic = plan.choices.clone();
             let budget = plan.billboards;
+            estimated_peak = plan.training_bytes(&scene);
             validate::memory(
                 &format!(
                     "training {budget} billboards at --texture-size {} on {} views",
                     args.texture_size,
                     scene.train.len() + scene.test.len()
                 ),
-                plan.training_bytes(&scene),
+                estimated_peak,
             )?;
             preflight::free_space(&args.output, output_bytes(budget, args.texture_size))?;
             if !args.quiet {
@@ -229,6 +241,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         step_clock: bbsplat::train::StepClock::Wall,
         snapshot_every: if args.view { args.view_every as usize } else { 0 },
         snapshot_request: args.view.then(|| refresh.clone()),
+        estimated_peak_bytes: Some(estimated_peak),
     };
     let live = if args.view {
         let cameras = train_names
@@ -263,9 +276,10 @@ pub fn run(args: TrainArgs) -> Result<()> {
             texture_size,
             ..
         } => println!(
-            "{}: {train_views} train / {test_views} test views at {width}x{height}, {billboards} billboards (TS {texture_size}), loaded in {:.1} s, {threads} threads",
+            "{}: {train_views} train / {test_views} test views at {width}x{height}, {billboards} billboards (TS {texture_size}), loaded in {:.1} s, {threads} threads; estimated peak memory {:.0} MB",
             args.scene.display(),
-            start.elapsed().as_secs_f64()
+            start.elapsed().as_secs_f64(),
+            estimated_peak as f64 / 1e6
         ),
         TrainEvent::Warning(warning) if !args.quiet => bar.suspend(|| eprintln!("warning: {warning}")),
         TrainEvent::Step {
@@ -365,14 +379,15 @@ pub fn run(args: TrainArgs) -> Result<()> {
         None => scores,
     };
     println!(
-        "trained {} steps in {:.1} s ({:.2} it/s): {scores}; {} billboards ({} alive); model {:.2} MB; peak memory {:.0} MB",
+        "trained {} steps in {:.1} s ({:.2} it/s): {scores}; {} billboards ({} alive); model {:.2} MB; peak memory {:.0} MB (estimated {:.0} MB)",
         summary.iterations,
         summary.train_seconds,
         summary.iterations as f64 / summary.train_seconds,
         summary.billboards,
         summary.alive,
         summary.model_bytes as f64 / 1e6,
-        summary.peak_rss_bytes as f64 / 1e6
+        summary.peak_rss_bytes as f64 / 1e6,
+        estimated_peak as f64 / 1e6
     );
     if let Some(record) = last_record.into_inner() {
         print!("{}", describe_record(&record));

@@ -13,6 +13,9 @@ pub use bbsplat::model_file::MAX_TEXTURE_SIZE;
 /// Largest `bbsplat demo --resolution` (square images).
 pub const MAX_DEMO_RESOLUTION: u32 = 8192;
 
+/// Largest `demo --views` (the memory check bounds it further by the resolution).
+pub const MAX_DEMO_VIEWS: usize = 100_000;
+
 /// `--texture-size`: 2 to [`MAX_TEXTURE_SIZE`].
 pub fn texture_size(ts: usize) -> Result<()> {
     anyhow::ensure!(ts >= 2, "--texture-size must be at least 2 (got {ts})");
@@ -44,10 +47,15 @@ pub fn train_args(args: &TrainArgs) -> Result<()> {
 }
 
 /// Every numeric flag of `bbsplat demo`.
-pub fn demo_args(iterations: usize, billboards_flag: usize, ts: usize, resolution: u32) -> Result<()> {
+pub fn demo_args(iterations: usize, billboards_flag: usize, ts: usize, resolution: u32, views: usize) -> Result<()> {
     texture_size(ts)?;
     billboards(billboards_flag)?;
     anyhow::ensure!(iterations >= 1, "--iterations must be at least 1");
+    anyhow::ensure!(views >= 1, "--views must be at least 1");
+    anyhow::ensure!(
+        views <= MAX_DEMO_VIEWS,
+        "--views must be at most {MAX_DEMO_VIEWS} (got {views})"
+    );
     anyhow::ensure!(resolution >= 8, "--resolution must be at least 8 (got {resolution})");
     anyhow::ensure!(
         resolution <= MAX_DEMO_RESOLUTION,

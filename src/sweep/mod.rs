@@ -27,7 +27,7 @@
 //!         version: SUMMARY_VERSION, scene: "fake".into(), iterations: 10, billboards: n, alive: n,
 //!         texture_size: 16, sh_degree: 3, resolution: [64, 64], train_seconds: n as f64 / 100.0,
 //!         render_ms_per_frame: 1.0, test_psnr: 20.0 + n as f64 / 100.0, test_ssim: 0.8,
-//!         test_views: 2, model_bytes: 1000 * n as u64, peak_rss_bytes: 0, seed: 0, threads: 1,
+//!         test_views: 2, model_bytes: 1000 * n as u64, peak_rss_bytes: 0, estimated_peak_bytes: None, seed: 0, threads: 1,
 //!         curve: vec![], command: vec![], lpips_network: None, test_lpips: None, lpips_note: None,
 //!     })
 //! })

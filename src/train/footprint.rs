@@ -2,8 +2,9 @@
 //! allocated, so that a run that cannot fit is refused with a message ("needs 41.0 GB, 23.0 GB
 //! available") instead of aborting on a failed allocation after seconds of work.
 //!
-//! The estimate is a sum of three terms, each a measured upper bound (calibration in
-//! `docs/training.md`, "Memory"):
+//! The estimate is a sum of three terms and a base, fitted to the measured peaks of runs from
+//! 200 to 1600 px, 10 000 to 300 000 billboards and 58 to 808 views, which it meets within
+//! 1.00-1.20× (calibration in `docs/training.md`, "Memory"):
 //!
 //! - per billboard: the raw parameters, the activated copy, the gradients, the two Adam moments
 //!   and, at the end, the re-loaded model and its encoded files: [`BYTES_PER_BILLBOARD_FLOAT`]
@@ -28,14 +29,16 @@ use crate::raster::SH_FLOATS;
 pub const GEOMETRY_FLOATS: u64 = 3 + 4 + 2 + SH_FLOATS as u64;
 
 /// Bytes per float of a billboard's row (raw, activated, gradients, two Adam moments, the
-/// re-loaded model and the encoding buffers of the final save).
-pub const BYTES_PER_BILLBOARD_FLOAT: u64 = 40;
+/// re-loaded model and the encoding buffers of the final save); measured 29-30.
+pub const BYTES_PER_BILLBOARD_FLOAT: u64 = 32;
 
-/// Bytes per pixel of a loaded view: the 8-bit RGB image (and its alpha coverage).
-pub const BYTES_PER_VIEW_PIXEL: u64 = 4;
+/// Bytes per pixel of a loaded view: the 8-bit RGB image (and its alpha coverage); measured 3
+/// (lego's PNGs) to 5.6 (the demo's).
+pub const BYTES_PER_VIEW_PIXEL: u64 = 5;
 
-/// Bytes per pixel of the largest view for the render, backward and loss buffers.
-pub const BYTES_PER_RENDER_PIXEL: u64 = 400;
+/// Bytes per pixel of the largest view for the render, backward and loss buffers; measured
+/// 410-490.
+pub const BYTES_PER_RENDER_PIXEL: u64 = 512;
 
 /// A fixed allowance for the program itself, its thread stacks and small tables.
 pub const BASE_BYTES: u64 = 64 << 20;
@@ -50,6 +53,14 @@ pub fn training_bytes(billboards: usize, texture_size: usize, view_pixels: u64, 
         + largest_view_pixels as u128 * BYTES_PER_RENDER_PIXEL as u128
         + BASE_BYTES as u128;
     total.min(u64::MAX as u128) as u64
+}
+
+/// [`training_bytes`] of `billboards` billboards on the train and test views of `scene`.
+pub fn scene_training_bytes(billboards: usize, texture_size: usize, scene: &crate::scene::Scene) -> u64 {
+    let views = scene.train.iter().chain(&scene.test);
+    let view_pixels: u64 = views.clone().map(|v| v.camera.pixel_count() as u64).sum();
+    let largest_view = views.map(|v| v.camera.pixel_count() as u64).max().unwrap_or(0);
+    training_bytes(billboards, texture_size, view_pixels, largest_view)
 }
 
 /// Estimated size, in bytes, of the files a run writes: the checkpoint (raw parameters and two

@@ -147,6 +147,10 @@ pub struct RunConfig {
     /// A request for one [`TrainEvent::Snapshot`] after the next step, whatever
     /// [`RunConfig::snapshot_every`] says (`bbsplat train --view`'s "refresh now"); `None`: none.
     pub snapshot_request: Option<SnapshotRequest>,
+    /// The caller's estimate of the run's peak memory in bytes (`bbsplat train`'s pre-flight
+    /// [`super::footprint::scene_training_bytes`]), recorded in the summary beside the measured
+    /// peak; `None` (the default): none.
+    pub estimated_peak_bytes: Option<u64>,
 }
 
 /// How [`run`] measures the time of a step, which the time budget plans on and the summary
@@ -182,6 +186,7 @@ impl Default for RunConfig {
             step_clock: StepClock::Wall,
             snapshot_every: 0,
             snapshot_request: None,
+            estimated_peak_bytes: None,
         }
     }
 }
@@ -1008,6 +1013,7 @@ impl<'a> RunState<'a> {
             test_views: test.len(),
             model_bytes,
             peak_rss_bytes: peak_rss_bytes(),
+            estimated_peak_bytes: config.estimated_peak_bytes,
             seed: tc.seed,
             threads: rayon::current_num_threads(),
             curve: self.curve,

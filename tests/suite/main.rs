@@ -14,6 +14,7 @@ mod cli_export;
 mod cli_full_disk;
 mod cli_live;
 mod cli_masks;
+mod cli_memory;
 #[cfg(feature = "cli")]
 mod cli_reliability;
 mod cli_resume_time;

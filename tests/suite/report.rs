@@ -20,6 +20,7 @@ fn summary_round_trips_through_json() {
         test_views: 8,
         model_bytes: 1234,
         peak_rss_bytes: peak_rss_bytes(),
+        estimated_peak_bytes: Some(1 << 30),
         seed: 0,
         threads: 2,
         curve: vec![CurvePoint {

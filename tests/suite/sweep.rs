@@ -49,6 +49,7 @@ mod fake {
             test_views: 4,
             model_bytes: (bb * (64 + 4 * (48 + texels))) as u64,
             peak_rss_bytes: 100_000_000 + bb as u64 * 1000,
+            estimated_peak_bytes: None,
             seed: s.seed.unwrap_or(0),
             threads: 2,
             curve,
