@@ -25,6 +25,18 @@ fn demo_rejects_a_tiny_resolution() {
 }
 
 #[test]
+fn demo_rejects_a_view_count_out_of_range() {
+    for (views, message) in [
+        ("0", "--views must be at least 1"),
+        ("100001", "--views must be at most 100000"),
+    ] {
+        let (ok, err) = run(&["demo", "--views", views, "--iterations", "1"]);
+        assert!(!ok);
+        assert!(err.contains(message), "{err}");
+    }
+}
+
+#[test]
 fn unknown_subcommand_is_refused() {
     let (ok, err) = run(&["bogus"]);
     assert!(!ok);
