@@ -80,12 +80,12 @@ fn main() -> Result<()> {
             export,
         } => {
             cli::common::start_threads(threads)?;
-            let scene = cli::demo::DemoSize {
+            let size = cli::demo::DemoSize {
                 resolution,
                 train_views: views,
                 billboards,
             };
-            cli::demo::run(iterations, scene, texture_size, seed, output, export)
+            cli::demo::run(iterations, size, texture_size, seed, output, export)
         }
         Command::Train(args) => cli::train::run(args),
         Command::Render(args) => cli::render::render(args),

@@ -454,9 +454,8 @@ impl TrainPlan {
     }
 
     /// Estimated peak memory of training this plan on `scene`, bytes
-    /// ([`crate::train::footprint::scene_training_bytes`] of the larger of the initial count
-    /// and the growth cap).
+    /// ([`crate::train::footprint::scene_training_bytes`], growth included).
     pub fn training_bytes(&self, scene: &Scene) -> u64 {
-        scene_training_bytes(self.billboards.max(self.config.growth_cap), self.texture_size, scene)
+        scene_training_bytes(self.billboards, self.config.growth_cap, self.texture_size, scene)
     }
 }

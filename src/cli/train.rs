@@ -121,8 +121,8 @@ pub fn run(args: TrainArgs) -> Result<()> {
             if let Some(note) = resume::check(path, t.run_record(), &record)? {
                 eprintln!("{note}");
             }
-            let (n, ts) = (t.model().len().max(t.config().growth_cap), t.model().texture_size);
-            estimated_peak = scene_training_bytes(n, ts, &scene);
+            let (n, ts) = (t.model().len(), t.model().texture_size);
+            estimated_peak = scene_training_bytes(n, t.config().growth_cap, ts, &scene);
             validate::memory(
                 &format!(
                     "resuming {n} billboards at texture size {ts} on {} views",
@@ -130,7 +130,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
                 ),
                 estimated_peak,
             )?;
-            preflight::free_space(&args.output, output_bytes(t.model().len(), t.model().texture_size))?;
+            preflight::free_space(&args.output, output_bytes(n, ts))?;
             println!("resuming at step {} from {}", t.step_index(), path.display());
             match run_time::read_beside(path, t.step_index()) {
                 Ok(time) => earlier_time = Some(time),

@@ -55,12 +55,19 @@ pub fn training_bytes(billboards: usize, texture_size: usize, view_pixels: u64, 
     total.min(u64::MAX as u128) as u64
 }
 
-/// [`training_bytes`] of `billboards` billboards on the train and test views of `scene`.
-pub fn scene_training_bytes(billboards: usize, texture_size: usize, scene: &crate::scene::Scene) -> u64 {
+/// [`training_bytes`] of a run on the train and test views of `scene` that starts from
+/// `billboards` billboards and may grow to `growth_cap` (0: no growth): the larger count is the
+/// one its arrays reach.
+pub fn scene_training_bytes(
+    billboards: usize,
+    growth_cap: usize,
+    texture_size: usize,
+    scene: &crate::scene::Scene,
+) -> u64 {
     let views = scene.train.iter().chain(&scene.test);
     let view_pixels: u64 = views.clone().map(|v| v.camera.pixel_count() as u64).sum();
     let largest_view = views.map(|v| v.camera.pixel_count() as u64).max().unwrap_or(0);
-    training_bytes(billboards, texture_size, view_pixels, largest_view)
+    training_bytes(billboards.max(growth_cap), texture_size, view_pixels, largest_view)
 }
 
 /// Estimated size, in bytes, of the files a run writes: the checkpoint (raw parameters and two

@@ -211,6 +211,37 @@ fn output_paths_that_cannot_take_the_run_are_refused_before_training() {
 
 /// Failure 2: `--resume` refuses another dataset and flags that change the model or the
 /// optimisation, naming them; the same flags continue.
+/// A resumed run is estimated with its views, like a fresh one, and refused when it does not fit.
+#[test]
+fn a_resumed_run_too_big_for_memory_is_refused_before_training() {
+    let root = temp("rel-resume-memory");
+    let data = export_demo(&root, 24, 100);
+    let out = root.join("out");
+    let (d, o) = (data.to_str().unwrap(), out.to_str().unwrap());
+    run_ok(&tiny_train_args(d, o, &["--stop-after", "10"]));
+    let checkpoint = out.join("checkpoint.bin");
+    let before = std::fs::read(&checkpoint).unwrap();
+    // Enough for the billboards alone (the check made before the scene loads), not for the
+    // run with its 40 views of 24×24.
+    let limit = bbsplat::train::footprint::training_bytes(120, 4, 0, 0) + 1;
+    let output = Command::new(env!("CARGO_BIN_EXE_bbsplat"))
+        .args(tiny_train_args(d, o, &["--resume", checkpoint.to_str().unwrap()]))
+        .env("RUST_BACKTRACE", "0")
+        .env("BBSPLAT_MEMORY_LIMIT", limit.to_string())
+        .output()
+        .unwrap();
+    refused(&output, "resuming 120 billboards at texture size 4 on 40 views needs");
+    assert!(std::fs::read(&checkpoint).unwrap() == before, "the checkpoint changed");
+    // With the room the estimate asks for, the same command resumes.
+    let output = Command::new(env!("CARGO_BIN_EXE_bbsplat"))
+        .args(tiny_train_args(d, o, &["--resume", checkpoint.to_str().unwrap()]))
+        .env("BBSPLAT_MEMORY_LIMIT", "2000000000")
+        .output()
+        .unwrap();
+    assert!(output.status.success(), "{}", stderr(&output));
+    std::fs::remove_dir_all(&root).ok();
+}
+
 #[test]
 fn resume_refuses_another_dataset_or_a_changed_flag_naming_it() {
     let root = temp("rel-resume");
