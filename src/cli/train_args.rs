@@ -242,6 +242,7 @@ impl TrainArgs {
             adam: match self.adam {
                 AdamModeArg::Dense => AdamMode::Dense,
                 AdamModeArg::Sparse => AdamMode::Sparse,
+                AdamModeArg::Lazy => AdamMode::Lazy,
             },
             relocate: !self.no_relocate,
             clamp_gradient: self.clamp_gradient.into(),
@@ -325,4 +326,6 @@ pub enum AdamModeArg {
     Dense,
     /// Touched rows only.
     Sparse,
+    /// Dense Adam, texture rows brought up to date when a view sees them.
+    Lazy,
 }

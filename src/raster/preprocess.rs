@@ -208,6 +208,21 @@ pub fn preprocess_into(
         .sum()
 }
 
+/// Per billboard of `set`, whether [`preprocess`] keeps it for `camera` (it has a record: the
+/// view can read its textures and send it a gradient), into `kept` (resized to one flag per
+/// billboard). The geometry of [`prepare_one`] without the SH colour: the same decisions as
+/// [`preprocess_into`], which gives the records of [`prepare_one`] bit for bit.
+pub fn kept_rows_into(set: &ActivatedRef<'_>, camera: &Camera, kept: &mut Vec<bool>) {
+    resize_for_overwrite(kept, set.len(), false)
+        .par_chunks_mut(PREPROCESS_CHUNK)
+        .enumerate()
+        .for_each(|(c, out)| {
+            for (k, slot) in out.iter_mut().enumerate() {
+                *slot = prepare_geometry(set, c * PREPROCESS_CHUNK + k, camera).is_some();
+            }
+        });
+}
+
 /// Billboard `i` of `set` has a non-finite position, log-scale or quaternion component.
 #[inline]
 fn has_non_finite_geometry(set: &ActivatedRef<'_>, i: usize) -> bool {

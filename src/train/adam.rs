@@ -121,6 +121,22 @@ pub struct StepFactors {
 }
 
 impl StepFactors {
+    /// The step size `lr / (1 − β₁ᵗ)`.
+    pub fn step_size(self) -> f32 {
+        self.step_size
+    }
+
+    /// `√(1 − β₂ᵗ)`.
+    pub fn bc2_sqrt(self) -> f32 {
+        self.bc2_sqrt
+    }
+
+    /// The factors of a step size and a `√(1 − β₂ᵗ)` (as [`StepFactors::step_size`] and
+    /// [`StepFactors::bc2_sqrt`] gave them: how a checkpoint restores them).
+    pub fn from_parts(step_size: f32, bc2_sqrt: f32) -> Self {
+        Self { step_size, bc2_sqrt }
+    }
+
     /// The factors at step `t` (values of `t` above `i32::MAX` count as `i32::MAX`).
     pub fn new(lr: f32, hp: &AdamParams, t: u64) -> Self {
         let t = t.min(i32::MAX as u64) as i32;

@@ -15,7 +15,7 @@
 //! | seed | u64 | |
 //! | extent | f32 | |
 //! | impact_threshold, texture_reg_weight, opacity_reg_weight | 3 × f32 | |
-//! | adam mode | u8 | 0 dense, 1 sparse |
+//! | adam mode | u8 | 0 dense, 1 sparse, 2 lazy |
 //! | texture mode | u8 | 0 full, 1 Gaussian |
 //! | relocate | u8 | 0 / 1 |
 //! | relocate_every | u64 | |
@@ -35,7 +35,8 @@
 //! | group count | u32 | 8, order of [`super::group`] |
 //! | per group: row_len, rows, global step | 3 × u64 | rows = n |
 //! | per group: m, v | 2 × `rows·row_len` × f32 | |
-//! | per group: update counts | `rows` × u32 | |
+//! | per group: update counts | `rows` × u32 | lazy mode: the live step each texture and SH-rest row is up to date through |
+//! | lazy logs (lazy mode only) | 3 × (u64 `k`, `k` × 2 f32: step size, √(1−β₂ᵗ)) | [`super::lazy_adam::LazyLog`] of the alpha, colour and SH-rest groups |
 //! | **growth and time budget** (version 4; absent before: no growth, no budget) | | |
 //! | growth cap | u64 | [`TrainConfig::growth_cap`] |
 //! | learning rate by run length | u8 | [`TrainConfig::lr_by_run_length`], 0 / 1 |
@@ -59,8 +60,9 @@
 //! and the model imply ([`CheckpointError::Inconsistent`]). It never panics on bad input and never
 //! allocates more than the file's size.
 
-use super::adam::AdamGroup;
+use super::adam::{AdamGroup, StepFactors};
 use super::geometry::GeometryRegularisers;
+use super::lazy_adam::LazyLog;
 use super::run_record::RunRecord;
 use super::time_budget::TimePlan;
 use super::{AdamMode, ClampGradient, LearningRateScales, TextureMode, TrainConfig, Trainer, adam_groups, group};
@@ -353,6 +355,7 @@ fn encode_into<S: Sink>(tr: &Trainer, len: u64, sink: &mut S) {
     w.u8(match c.adam {
         AdamMode::Dense => 0,
         AdamMode::Sparse => 1,
+        AdamMode::Lazy => 2,
     });
     w.u8(match c.texture_mode {
         TextureMode::Full => 0,
@@ -405,6 +408,14 @@ fn encode_into<S: Sink>(tr: &Trainer, len: u64, sink: &mut S) {
         w.f32s(&g.v);
         for &s in &g.steps {
             w.u32(s);
+        }
+    }
+    if tr.config.adam == AdamMode::Lazy {
+        for log in &tr.lazy_logs {
+            w.u64(log.factors.len() as u64);
+            for f in &log.factors {
+                w.f32s(&[f.step_size(), f.bc2_sqrt()]);
+            }
         }
     }
     encode_growth_and_plan(tr, &mut w);
@@ -491,6 +502,17 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
     let t = model.texture_size * model.texture_size;
     let opacity_logits = decode_opacity_logits(&mut r, config.texture_mode, n)?;
     let adam = decode_adam(&mut r, n, t)?;
+    let mut lazy_logs: [LazyLog; 3] = Default::default();
+    if config.adam == AdamMode::Lazy {
+        for log in &mut lazy_logs {
+            let k = r.count(8, "lazy Adam log length")?;
+            let values = r.f32s(2 * k, "lazy Adam log")?;
+            log.factors = values
+                .chunks_exact(2)
+                .map(|f| StepFactors::from_parts(f[0], f[1]))
+                .collect();
+        }
+    }
     let (growth_cap, lr_by_run_length, time_plan) = if version >= 4 {
         decode_growth_and_plan(&mut r)?
     } else {
@@ -517,6 +539,7 @@ fn decode(data: &[u8], path: &Path) -> Result<Trainer, CheckpointError> {
             trainer.refresh_row(b);
         }
     }
+    trainer.lazy_logs = lazy_logs;
     trainer.order = order;
     trainer.rng = rng;
     trainer.step = step;
@@ -596,6 +619,7 @@ fn decode_config(r: &mut Reader<'_>, version: u32) -> Result<TrainConfig, Checkp
     let adam = match r.u8("adam mode")? {
         0 => AdamMode::Dense,
         1 => AdamMode::Sparse,
+        2 => AdamMode::Lazy,
         x => return Err(r.inconsistent(format!("unknown Adam mode {x}"))),
     };
     let texture_mode = match r.u8("texture mode")? {

@@ -129,21 +129,43 @@ pub fn non_finite_gradient(g: &RenderGradients) -> Option<ParamGroup> {
 /// # Panics
 /// When `added` does not hold one gradient per billboard.
 pub fn non_finite_gradient_with(g: &RenderGradients, added: Option<&[RowGradient]>) -> Option<ParamGroup> {
-    let Some(added) = added else {
-        return non_finite_gradient_plain(g);
-    };
+    non_finite_gradient_of(g, added, None)
+}
+
+/// [`non_finite_gradient_with`] reading the texture gradients of the rows flagged in `only`
+/// (every row when `None`): lazy Adam's check ([`super::AdamMode::Lazy`]), whose other rows have
+/// no gradient (the view does not keep them) and no regulariser gradient.
+///
+/// # Panics
+/// When `added` does not hold one gradient per billboard or `only` one flag per billboard.
+pub fn non_finite_gradient_of(
+    g: &RenderGradients,
+    added: Option<&[RowGradient]>,
+    only: Option<&[bool]>,
+) -> Option<ParamGroup> {
     let rows = g.positions.len();
+    let Some(added) = added else {
+        return match only {
+            None => non_finite_gradient_plain(g),
+            Some(_) => non_finite_gradient_of(g, Some(&vec![RowGradient::default(); rows]), only),
+        };
+    };
     assert_eq!(added.len(), rows, "one regulariser gradient per billboard");
     if let Some(group) = non_finite_geometry_gradient(g) {
         return Some(group);
     }
     let texels = g.textures.len() / rows.max(1);
     // Per row: the largest exponent field of its colour and of its alpha gradients.
+    assert!(only.is_none_or(|o| o.len() == rows), "one flag per billboard");
     let (colour, alpha) = g
         .textures
         .par_chunks(texels.max(1))
         .zip(added)
-        .map(|(row, a)| {
+        .enumerate()
+        .map(|(i, (row, a))| {
+            if only.is_some_and(|o| !o[i]) {
+                return (0, 0);
+            }
             let addends: [[f32; 2]; 4] = std::array::from_fn(|ch| a.addends(ch));
             // Per channel (four lanes of one register), then the colour lanes together.
             let fields = row.iter().fold([0u32; 4], |m, x| {

@@ -33,6 +33,7 @@ pub mod finite;
 pub mod footprint;
 pub mod geometry;
 pub mod grow;
+pub mod lazy_adam;
 pub mod place;
 pub mod regularise;
 pub mod relocate;
@@ -52,19 +53,20 @@ use crate::loss::TrainingLoss;
 use crate::loss::psnr::psnr_u8;
 use crate::loss::ssim::SsimScratch;
 use crate::model::{RawBillboards, clamped_logit, initial_alpha, logit, sigmoid};
+use crate::raster::preprocess::kept_rows_into;
 use crate::raster::{
     BackwardScratch, RenderBuffers, RenderGradients, RenderOutput, RenderSettings, SH_FLOATS, render_backward_with,
     render_with,
 };
 use crate::rng::Rng;
 pub use crate::stages::composite::ClampGradient;
-use adam::{AdamGroup, AdamParams, StepFactors};
+use adam::{AdamGroup, AdamParams, StepFactors, update_row_with};
 pub use checkpoint::CheckpointError;
 pub use error::TrainError;
 pub use finite::{NonFinite, ParamGroup};
 use geometry::GeometryLoss;
 use glam::Vec3;
-use regularise::{RegulariserValues, RowGradient, TextureTerm, gaussian_opacity_grad, regularise, regulariser_rows};
+use regularise::{RegulariserValues, RowGradient, TextureTerm, gaussian_opacity_grad, regularise, regulariser_rows_of};
 use relocate::{apply_relocation, plan_relocation, split_alpha_logit};
 pub use run::{
     RunConfig, RunError, RunOutcome, RunWarning, SnapshotRequest, StepClock, StopReason, StopSignal, TrainEvent, run,
@@ -136,6 +138,16 @@ pub enum AdamMode {
     /// Only billboards touched by the step's view are updated, with per-row bias correction;
     /// the opacity regulariser's gradient on unseen billboards is dropped.
     Sparse,
+    /// Dense Adam whose texture rows step only when the view can see them ([`lazy_adam`]): a
+    /// texture row the view does not see is left as it is, and its zero-gradient steps are
+    /// applied in one closed-form move when a view next sees it (or before relocation, growth,
+    /// the texture freeze, an export or an evaluation), so that the optimiser's cost follows the
+    /// rows a view touches. Geometry and SH step densely, as in [`AdamMode::Dense`]. The same
+    /// result as dense Adam up to rounding and Adam's ε, except one thing: the opacity
+    /// regulariser's gradient reaches only the billboards the view sees (dense: every
+    /// billboard), and its value is summed over them. In [`TextureMode::Gaussian`] (no texture
+    /// rows) the same as [`AdamMode::Dense`].
+    Lazy,
 }
 
 /// What the alpha and colour textures are allowed to be (the "textures on vs off" ablation).
@@ -558,6 +570,11 @@ pub struct Trainer {
     opacity_logits: Vec<f32>,
     /// The storage of the last step's render, recycled by the next (values never carried over).
     render_buffers: RenderBuffers,
+    /// Lazy Adam's record of the alpha, colour and SH-rest groups' live steps ([`lazy_adam`];
+    /// empty in the other modes).
+    lazy_logs: [lazy_adam::LazyLog; 3],
+    /// Per billboard, whether the step's view keeps it (lazy Adam; recycled from step to step).
+    in_view: Vec<bool>,
     /// The float values of the step's view when it is 8-bit (recycled from step to step).
     target: Vec<f32>,
     /// The SSIM gradient's partial maps (recycled from step to step; values never carried over).
@@ -638,6 +655,8 @@ impl Trainer {
             ssim_scratch: SsimScratch::default(),
             backward_scratch: BackwardScratch::default(),
             target: Vec::new(),
+            lazy_logs: Default::default(),
+            in_view: Vec::new(),
             regulariser_rows: Vec::new(),
             record: run_record::RunRecord::default(),
             time_plan: None,
@@ -792,6 +811,29 @@ impl Trainer {
     /// [`Trainer::model`].
     pub fn export_model(&self) -> RawBillboards {
         let mut model = self.model.clone();
+        if self.lazy_textures() {
+            // Lazy Adam: every row's pending texture steps, on the copy.
+            let hp = AdamParams::default();
+            let [.., a_alpha, a_colour, _] = &self.adam;
+            lazy_adam::caught_up_values(a_alpha, &self.lazy_logs[0], &mut model.alpha_logits, &hp);
+            lazy_adam::caught_up_values(a_colour, &self.lazy_logs[1], &mut model.colour_logits, &hp);
+            let rest = SH_FLOATS - 3;
+            let a_sh_rest = &self.adam[group::SH_REST];
+            for b in 0..model.len() {
+                if let Some(pending) = self.lazy_logs[2].pending(u64::from(a_sh_rest.steps[b]), &hp) {
+                    let (mut m, mut v) = (
+                        a_sh_rest.m[b * rest..(b + 1) * rest].to_vec(),
+                        a_sh_rest.v[b * rest..(b + 1) * rest].to_vec(),
+                    );
+                    lazy_adam::catch_up_row(
+                        &mut m,
+                        &mut v,
+                        &mut model.sh[b * SH_FLOATS + 3..(b + 1) * SH_FLOATS],
+                        pending,
+                    );
+                }
+            }
+        }
         if self.config.texture_mode == TextureMode::Gaussian {
             let t = model.texture_size * model.texture_size;
             for (i, texel) in self.activated.textures.iter().enumerate() {
@@ -891,6 +933,20 @@ impl Trainer {
             .distortion_active(self.step, self.config.iterations)
             .then_some(geometry.lambda_distortion);
         settings.distortion = lambda_distortion.is_some();
+        let lazy = self.lazy_textures();
+        // The catch-up checks the logits it writes, as the texture step does.
+        let mut caught_up_finite = true;
+        if lazy {
+            // The texture and SH-rest rows the view can read, brought up to date before it is
+            // drawn (every texture row once the textures are frozen: nothing is pending after
+            // that first time).
+            let mut in_view = std::mem::take(&mut self.in_view);
+            let textures_live = !past_milestone(self.step, self.config.iterations, 30_000);
+            kept_rows_into(&self.activated.borrowed(), cam, &mut in_view);
+            let textures = textures_live.then_some(in_view.as_slice());
+            caught_up_finite = self.catch_up(textures, Some(&in_view));
+            self.in_view = in_view;
+        }
         let buffers = std::mem::take(&mut self.render_buffers);
         let out = render_with(&self.activated.borrowed(), cam, &settings, buffers);
         // An 8-bit view is converted to floats here, into a buffer recycled from step to step.
@@ -943,11 +999,12 @@ impl Trainer {
         } else {
             // Only read here: the texture step adds each row's regulariser gradient as it reads
             // the row's gradients (the same bits as adding it in place, one pass fewer over them).
-            regulariser_rows(
+            regulariser_rows_of(
                 &self.activated.textures,
                 self.model.texture_size * self.model.texture_size,
                 texture_term,
                 opacity_weight,
+                lazy.then_some(self.in_view.as_slice()),
                 &mut self.regulariser_rows,
                 self.config.simd,
             )
@@ -970,7 +1027,8 @@ impl Trainer {
         };
         let bad = if total.is_finite() {
             let added = (!self.regulariser_rows.is_empty()).then_some(self.regulariser_rows.as_slice());
-            finite::non_finite_gradient_with(&self.grads, added).map(NonFinite::Gradient)
+            let only = lazy.then_some(self.in_view.as_slice());
+            finite::non_finite_gradient_of(&self.grads, added, only).map(NonFinite::Gradient)
         } else {
             Some(NonFinite::Loss)
         };
@@ -997,7 +1055,7 @@ impl Trainer {
             )));
         }
         let (updated, textures_checked) = match self.config.adam {
-            AdamMode::Dense => {
+            AdamMode::Dense | AdamMode::Lazy => {
                 for g in &mut self.adam {
                     g.global_step += 1;
                 }
@@ -1025,7 +1083,9 @@ impl Trainer {
         self.step += 1;
         // The texture logits were checked as the texture step wrote them, unless some were
         // not written (sparse rows, frozen textures) or were written since (relocation, growth).
-        let textures_known_finite = textures_checked && relocated == 0 && grown == 0;
+        // Lazy Adam writes only the rows the view keeps: those the catch-up and the texture step
+        // checked; the others are as they were at the last check.
+        let textures_known_finite = textures_checked && caught_up_finite && relocated == 0 && grown == 0;
         if let Some(group) = finite::non_finite_parameter_with(&self.model, &self.opacity_logits, textures_known_finite)
         {
             return Err(TrainError::NonFinite {
@@ -1074,11 +1134,13 @@ impl Trainer {
     }
 
     /// One optimiser step of the rows `rows`. Returns true when the texture step wrote every
-    /// texture logit (dense mode, full textures, not frozen) and found them all finite.
+    /// texture logit that changed since the last check (dense or lazy mode, full textures, not
+    /// frozen) and found them all finite.
     fn apply(&mut self, rows: &[u32], lr: &LearningRates) -> bool {
         let hp = AdamParams::default();
         let t = self.model.texture_size * self.model.texture_size;
-        let dense = self.config.adam == AdamMode::Dense;
+        let dense = self.config.adam != AdamMode::Sparse;
+        let lazy = self.lazy_textures();
         let gaussian = self.config.texture_mode == TextureMode::Gaussian;
         // Texture moments accumulate before the texture window (lr 0, as the reference); after
         // the late freeze the textures never move again, so their groups are skipped.
@@ -1115,6 +1177,7 @@ impl Trainer {
                     [a_pos, a_rot, a_scale, a_sh_dc, a_sh_rest],
                     GeometryMut::of(&mut m.positions, &mut m.quaternions, &mut m.log_scales, &mut m.sh),
                     (&g.positions, &g.quaternions, &g.log_scales, &g.sh),
+                    true,
                 );
                 if textures_live {
                     let w = &mut self.opacity_logits[b..b + 1];
@@ -1130,7 +1193,13 @@ impl Trainer {
         // texture step runs on the others; the two touch disjoint arrays, so the bits are those
         // of one after the other.
         let selected: Vec<bool>;
-        let selection = if dense {
+        let now = self.lazy_logs[0].live_steps() + 1;
+        let selection = if lazy {
+            texture_step::RowSelection::Lazy {
+                selected: &self.in_view,
+                now: now.min(u64::from(u32::MAX)) as u32,
+            }
+        } else if dense {
             texture_step::RowSelection::Dense
         } else {
             let mut s = vec![false; self.model.len()];
@@ -1144,13 +1213,35 @@ impl Trainer {
         let mut params = GeometryMut::of(&mut m.positions, &mut m.quaternions, &mut m.log_scales, &mut m.sh);
         let mut activated = GeometryMut::of(&mut a.positions, &mut a.quaternions, &mut a.log_scales, &mut a.sh);
         let mut grads = GeometryMut::of(&mut g.positions, &mut g.quaternions, &mut g.log_scales, &mut g.sh);
+        // Lazy Adam: SH rest only on the rows the view keeps (the others have no gradient and
+        // wait), each marked up to date through this step.
+        let sh_rest_now = a_sh_rest.global_step.min(u64::from(u32::MAX)) as u32;
+        let in_view = &self.in_view;
         let geometry = || {
+            if dense {
+                // Every row, in parallel chunks (rows are independent: the bits of the loop below).
+                let moments = [&mut *a_pos, &mut *a_rot, &mut *a_scale, &mut *a_sh_dc, &mut *a_sh_rest]
+                    .map(|g| (&mut g.m[..], &mut g.v[..], &mut g.steps[..]));
+                let all = GeometryRows {
+                    params: params.reborrow(),
+                    activated: activated.reborrow(),
+                    grads: grads.reborrow(),
+                    moments,
+                    in_view: lazy.then_some(&in_view[..]),
+                };
+                geometry_step.rows(all, sh_rest_now);
+                return;
+            }
             for &b in rows {
                 let b = b as usize;
+                let with_sh_rest = !lazy || in_view[b];
                 let adam = [&mut *a_pos, &mut *a_rot, &mut *a_scale, &mut *a_sh_dc, &mut *a_sh_rest];
                 let read = (&*grads.positions, &*grads.quaternions, &*grads.log_scales, &*grads.sh);
-                geometry_step.row(b, lr, adam, params.reborrow(), read);
-                params.copy_row_to(b, &mut activated);
+                geometry_step.row(b, lr, adam, params.reborrow(), read, with_sh_rest);
+                if lazy && with_sh_rest {
+                    a_sh_rest.steps[b] = sh_rest_now;
+                }
+                params.copy_row_to(b, &mut activated, with_sh_rest);
                 grads.zero_row(b);
             }
         };
@@ -1181,7 +1272,89 @@ impl Trainer {
             )
         };
         let ((), [alpha_finite, colour_finite]) = rayon::join(geometry, textures);
+        if lazy {
+            if textures_live {
+                for (log, (group, lr)) in self
+                    .lazy_logs
+                    .iter_mut()
+                    .zip([(&*a_alpha, lr.alpha), (&*a_colour, lr.colour)])
+                {
+                    log.record(StepFactors::new(lr, &hp, group.global_step));
+                }
+            }
+            self.lazy_logs[2].record(f_sh_rest);
+        }
+        // Dense and lazy: every logit written this step was checked (lazy writes only kept rows).
         dense && textures_live && alpha_finite && colour_finite
+    }
+
+    /// Lazy Adam is on and there are texture rows to be lazy about.
+    fn lazy_textures(&self) -> bool {
+        self.config.adam == AdamMode::Lazy && self.config.texture_mode == TextureMode::Full
+    }
+
+    /// Lazy Adam: brings the alpha and colour rows flagged in `textures` and the SH-rest rows
+    /// flagged in `sh_rest` (every row when `None`) up to date with their pending zero-gradient
+    /// steps ([`lazy_adam::catch_up_rows`]) and refreshes their activated values. Nothing to do
+    /// in the other modes. Returns false when a value it wrote is not finite.
+    fn catch_up(&mut self, textures: Option<&[bool]>, sh_rest: Option<&[bool]>) -> bool {
+        if !self.lazy_textures() {
+            return true;
+        }
+        let hp = AdamParams::default();
+        let [.., a_alpha, a_colour, _] = &mut self.adam;
+        let m = &mut self.model;
+        let [alpha_log, colour_log, _] = &self.lazy_logs;
+        let alpha = lazy_adam::catch_up_rows(
+            lazy_adam::CatchUpGroup {
+                group: a_alpha,
+                log: alpha_log,
+                logits: &mut m.alpha_logits,
+                channels: 3..4,
+                mask: Some(&m.alpha_mask),
+            },
+            &mut self.activated.textures,
+            textures,
+            &hp,
+            self.config.simd,
+        );
+        let colour = lazy_adam::catch_up_rows(
+            lazy_adam::CatchUpGroup {
+                group: a_colour,
+                log: colour_log,
+                logits: &mut m.colour_logits,
+                channels: 0..3,
+                mask: None,
+            },
+            &mut self.activated.textures,
+            textures,
+            &hp,
+            self.config.simd,
+        );
+        // SH rest (45 values a row, interleaved with SH DC in the model): row by row.
+        let rest = SH_FLOATS - 3;
+        let [.., a_sh_rest, _, _, _] = &mut self.adam;
+        let mut sh_finite = true;
+        for b in 0..m.len() {
+            if sh_rest.is_some_and(|s| !s[b]) {
+                continue;
+            }
+            let Some(pending) = self.lazy_logs[2].pending(u64::from(a_sh_rest.steps[b]), &hp) else {
+                continue;
+            };
+            let span = b * SH_FLOATS + 3..(b + 1) * SH_FLOATS;
+            let moments = b * rest..(b + 1) * rest;
+            lazy_adam::catch_up_row(
+                &mut a_sh_rest.m[moments.clone()],
+                &mut a_sh_rest.v[moments],
+                &mut m.sh[span.clone()],
+                pending,
+            );
+            sh_finite &= m.sh[span.clone()].iter().all(|x| x.is_finite());
+            self.activated.sh[span.clone()].copy_from_slice(&m.sh[span]);
+            a_sh_rest.steps[b] = self.lazy_logs[2].live_steps().min(u64::from(u32::MAX)) as u32;
+        }
+        alpha && colour && sh_finite
     }
 
     /// Relocates dead billboards now (spec §6; normally called by [`Trainer::step`] when due) and
@@ -1192,6 +1365,8 @@ impl Trainer {
     /// of both the sources and the dead slots are zeroed (the reference zeroes only the sources;
     /// a dead slot's stale moments belong to the billboard that died there).
     pub fn relocate(&mut self) -> usize {
+        // Lazy Adam: the sources' textures and moments as dense Adam has them.
+        self.catch_up(None, None);
         let plan = plan_relocation(&self.activated.mean_alphas(), &mut self.rng);
         if plan.is_empty() {
             return 0;
@@ -1276,6 +1451,8 @@ impl Trainer {
     /// Appends `copies` copies of billboards drawn ∝ mean alpha ([`grow`]) and then the rows of
     /// `placed` (if any); returns how many rows were added.
     fn grow_rows(&mut self, copies: usize, placed: Option<RawBillboards>) -> usize {
+        // Lazy Adam: the sources' textures and moments as dense Adam has them.
+        self.catch_up(None, None);
         let n = self.model.len();
         let plan = grow::plan_growth(&self.activated.mean_alphas(), copies, &mut self.rng);
         let placed_rows = placed.as_ref().map_or(0, RawBillboards::len);
@@ -1323,11 +1500,14 @@ impl Trainer {
             ..Default::default()
         };
         let mut buffers = RenderBuffers::default();
+        // Lazy Adam: rendered with every row's pending steps applied (on a copy).
+        let caught_up = self.lazy_textures().then(|| self.export_model().activate());
+        let activated = caught_up.as_ref().unwrap_or(&self.activated);
         let total: f64 = views
             .iter()
             .map(|v| {
                 let out = render_with(
-                    &self.activated.borrowed(),
+                    &activated.borrowed(),
                     &v.camera,
                     &settings,
                     std::mem::take(&mut buffers),
@@ -1381,12 +1561,17 @@ impl<'a> GeometryMut<'a> {
         GeometryMut::of(self.positions, self.quaternions, self.log_scales, self.sh)
     }
 
-    /// Copies row `b` into `to`.
-    fn copy_row_to(&self, b: usize, to: &mut GeometryMut<'_>) {
+    /// Copies row `b` into `to` (its SH rest only `with_sh_rest`).
+    fn copy_row_to(&self, b: usize, to: &mut GeometryMut<'_>, with_sh_rest: bool) {
         to.positions[b] = self.positions[b];
         to.quaternions[b] = self.quaternions[b];
         to.log_scales[b] = self.log_scales[b];
-        to.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS].copy_from_slice(&self.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS]);
+        let sh = if with_sh_rest {
+            b * SH_FLOATS..(b + 1) * SH_FLOATS
+        } else {
+            b * SH_FLOATS..b * SH_FLOATS + 3
+        };
+        to.sh[sh.clone()].copy_from_slice(&self.sh[sh]);
     }
 
     /// Sets row `b` to zero.
@@ -1398,7 +1583,149 @@ impl<'a> GeometryMut<'a> {
     }
 }
 
+/// A range of rows of every array the dense geometry step writes: the parameters, their
+/// activated copy, their gradients and, per group (position, rotation, scale, SH DC, SH rest),
+/// the moments and update counts; with lazy Adam, the rows' in-view flags.
+struct GeometryRows<'a> {
+    params: GeometryMut<'a>,
+    activated: GeometryMut<'a>,
+    grads: GeometryMut<'a>,
+    moments: [GroupRows<'a>; 5],
+    in_view: Option<&'a [bool]>,
+}
+
+/// One group's moments and update counts (`m`, `v`, `steps`) over a range of rows.
+type GroupRows<'a> = (&'a mut [f32], &'a mut [f32], &'a mut [u32]);
+
+/// Values per row of the position, rotation, scale, SH DC and SH rest groups.
+const GEOMETRY_ROW_LENS: [usize; 5] = [3, 4, 2, 3, SH_FLOATS - 3];
+
+/// Rows per task of the dense geometry step.
+const GEOMETRY_CHUNK: usize = 4096;
+
+impl<'a> GeometryMut<'a> {
+    /// The first `mid` rows and the rest.
+    fn split_at(self, mid: usize) -> (Self, Self) {
+        let (p0, p1) = self.positions.split_at_mut(mid);
+        let (q0, q1) = self.quaternions.split_at_mut(mid);
+        let (s0, s1) = self.log_scales.split_at_mut(mid);
+        let (h0, h1) = self.sh.split_at_mut(mid * SH_FLOATS);
+        (GeometryMut::of(p0, q0, s0, h0), GeometryMut::of(p1, q1, s1, h1))
+    }
+}
+
+impl<'a> GeometryRows<'a> {
+    fn len(&self) -> usize {
+        self.params.positions.len()
+    }
+
+    /// The first `mid` rows and the rest.
+    fn split_at(self, mid: usize) -> (Self, Self) {
+        let (p0, p1) = self.params.split_at(mid);
+        let (a0, a1) = self.activated.split_at(mid);
+        let (g0, g1) = self.grads.split_at(mid);
+        let mut m0: [Option<GroupRows<'a>>; 5] = Default::default();
+        let mut m1: [Option<GroupRows<'a>>; 5] = Default::default();
+        for (i, (m, v, steps)) in self.moments.into_iter().enumerate() {
+            let n = GEOMETRY_ROW_LENS[i];
+            let (ma, mb) = m.split_at_mut(mid * n);
+            let (va, vb) = v.split_at_mut(mid * n);
+            let (sa, sb) = steps.split_at_mut(mid);
+            m0[i] = Some((ma, va, sa));
+            m1[i] = Some((mb, vb, sb));
+        }
+        let (f0, f1) = match self.in_view {
+            Some(f) => {
+                let (x, y) = f.split_at(mid);
+                (Some(x), Some(y))
+            }
+            None => (None, None),
+        };
+        let unwrap = |m: [Option<GroupRows<'a>>; 5]| m.map(|g| g.expect("every group split"));
+        (
+            GeometryRows {
+                params: p0,
+                activated: a0,
+                grads: g0,
+                moments: unwrap(m0),
+                in_view: f0,
+            },
+            GeometryRows {
+                params: p1,
+                activated: a1,
+                grads: g1,
+                moments: unwrap(m1),
+                in_view: f1,
+            },
+        )
+    }
+}
+
 impl GeometryStep {
+    /// The dense step of every row of `rows` ([`GeometryStep::row`] with the groups' shared
+    /// factors, then the row copied to the activated set and its gradients zeroed), in parallel
+    /// chunks of [`GEOMETRY_CHUNK`] rows: each row's arithmetic is that of the serial loop, so the
+    /// bits do not depend on the split. With lazy Adam (`in_view` set), SH rest steps only on the
+    /// rows in view, each marked up to date through `sh_rest_now`.
+    fn rows(&self, rows: GeometryRows<'_>, sh_rest_now: u32) {
+        if rows.len() > GEOMETRY_CHUNK {
+            let mid = rows.len() / 2;
+            let (a, b) = rows.split_at(mid);
+            rayon::join(|| self.rows(a, sh_rest_now), || self.rows(b, sh_rest_now));
+            return;
+        }
+        let GeometryRows {
+            params,
+            mut activated,
+            mut grads,
+            moments,
+            in_view,
+        } = rows;
+        let [f_pos, f_rot, f_scale, f_sh_dc, f_sh_rest] = self.factors;
+        let [pos, rot, scale, dc, rest] = moments;
+        let hp = &self.hp;
+        // One group's update of row `r`: the dense path of `AdamGroup::step_row_with`.
+        let update = |(m, v, steps): &mut GroupRows<'_>, n: usize, r: usize, p: &mut [f32], g: &[f32], f| {
+            steps[r] = steps[r].saturating_add(1);
+            update_row_with(&mut m[r * n..(r + 1) * n], &mut v[r * n..(r + 1) * n], p, g, f, hp);
+        };
+        let (mut pos, mut rot, mut scale, mut dc, mut rest) = (pos, rot, scale, dc, rest);
+        for r in 0..params.positions.len() {
+            let with_sh_rest = in_view.is_none_or(|f| f[r]);
+            update(
+                &mut pos,
+                3,
+                r,
+                params.positions[r].as_mut(),
+                &grads.positions[r].to_array(),
+                f_pos,
+            );
+            update(&mut rot, 4, r, &mut params.quaternions[r], &grads.quaternions[r], f_rot);
+            update(
+                &mut scale,
+                2,
+                r,
+                params.log_scales[r].as_mut(),
+                &grads.log_scales[r].to_array(),
+                f_scale,
+            );
+            let (sh, d_sh) = (
+                &mut params.sh[r * SH_FLOATS..(r + 1) * SH_FLOATS],
+                &grads.sh[r * SH_FLOATS..(r + 1) * SH_FLOATS],
+            );
+            let (sh_dc, sh_rest) = sh.split_at_mut(3);
+            update(&mut dc, 3, r, sh_dc, &d_sh[..3], f_sh_dc);
+            if with_sh_rest {
+                update(&mut rest, SH_FLOATS - 3, r, sh_rest, &d_sh[3..], f_sh_rest);
+                if in_view.is_some() {
+                    rest.2[r] = sh_rest_now;
+                }
+            }
+            params.copy_row_to(r, &mut activated, with_sh_rest);
+            grads.zero_row(r);
+        }
+    }
+
     /// One Adam step of row `b` of `group`: with the group's `factors` of this step when dense,
     /// else with its own count and `lr` (row-sparse).
     fn group_row(
@@ -1417,8 +1744,9 @@ impl GeometryStep {
         }
     }
 
-    /// One Adam step of row `b` of the position, rotation, scale, SH degree-0 and SH rest groups
-    /// (`adam`, in that order) on `params` with the gradients `grads`.
+    /// One Adam step of row `b` of the position, rotation, scale, SH degree-0 and (when
+    /// `with_sh_rest`) SH rest groups (`adam`, in that order) on `params` with the gradients
+    /// `grads`.
     fn row(
         &self,
         b: usize,
@@ -1426,6 +1754,7 @@ impl GeometryStep {
         adam: [&mut AdamGroup; 5],
         params: GeometryMut<'_>,
         (d_pos, d_quat, d_scale, d_sh): GeometryGrads<'_>,
+        with_sh_rest: bool,
     ) {
         let [f_pos, f_rot, f_scale, f_sh_dc, f_sh_rest] = self.factors;
         let [a_pos, a_rot, a_scale, a_sh_dc, a_sh_rest] = adam;
@@ -1454,6 +1783,8 @@ impl GeometryStep {
         );
         let (dc, rest) = sh.split_at_mut(3);
         step(a_sh_dc, dc, &d_sh[..3], lr.sh_dc, f_sh_dc);
-        step(a_sh_rest, rest, &d_sh[3..], lr.sh_rest, f_sh_rest);
+        if with_sh_rest {
+            step(a_sh_rest, rest, &d_sh[3..], lr.sh_rest, f_sh_rest);
+        }
     }
 }

@@ -154,6 +154,27 @@ pub fn regulariser_rows(
     rows: &mut Vec<RowGradient>,
     simd: Simd,
 ) -> RegulariserValues {
+    regulariser_rows_of(textures, texels_per_row, texture, opacity_weight, None, rows, simd)
+}
+
+/// [`regulariser_rows`] on the billboards flagged in `only` (every billboard when `None`): the
+/// others get no gradient and add nothing to the values (they are not read). The opacity term
+/// keeps its per-texel gradient `weight / (all texels)`; the texture term reaches only visible
+/// billboards anyway. What lazy Adam ([`super::AdamMode::Lazy`]) runs, `only` being the rows the
+/// view keeps; with `None` the bits of [`regulariser_rows`].
+///
+/// # Panics
+/// As [`regularise`]; and when `only` does not hold one flag per billboard.
+#[allow(clippy::too_many_arguments)]
+pub fn regulariser_rows_of(
+    textures: &[[f32; 4]],
+    texels_per_row: usize,
+    texture: Option<TextureTerm<'_>>,
+    opacity_weight: Option<f32>,
+    only: Option<&[bool]>,
+    rows: &mut Vec<RowGradient>,
+    simd: Simd,
+) -> RegulariserValues {
     let t = texels_per_row;
     rows.clear();
     // Rows of no texels hold nothing: only an empty set has them.
@@ -175,11 +196,18 @@ pub fn regulariser_rows(
         return RegulariserValues::default();
     }
     let g_opacity = opacity.map(|w| (w as f64 / textures.len() as f64) as f32);
+    assert!(
+        only.is_none_or(|o| o.len() * t == textures.len()),
+        "one flag per billboard"
+    );
     // Per row: its gradient, the texture term's contribution and the row's alpha sum (f64).
     let per_row: Vec<(RowGradient, f64, f64)> = textures
         .par_chunks(t)
         .enumerate()
         .map(|(i, tex)| {
+            if only.is_some_and(|o| !o[i]) {
+                return (RowGradient::default(), 0.0, 0.0);
+            }
             // The row's sums, read once for both terms (only the alpha sum without the texture
             // term, or for a row the term skips).
             let texture_row = texture.and_then(|(term, vis)| Some((term, vis, term_weight(term, i)?)));

@@ -29,6 +29,16 @@ pub enum RowSelection<'a> {
     Dense,
     /// Only the rows flagged `true` (row-sparse Adam, per-row bias correction).
     Sparse(&'a [bool]),
+    /// Only the rows flagged `true`, with the bias correction of the group's global step, each
+    /// marked up to date through live step `now` (lazy Adam, [`super::lazy_adam`]: the caller
+    /// brought them up to date first). The other rows are not read or written, their gradients
+    /// included (they must be zero).
+    Lazy {
+        /// The rows to step.
+        selected: &'a [bool],
+        /// The live step this update is, stored in each stepped row's `steps`.
+        now: u32,
+    },
 }
 
 /// Rows per rayon task.
@@ -357,6 +367,13 @@ fn step_rows(rows: ChunkRows<'_>, how: &RowStep<'_, '_>) -> u32 {
                 }
                 steps[r] = steps[r].saturating_add(1);
                 StepFactors::new(how.lr, how.hp, u64::from(steps[r]))
+            }
+            RowSelection::Lazy { selected, now } => {
+                if !selected[first_row + r] {
+                    continue;
+                }
+                steps[r] = now;
+                dense_factors
             }
         };
         let (y, g) = (&mut activated[texel_span.clone()], &mut grads[texel_span]);

@@ -100,6 +100,7 @@ mod train_edit;
 mod train_finite;
 mod train_geometry;
 mod train_grow;
+mod train_lazy_adam;
 mod train_place;
 mod train_regularise;
 mod train_relocate;

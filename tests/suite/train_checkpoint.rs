@@ -110,6 +110,11 @@ fn resume_is_bit_identical_dense_full() {
 }
 
 #[test]
+fn resume_is_bit_identical_lazy_full() {
+    resume_equals_uninterrupted(AdamMode::Lazy, TextureMode::Full, "lazy-full");
+}
+
+#[test]
 fn resume_is_bit_identical_sparse_gaussian() {
     resume_equals_uninterrupted(AdamMode::Sparse, TextureMode::Gaussian, "sparse-gaussian");
 }

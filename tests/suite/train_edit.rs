@@ -88,6 +88,7 @@ fn the_activated_copy_follows_steps_and_edits() {
     for (adam, mode) in [
         (AdamMode::Dense, TextureMode::Full),
         (AdamMode::Sparse, TextureMode::Full),
+        (AdamMode::Lazy, TextureMode::Full),
         (AdamMode::Dense, TextureMode::Gaussian),
     ] {
         let tag = format!("{adam:?}/{mode:?}");
