@@ -89,8 +89,10 @@ pub struct TrainArgs {
     /// with one opacity each and SH colour only (the "textures off" ablation).
     #[arg(long, default_value_t = TextureMode::Full, value_parser = texture_mode())]
     pub texture_mode: TextureMode,
-    /// `dense`: every billboard takes an Adam step each iteration (the reference); `sparse`:
-    /// only billboards the view touched.
+    /// `dense`: every billboard takes an Adam step each iteration (the reference); `lazy`: dense
+    /// Adam whose texture and SH-rest rows step when a view sees them, their skipped steps
+    /// applied then (a step's cost follows what the view sees: for large captures); `sparse`:
+    /// only billboards the view touched, with per-row bias correction.
     #[arg(long, value_enum, default_value_t = AdamModeArg::Dense)]
     pub adam: AdamModeArg,
     /// Do not recycle dead billboards (mean alpha ≤ 0.005).
