@@ -138,7 +138,7 @@ fn train_step(c: &mut Criterion) {
 /// The "street" scene: `copies` copies of the demo world at `resolution` (`per_copy` billboards
 /// each, FPS of its surface points, TS = 16) 20 units apart along x, each with the demo's
 /// training views that look across the street (camera centre within 2 of the copy's axis), moved
-/// with it. A view sees its own copy and none of the others (`kept_fraction` prints what it
+/// with it. A view sees its own copy and none of the others (the setup prints what share a view
 /// keeps), so a step at 10 × 30 000 billboards touches what one at 30 000 does: the scene of
 /// a large capture where each photo sees a part.
 fn street_setup(resolution: u32, per_copy: usize, copies: usize) -> Setup {

@@ -129,9 +129,11 @@ pub fn catch_up_row(m: &mut [f32], v: &mut [f32], params: &mut [f32], pending: P
 /// `move_size`; smaller `v` are left as they are, for [`stepped_one_by_one`].
 #[inline(always)]
 fn caught_up(p: f32, m: f32, v: f32, move_size: f32) -> f32 {
-    // A select, not a branch (the loop vectorises); the quotient of a small `v` is discarded.
-    let moved = p - move_size * m / v.sqrt();
-    if v >= V_EXACT { moved } else { p }
+    // The step is selected, not the result: the parameter is then stored whatever `v` is (a
+    // selected result is compiled to a masked store, slow on AMD Zen: docs/perf.md). `p − 0`
+    // is `p`, bit for bit; the quotient of a small `v` is discarded.
+    let step = if v >= V_EXACT { move_size * m / v.sqrt() } else { 0.0 };
+    p - step
 }
 
 /// `p` after the skipped zero-gradient steps taken one by one with `ε` (in f64; at most
