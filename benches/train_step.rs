@@ -19,6 +19,7 @@ use bbsplat::model::RawBillboards;
 use bbsplat::raster::{RenderSettings, render};
 use bbsplat::scene::split::camera_extent;
 use bbsplat::train::adam::{AdamGroup, AdamParams};
+use bbsplat::train::street::{kept_share, street};
 use bbsplat::train::texture_step::{GroupStep, RowSelection, step_texture_group, step_texture_pair};
 use bbsplat::train::{AdamMode, TrainConfig, TrainView, Trainer};
 use criterion::{BenchmarkId, Criterion, Throughput, black_box, criterion_group, criterion_main};
@@ -143,42 +144,16 @@ fn train_step(c: &mut Criterion) {
 /// a large capture where each photo sees a part.
 fn street_setup(resolution: u32, per_copy: usize, copies: usize) -> Setup {
     let one = demo_setup(resolution, per_copy);
-    let mut model = one.model.clone();
-    let mut views = Vec::new();
-    for c in 0..copies {
-        let d = Vec3::new(20.0 * c as f32, 0.0, 0.0);
-        if c > 0 {
-            let mut copy = one.model.clone();
-            copy.positions.iter_mut().for_each(|p| *p += d);
-            bbsplat::train::grow::append_rows(&mut model, &copy);
-        }
-        for v in one.views.iter().filter(|v| v.camera.centre().x.abs() < 2.0) {
-            let mut camera = v.camera;
-            camera.translation -= camera.rotation * d;
-            views.push(TrainView {
-                camera,
-                rgb: v.rgb.clone(),
-            });
-        }
-    }
+    let (model, views) = street(&one.model, &one.views, copies, 20.0, 2.0);
     let cameras: Vec<_> = views.iter().map(|v| v.camera).collect();
     let config = TrainConfig {
         extent: camera_extent(&cameras),
         ..one.config
     };
-    let activated = model.activate();
-    let kept: usize = views
-        .iter()
-        .map(|v| {
-            let mut kept = Vec::new();
-            bbsplat::raster::preprocess::kept_rows_into(&activated.borrowed(), &v.camera, &mut kept);
-            kept.iter().filter(|&&k| k).count()
-        })
-        .sum();
     eprintln!(
         "street {resolution}px {copies}x{per_copy}: {} views, a view keeps {:.1} % of {} billboards",
         views.len(),
-        100.0 * kept as f64 / (views.len() * model.len()) as f64,
+        100.0 * kept_share(&model, &views),
         model.len()
     );
     Setup { model, views, config }

@@ -42,6 +42,7 @@ pub mod row_sums;
 pub mod run;
 pub mod run_record;
 pub mod run_time;
+pub mod street;
 pub mod texture_step;
 pub mod time_budget;
 pub mod view_pixels;

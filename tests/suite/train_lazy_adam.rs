@@ -12,6 +12,7 @@ use bbsplat::scene::split::camera_extent;
 use bbsplat::train::adam::{AdamGroup, AdamParams, StepFactors};
 use bbsplat::train::lazy_adam::{LazyLog, MAX_TERMS, Pending, catch_up_row};
 use bbsplat::train::regularise::{TextureTerm, regulariser_rows, regulariser_rows_of};
+use bbsplat::train::street::{kept_share, street as street_of};
 use bbsplat::train::{AdamMode, TrainConfig, TrainView, Trainer};
 use glam::Vec3;
 
@@ -142,24 +143,8 @@ fn street() -> (RawBillboards, Vec<TrainView>, TrainConfig) {
         seed: 4,
     });
     let one = RawBillboards::from_points(&scene.points, &scene.colours, 4, 4);
-    let mut model = one.clone();
-    let mut views = Vec::new();
-    for c in 0..2 {
-        let d = Vec3::new(12.0 * c as f32, 0.0, 0.0);
-        if c > 0 {
-            let mut copy = one.clone();
-            copy.positions.iter_mut().for_each(|p| *p += d);
-            bbsplat::train::grow::append_rows(&mut model, &copy);
-        }
-        for v in scene.train.iter().filter(|v| v.camera.centre().x.abs() < 2.0) {
-            let mut camera = v.camera;
-            camera.translation -= camera.rotation * d;
-            views.push(TrainView {
-                camera,
-                rgb: v.rgb.clone().into(),
-            });
-        }
-    }
+    let one_views: Vec<TrainView> = scene.train.iter().map(TrainView::from_demo).collect();
+    let (model, views) = street_of(&one, &one_views, 2, 12.0, 2.0);
     let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
     let config = TrainConfig {
         iterations: 120,
@@ -170,20 +155,6 @@ fn street() -> (RawBillboards, Vec<TrainView>, TrainConfig) {
         ..TrainConfig::default()
     };
     (model, views, config)
-}
-
-/// Per view of the street, the share of billboards the renderer keeps.
-fn kept_share(model: &RawBillboards, views: &[TrainView]) -> f64 {
-    let set = model.activate();
-    let mut kept = Vec::new();
-    let total: usize = views
-        .iter()
-        .map(|v| {
-            kept_rows_into(&set.borrowed(), &v.camera, &mut kept);
-            kept.iter().filter(|&&k| k).count()
-        })
-        .sum();
-    total as f64 / (views.len() * model.len()) as f64
 }
 
 /// With the opacity regulariser off (the one term lazy Adam changes), 120 steps of lazy Adam
