@@ -144,13 +144,13 @@ pub fn non_finite_gradient_of(
     only: Option<&[bool]>,
 ) -> Option<ParamGroup> {
     let rows = g.positions.len();
-    let Some(added) = added else {
-        return match only {
-            None => non_finite_gradient_plain(g),
-            Some(_) => non_finite_gradient_of(g, Some(&vec![RowGradient::default(); rows]), only),
-        };
-    };
-    assert_eq!(added.len(), rows, "one regulariser gradient per billboard");
+    if added.is_none() && only.is_none() {
+        return non_finite_gradient_plain(g);
+    }
+    assert!(
+        added.is_none_or(|a| a.len() == rows),
+        "one regulariser gradient per billboard"
+    );
     if let Some(group) = non_finite_geometry_gradient(g) {
         return Some(group);
     }
@@ -160,12 +160,13 @@ pub fn non_finite_gradient_of(
     let (colour, alpha) = g
         .textures
         .par_chunks(texels.max(1))
-        .zip(added)
         .enumerate()
-        .map(|(i, (row, a))| {
+        .map(|(i, row)| {
             if only.is_some_and(|o| !o[i]) {
                 return (0, 0);
             }
+            // No regulariser gradient: the identity addends (`RowGradient::default`).
+            let a = added.map_or_else(RowGradient::default, |a| a[i]);
             let addends: [[f32; 2]; 4] = std::array::from_fn(|ch| a.addends(ch));
             // Per channel (four lanes of one register), then the colour lanes together.
             let fields = row.iter().fold([0u32; 4], |m, x| {

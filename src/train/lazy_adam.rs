@@ -102,9 +102,42 @@ impl LazyLog {
     }
 }
 
-/// Brings one row's parameters `params` and moments `m`, `v` up to date with `pending`.
+impl LazyLog {
+    /// [`LazyLog::pending`] of a row up to date through `synced`, reusing `memo` (the previous
+    /// answer) when its step is the same: rows seen together share their last step, and the sum
+    /// is up to [`MAX_TERMS`] terms.
+    pub fn pending_memo<'a>(
+        &'a self,
+        synced: u32,
+        hp: &AdamParams,
+        memo: &mut Option<(u32, Option<Pending<'a>>)>,
+    ) -> Option<Pending<'a>> {
+        match *memo {
+            Some((s, p)) if s == synced => p,
+            _ => {
+                let p = self.pending(u64::from(synced), hp);
+                *memo = Some((synced, p));
+                p
+            }
+        }
+    }
+}
+
+/// Brings one row's parameters `params` and moments `m`, `v` up to date with `pending`:
+/// [`move_row`], then the moments' decays.
 #[inline(always)]
 pub fn catch_up_row(m: &mut [f32], v: &mut [f32], params: &mut [f32], pending: Pending<'_>) {
+    move_row(m, v, params, &pending);
+    for (m, v) in m.iter_mut().zip(v.iter_mut()) {
+        *m *= pending.decay1;
+        *v *= pending.decay2;
+    }
+}
+
+/// The pending move of one row's parameters `params`, whose moments are `m`, `v` (left as they
+/// are): the closed form, and the skipped steps one by one for the values below [`V_EXACT`].
+#[inline(always)]
+pub fn move_row(m: &[f32], v: &[f32], params: &mut [f32], pending: &Pending<'_>) {
     let mut small = false;
     // Zipped slices (no bounds checks), so that the loop vectorises.
     for (p, (&m, &v)) in params.iter_mut().zip(m.iter().zip(v.iter())) {
@@ -115,13 +148,9 @@ pub fn catch_up_row(m: &mut [f32], v: &mut [f32], params: &mut [f32], pending: P
         // A value with `m = 0` never moves (its first moment stays 0).
         for (p, (&m, &v)) in params.iter_mut().zip(m.iter().zip(v.iter())) {
             if v < V_EXACT && m != 0.0 {
-                *p = stepped_one_by_one(*p, m, v, &pending);
+                *p = stepped_one_by_one(*p, m, v, pending);
             }
         }
-    }
-    for (m, v) in m.iter_mut().zip(v.iter_mut()) {
-        *m *= pending.decay1;
-        *v *= pending.decay2;
     }
 }
 
@@ -287,15 +316,7 @@ fn catch_up_chunk(chunk: Chunk<'_>, how: &Rows<'_>) -> u32 {
         if flags.is_some_and(|f| !f[r]) {
             continue;
         }
-        let pending = match memo {
-            Some((s, p)) if s == *synced => p,
-            _ => {
-                let p = how.log.pending(u64::from(*synced), how.hp);
-                memo = Some((*synced, p));
-                p
-            }
-        };
-        let Some(pending) = pending else {
+        let Some(pending) = how.log.pending_memo(*synced, how.hp, &mut memo) else {
             continue;
         };
         let span = r * n..(r + 1) * n;
@@ -327,11 +348,16 @@ fn catch_up_chunk(chunk: Chunk<'_>, how: &Rows<'_>) -> u32 {
 /// model exported between steps.
 pub fn caught_up_values(group: &AdamGroup, log: &LazyLog, logits: &mut [f32], hp: &AdamParams) {
     let n = group.row_len;
+    let mut memo = None;
     for (row, &synced) in group.steps.iter().enumerate() {
-        if let Some(pending) = log.pending(u64::from(synced), hp) {
+        if let Some(pending) = log.pending_memo(synced, hp, &mut memo) {
             let span = row * n..(row + 1) * n;
-            let (mut m, mut v) = (group.m[span.clone()].to_vec(), group.v[span.clone()].to_vec());
-            catch_up_row(&mut m, &mut v, &mut logits[span], pending);
+            move_row(
+                &group.m[span.clone()],
+                &group.v[span.clone()],
+                &mut logits[span],
+                &pending,
+            );
         }
     }
 }

@@ -820,17 +820,15 @@ impl Trainer {
             lazy_adam::caught_up_values(a_colour, &self.lazy_logs[1], &mut model.colour_logits, &hp);
             let rest = SH_FLOATS - 3;
             let a_sh_rest = &self.adam[group::SH_REST];
+            let mut memo = None;
             for b in 0..model.len() {
-                if let Some(pending) = self.lazy_logs[2].pending(u64::from(a_sh_rest.steps[b]), &hp) {
-                    let (mut m, mut v) = (
-                        a_sh_rest.m[b * rest..(b + 1) * rest].to_vec(),
-                        a_sh_rest.v[b * rest..(b + 1) * rest].to_vec(),
-                    );
-                    lazy_adam::catch_up_row(
-                        &mut m,
-                        &mut v,
+                if let Some(pending) = self.lazy_logs[2].pending_memo(a_sh_rest.steps[b], &hp, &mut memo) {
+                    let moments = b * rest..(b + 1) * rest;
+                    lazy_adam::move_row(
+                        &a_sh_rest.m[moments.clone()],
+                        &a_sh_rest.v[moments],
                         &mut model.sh[b * SH_FLOATS + 3..(b + 1) * SH_FLOATS],
-                        pending,
+                        &pending,
                     );
                 }
             }
@@ -1172,10 +1170,12 @@ impl Trainer {
                 let [a_pos, a_rot, a_scale, a_sh_dc, a_sh_rest, _, _, a_opacity] = &mut self.adam;
                 let m = &mut self.model;
                 let g = &self.grads;
+                let mut moments =
+                    [a_pos, a_rot, a_scale, a_sh_dc, a_sh_rest].map(|g| (&mut g.m[..], &mut g.v[..], &mut g.steps[..]));
                 geometry_step.row(
                     b,
                     lr,
-                    [a_pos, a_rot, a_scale, a_sh_dc, a_sh_rest],
+                    &mut moments,
                     GeometryMut::of(&mut m.positions, &mut m.quaternions, &mut m.log_scales, &mut m.sh),
                     (&g.positions, &g.quaternions, &g.log_scales, &g.sh),
                     true,
@@ -1230,19 +1230,17 @@ impl Trainer {
                     moments,
                     in_view: lazy.then_some(&in_view[..]),
                 };
-                geometry_step.rows(all, sh_rest_now);
+                geometry_step.rows(all, lr, sh_rest_now);
                 return;
             }
+            // Row-sparse: the rows the view touched, one after the other.
+            let mut moments =
+                [a_pos, a_rot, a_scale, a_sh_dc, a_sh_rest].map(|g| (&mut g.m[..], &mut g.v[..], &mut g.steps[..]));
             for &b in rows {
                 let b = b as usize;
-                let with_sh_rest = !lazy || in_view[b];
-                let adam = [&mut *a_pos, &mut *a_rot, &mut *a_scale, &mut *a_sh_dc, &mut *a_sh_rest];
                 let read = (&*grads.positions, &*grads.quaternions, &*grads.log_scales, &*grads.sh);
-                geometry_step.row(b, lr, adam, params.reborrow(), read, with_sh_rest);
-                if lazy && with_sh_rest {
-                    a_sh_rest.steps[b] = sh_rest_now;
-                }
-                params.copy_row_to(b, &mut activated, with_sh_rest);
+                geometry_step.row(b, lr, &mut moments, params.reborrow(), read, true);
+                params.copy_row_to(b, &mut activated, true);
                 grads.zero_row(b);
             }
         };
@@ -1335,12 +1333,15 @@ impl Trainer {
         // SH rest (45 values a row, interleaved with SH DC in the model): row by row.
         let rest = SH_FLOATS - 3;
         let [.., a_sh_rest, _, _, _] = &mut self.adam;
+        let sh_log = &self.lazy_logs[2];
+        let now = sh_log.live_steps().min(u64::from(u32::MAX)) as u32;
+        let mut memo = None;
         let mut sh_finite = true;
         for b in 0..m.len() {
             if sh_rest.is_some_and(|s| !s[b]) {
                 continue;
             }
-            let Some(pending) = self.lazy_logs[2].pending(u64::from(a_sh_rest.steps[b]), &hp) else {
+            let Some(pending) = sh_log.pending_memo(a_sh_rest.steps[b], &hp, &mut memo) else {
                 continue;
             };
             let span = b * SH_FLOATS + 3..(b + 1) * SH_FLOATS;
@@ -1353,7 +1354,7 @@ impl Trainer {
             );
             sh_finite &= m.sh[span.clone()].iter().all(|x| x.is_finite());
             self.activated.sh[span.clone()].copy_from_slice(&m.sh[span]);
-            a_sh_rest.steps[b] = self.lazy_logs[2].live_steps().min(u64::from(u32::MAX)) as u32;
+            a_sh_rest.steps[b] = now;
         }
         alpha && colour && sh_finite
     }
@@ -1663,72 +1664,62 @@ impl<'a> GeometryRows<'a> {
 }
 
 impl GeometryStep {
-    /// The dense step of every row of `rows` ([`GeometryStep::row`] with the groups' shared
-    /// factors, then the row copied to the activated set and its gradients zeroed), in parallel
-    /// chunks of [`GEOMETRY_CHUNK`] rows: each row's arithmetic is that of the serial loop, so the
-    /// bits do not depend on the split. With lazy Adam (`in_view` set), SH rest steps only on the
-    /// rows in view, each marked up to date through `sh_rest_now`.
-    fn rows(&self, rows: GeometryRows<'_>, sh_rest_now: u32) {
+    /// The dense step of every row of `rows` ([`GeometryStep::row`], then the row copied to the
+    /// activated set and its gradients zeroed), in parallel chunks of [`GEOMETRY_CHUNK`] rows:
+    /// each row's arithmetic is that of the serial loop, so the bits do not depend on the split.
+    /// With lazy Adam (`in_view` set), SH rest steps only on the rows in view, each marked up to
+    /// date through `sh_rest_now`.
+    fn rows(&self, rows: GeometryRows<'_>, lr: &LearningRates, sh_rest_now: u32) {
         if rows.len() > GEOMETRY_CHUNK {
             let mid = rows.len() / 2;
             let (a, b) = rows.split_at(mid);
-            rayon::join(|| self.rows(a, sh_rest_now), || self.rows(b, sh_rest_now));
+            rayon::join(|| self.rows(a, lr, sh_rest_now), || self.rows(b, lr, sh_rest_now));
             return;
         }
         let GeometryRows {
-            params,
+            mut params,
             mut activated,
             mut grads,
-            moments,
+            mut moments,
             in_view,
         } = rows;
-        let [f_pos, f_rot, f_scale, f_sh_dc, f_sh_rest] = self.factors;
-        let [pos, rot, scale, dc, rest] = moments;
-        let hp = &self.hp;
-        // One group's update of row `r`: the dense path of `AdamGroup::step_row_with`.
-        let update = |(m, v, steps): &mut GroupRows<'_>, n: usize, r: usize, p: &mut [f32], g: &[f32], f| {
-            steps[r] = steps[r].saturating_add(1);
-            update_row_with(&mut m[r * n..(r + 1) * n], &mut v[r * n..(r + 1) * n], p, g, f, hp);
-        };
-        let (mut pos, mut rot, mut scale, mut dc, mut rest) = (pos, rot, scale, dc, rest);
         for r in 0..params.positions.len() {
             let with_sh_rest = in_view.is_none_or(|f| f[r]);
-            update(
-                &mut pos,
-                3,
-                r,
-                params.positions[r].as_mut(),
-                &grads.positions[r].to_array(),
-                f_pos,
-            );
-            update(&mut rot, 4, r, &mut params.quaternions[r], &grads.quaternions[r], f_rot);
-            update(
-                &mut scale,
-                2,
-                r,
-                params.log_scales[r].as_mut(),
-                &grads.log_scales[r].to_array(),
-                f_scale,
-            );
-            let (sh, d_sh) = (
-                &mut params.sh[r * SH_FLOATS..(r + 1) * SH_FLOATS],
-                &grads.sh[r * SH_FLOATS..(r + 1) * SH_FLOATS],
-            );
-            let (sh_dc, sh_rest) = sh.split_at_mut(3);
-            update(&mut dc, 3, r, sh_dc, &d_sh[..3], f_sh_dc);
-            if with_sh_rest {
-                update(&mut rest, SH_FLOATS - 3, r, sh_rest, &d_sh[3..], f_sh_rest);
-                if in_view.is_some() {
-                    rest.2[r] = sh_rest_now;
-                }
+            let read = (&*grads.positions, &*grads.quaternions, &*grads.log_scales, &*grads.sh);
+            self.row(r, lr, &mut moments, params.reborrow(), read, with_sh_rest);
+            if with_sh_rest && in_view.is_some() {
+                moments[4].2[r] = sh_rest_now;
             }
             params.copy_row_to(r, &mut activated, with_sh_rest);
             grads.zero_row(r);
         }
     }
 
-    /// One Adam step of row `b` of `group`: with the group's `factors` of this step when dense,
-    /// else with its own count and `lr` (row-sparse).
+    /// One Adam step of row `b` of one group's moments and counts (`n` values a row): with the
+    /// group's `factors` of this step when dense, else with the row's own count and `lr`
+    /// (row-sparse; [`AdamGroup::step_row`]). Counts the update in the row's count.
+    #[allow(clippy::too_many_arguments)]
+    fn update(
+        &self,
+        (m, v, steps): &mut GroupRows<'_>,
+        n: usize,
+        b: usize,
+        params: &mut [f32],
+        grads: &[f32],
+        lr: f32,
+        factors: StepFactors,
+    ) {
+        steps[b] = steps[b].saturating_add(1);
+        let factors = if self.dense {
+            factors
+        } else {
+            StepFactors::new(lr, &self.hp, u64::from(steps[b]))
+        };
+        let span = b * n..(b + 1) * n;
+        update_row_with(&mut m[span.clone()], &mut v[span], params, grads, factors, &self.hp);
+    }
+
+    /// [`GeometryStep::update`] of row `b` of `group`.
     fn group_row(
         &self,
         group: &mut AdamGroup,
@@ -1738,40 +1729,48 @@ impl GeometryStep {
         lr: f32,
         factors: StepFactors,
     ) {
-        if self.dense {
-            group.step_row_with(b, params, grads, factors, &self.hp);
-        } else {
-            group.step_row(b, params, grads, lr, &self.hp);
-        }
+        let n = group.row_len;
+        let mut rows = (&mut group.m[..], &mut group.v[..], &mut group.steps[..]);
+        self.update(&mut rows, n, b, params, grads, lr, factors);
     }
 
     /// One Adam step of row `b` of the position, rotation, scale, SH degree-0 and (when
-    /// `with_sh_rest`) SH rest groups (`adam`, in that order) on `params` with the gradients
+    /// `with_sh_rest`) SH rest groups (`moments`, in that order) on `params` with the gradients
     /// `grads`.
     fn row(
         &self,
         b: usize,
         lr: &LearningRates,
-        adam: [&mut AdamGroup; 5],
+        moments: &mut [GroupRows<'_>; 5],
         params: GeometryMut<'_>,
         (d_pos, d_quat, d_scale, d_sh): GeometryGrads<'_>,
         with_sh_rest: bool,
     ) {
         let [f_pos, f_rot, f_scale, f_sh_dc, f_sh_rest] = self.factors;
-        let [a_pos, a_rot, a_scale, a_sh_dc, a_sh_rest] = adam;
-        let step = |group: &mut AdamGroup, params: &mut [f32], grads: &[f32], lr: f32, factors: StepFactors| {
-            self.group_row(group, b, params, grads, lr, factors);
-        };
-        step(
-            a_pos,
+        let [pos, rot, scale, dc, rest] = moments;
+        let [n_pos, n_rot, n_scale, n_dc, n_rest] = GEOMETRY_ROW_LENS;
+        self.update(
+            pos,
+            n_pos,
+            b,
             params.positions[b].as_mut(),
             &d_pos[b].to_array(),
             lr.position,
             f_pos,
         );
-        step(a_rot, &mut params.quaternions[b], &d_quat[b], lr.rotation, f_rot);
-        step(
-            a_scale,
+        self.update(
+            rot,
+            n_rot,
+            b,
+            &mut params.quaternions[b],
+            &d_quat[b],
+            lr.rotation,
+            f_rot,
+        );
+        self.update(
+            scale,
+            n_scale,
+            b,
             params.log_scales[b].as_mut(),
             &d_scale[b].to_array(),
             lr.scale,
@@ -1782,10 +1781,10 @@ impl GeometryStep {
             &mut params.sh[b * SH_FLOATS..(b + 1) * SH_FLOATS],
             &d_sh[b * SH_FLOATS..(b + 1) * SH_FLOATS],
         );
-        let (dc, rest) = sh.split_at_mut(3);
-        step(a_sh_dc, dc, &d_sh[..3], lr.sh_dc, f_sh_dc);
+        let (sh_dc, sh_rest) = sh.split_at_mut(3);
+        self.update(dc, n_dc, b, sh_dc, &d_sh[..3], lr.sh_dc, f_sh_dc);
         if with_sh_rest {
-            step(a_sh_rest, rest, &d_sh[3..], lr.sh_rest, f_sh_rest);
+            self.update(rest, n_rest, b, sh_rest, &d_sh[3..], lr.sh_rest, f_sh_rest);
         }
     }
 }
