@@ -62,7 +62,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         _ => scene.test.iter().collect(),
     };
     for view in chosen.iter().copied() {
-        let target = view.image.to_f32_rgb();
+        let target = view.image.get().unwrap().to_f32_rgb();
         let (w, h) = (view.camera.width as usize, view.camera.height as usize);
         let before = image_metrics(&render(&set, &view.camera, &settings).rgb, &target, w, h)?;
         let fit = fit_camera(&set, &view.camera, &target, &settings, iterations, &sizes)?;

@@ -95,7 +95,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (mut sum_fwd, mut sum_both, mut count) = (0.0, 0.0, 0usize);
     let (mut sum_fwd_cpu, mut sum_both_cpu) = (0.0, 0.0);
     for view in test.iter().take(views) {
-        let target = view.image.to_f32_rgb();
+        let target = view.image.get()?.to_f32_rgb();
         let (mut fwd_ms, mut both_ms) = (0.0, 0.0);
         let (mut fwd_cpu, mut both_cpu) = (0.0, 0.0);
         let mut stats = None;

@@ -413,3 +413,87 @@ pub fn export_colmap(scene: &DemoScene, dir: &std::path::Path) -> Result<(), cra
     std::fs::create_dir_all(&sparse).map_err(|e| SceneError::io(&sparse, e))?;
     crate::scene::colmap_binary::write_model(&model, &sparse)
 }
+
+/// Camera `i` of `n` on a dome: a spiral over heights 0.6 to 3 at radius 3.5 to 4.5, looking at
+/// the demo's objects (the golden angle apart: no two photos alike).
+fn dome_camera(i: usize, n: usize, width: u32, height: u32) -> Camera {
+    let t = (i as f32 + 0.5) / n as f32;
+    let angle = i as f32 * 2.399_963;
+    let radius = 3.5 + ((i * 7919) % 101) as f32 / 100.0;
+    let eye = Vec3::new(radius * angle.cos(), 0.6 + 2.4 * t, radius * angle.sin());
+    let focal = width as f32 * 0.9;
+    Camera::look_at(eye, Vec3::new(0.0, 0.4, 0.0), Vec3::Y, focal, focal, width, height)
+}
+
+/// Writes a capture of the demo world as large as a user's, to measure memory and loading at
+/// the sizes of real captures (docs/scene.md, "Large captures"): `count` JPEG photographs
+/// (quality 90) of `width × height` named `images/photo_NNNNN.jpg` on a dome of cameras
+/// ([`render_view`]), a COLMAP model in `sparse/0` (one PINHOLE camera per photo) and 20 000 of
+/// the demo's surface points. Each photo is rendered, encoded and dropped in turn (in
+/// parallel), so the memory taken is a few photos'.
+///
+/// # Errors
+///
+/// [`SceneError`](crate::scene::SceneError) when a file cannot be written.
+pub fn export_capture(
+    dir: &std::path::Path,
+    count: usize,
+    width: u32,
+    height: u32,
+) -> Result<(), crate::scene::SceneError> {
+    use crate::scene::SceneError;
+    use crate::scene::colmap::{CameraModel, ColmapCamera, ColmapImage, ColmapModel, ColmapPoint3D};
+    use rayon::prelude::*;
+    let images = dir.join("images");
+    std::fs::create_dir_all(&images).map_err(|e| SceneError::io(&images, e))?;
+    let names: Vec<String> = (0..count).map(|i| format!("photo_{i:05}.jpg")).collect();
+    names.par_iter().enumerate().try_for_each(|(i, name)| {
+        let camera = dome_camera(i, count, width, height);
+        let bytes: Vec<u8> = render_view(&camera)
+            .iter()
+            .map(|&c| crate::loss::psnr::quantize_u8(c))
+            .collect();
+        let path = images.join(name);
+        let file = std::fs::File::create(&path).map_err(|e| SceneError::io(&path, e))?;
+        image::codecs::jpeg::JpegEncoder::new_with_quality(std::io::BufWriter::new(file), 90)
+            .encode(&bytes, width, height, image::ExtendedColorType::Rgb8)
+            .map_err(|e| SceneError::io(&path, std::io::Error::other(e)))
+    })?;
+    let (points, colours) = surface_points(20_000, &mut Rng::new(0));
+    let mut model = ColmapModel {
+        cameras: Vec::new(),
+        images: Vec::new(),
+        points: Vec::new(),
+    };
+    for (i, name) in names.iter().enumerate() {
+        let c = dome_camera(i, count, width, height);
+        model.cameras.push(ColmapCamera {
+            id: i as u32 + 1,
+            model: CameraModel::Pinhole,
+            width: width as u64,
+            height: height as u64,
+            params: vec![c.fx as f64, c.fy as f64, c.cx as f64, c.cy as f64],
+        });
+        let q = glam::Quat::from_mat3(&c.rotation).normalize();
+        model.images.push(ColmapImage {
+            id: i as u32 + 1,
+            qvec: [q.w as f64, q.x as f64, q.y as f64, q.z as f64],
+            tvec: c.translation.to_array().map(f64::from),
+            camera_id: i as u32 + 1,
+            name: name.clone(),
+            points2d: Vec::new(),
+        });
+    }
+    for (i, (p, col)) in points.iter().zip(&colours).enumerate() {
+        model.points.push(ColmapPoint3D {
+            id: i as u64 + 1,
+            xyz: p.to_array().map(f64::from),
+            rgb: col.map(crate::loss::psnr::quantize_u8),
+            error: 0.0,
+            track: Vec::new(),
+        });
+    }
+    let sparse = dir.join("sparse/0");
+    std::fs::create_dir_all(&sparse).map_err(|e| SceneError::io(&sparse, e))?;
+    crate::scene::colmap_binary::write_model(&model, &sparse)
+}

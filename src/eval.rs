@@ -277,6 +277,29 @@ pub struct EvalView<'a> {
     pub mask: Option<&'a [u8]>,
 }
 
+/// The items of `items` up to the first error, which is left in `failure`: to evaluate views
+/// whose images are read one by one as they are evaluated (decoded on demand,
+/// [`crate::scene::on_demand`]) and stop at the first that cannot be read.
+///
+/// ```
+/// use bbsplat::eval::until_error;
+/// let mut failure = None;
+/// let read: Vec<i32> = until_error([Ok(1), Ok(2), Err("gone"), Ok(4)], &mut failure).collect();
+/// assert_eq!((read, failure), (vec![1, 2], Some("gone")));
+/// ```
+pub fn until_error<'a, T, E>(
+    items: impl IntoIterator<Item = Result<T, E>> + 'a,
+    failure: &'a mut Option<E>,
+) -> impl Iterator<Item = T> + 'a {
+    items.into_iter().map_while(move |item| match item {
+        Ok(value) => Some(value),
+        Err(e) => {
+            *failure = Some(e);
+            None
+        }
+    })
+}
+
 /// Renders every view and measures it; `on_render` sees each render (e.g. to save it).
 ///
 /// # Errors

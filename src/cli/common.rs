@@ -69,6 +69,11 @@ pub struct SceneArgs {
     /// --masked`).
     #[arg(long, value_enum, default_value_t = MaskModeArg::Composite)]
     pub mask_mode: MaskModeArg,
+    /// Memory for the 8-bit images (K, M or G; a bare number is MiB). When all the scene's
+    /// images fit they are held in memory; otherwise each is decoded from its file when used,
+    /// through a cache of this size (same pixels, same result; docs/scene.md, "Large captures").
+    #[arg(long, value_name = "SIZE", default_value = "2G", value_parser = super::flag_parsers::byte_size)]
+    pub image_memory: u64,
 }
 
 /// `--mask-mode`.
@@ -104,6 +109,7 @@ impl SceneArgs {
             unfold: !self.keep_folded,
             masks_dir: self.masks.clone(),
             mask_mode: self.mask_mode.into(),
+            image_memory: self.image_memory,
             ..LoadOptions::default()
         }
     }

@@ -100,7 +100,7 @@ pub fn run(
         res = resolution
     );
     let mut trainer = Trainer::new(model, config);
-    let before = trainer.evaluate(&test);
+    let before = trainer.evaluate(&test)?;
     let bar = ProgressBar::new(iterations as u64);
     bar.set_style(
         ProgressStyle::with_template("{bar:30} {pos}/{len} [{elapsed_precise} < {eta_precise}, {per_sec}] {msg}")
@@ -147,7 +147,7 @@ pub fn run(
             )?;
             write_png_atomic(
                 &dir.join(format!("test_{i:03}_truth.png")),
-                &v.rgb.to_f32(),
+                &v.rgb.to_f32()?,
                 v.camera.width,
                 v.camera.height,
             )?;

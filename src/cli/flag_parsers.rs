@@ -34,3 +34,48 @@ pub fn frame_ms(text: &str) -> Result<u32, String> {
         Err(e) => Err(format!("{text:?} is not a whole number: {e}")),
     }
 }
+
+/// A size in bytes written as a whole number with a unit: `K`, `M` or `G` (powers of 1024;
+/// `MiB`-style suffixes and a trailing `B` accepted), e.g. `512M`, `2G`; a bare number is
+/// MiB. At most 1 TiB.
+pub fn byte_size(text: &str) -> Result<u64, String> {
+    let t = text.trim();
+    let upper = t.to_ascii_uppercase();
+    let trimmed = upper.trim_end_matches('B').trim_end_matches('I');
+    let digits = trimmed.trim_end_matches(['K', 'M', 'G']);
+    let unit: u64 = match &trimmed[digits.len()..] {
+        "K" => 1 << 10,
+        "" | "M" => 1 << 20,
+        "G" => 1 << 30,
+        other => return Err(format!("{text:?}: unknown unit {other:?} (use K, M or G, e.g. 2G)")),
+    };
+    let n: u64 = digits
+        .trim()
+        .parse()
+        .map_err(|e| format!("{text:?} is not a whole number with a unit (e.g. 512M, 2G): {e}"))?;
+    match n.checked_mul(unit) {
+        Some(bytes) if bytes <= 1 << 40 => Ok(bytes),
+        _ => Err(format!("{text:?} is more than 1 TiB")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::byte_size;
+
+    #[test]
+    fn sizes_with_units() {
+        assert_eq!(byte_size("2G"), Ok(2 << 30));
+        // `--image-memory`'s default is the library's.
+        assert_eq!(byte_size("2G"), Ok(bbsplat::scene::on_demand::DEFAULT_IMAGE_MEMORY));
+        assert_eq!(byte_size("512m"), Ok(512 << 20));
+        assert_eq!(byte_size("300"), Ok(300 << 20));
+        assert_eq!(byte_size("64KiB"), Ok(64 << 10));
+        assert_eq!(byte_size("1GB"), Ok(1 << 30));
+        assert_eq!(byte_size("0"), Ok(0));
+        assert!(byte_size("2T").is_err());
+        assert!(byte_size("2048G").is_err());
+        assert!(byte_size("lots").is_err());
+        assert!(byte_size("-1G").is_err());
+    }
+}

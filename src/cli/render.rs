@@ -5,7 +5,7 @@ use super::common::{
     write_text_atomic,
 };
 use anyhow::{Context, Result};
-use bbsplat::eval::{EvalReport, EvalView, evaluate_views, lpips_u8};
+use bbsplat::eval::{EvalReport, EvalView, evaluate_views, lpips_u8, until_error};
 use bbsplat::lpips::Lpips;
 use bbsplat::raster::RenderSettings;
 use clap::Args;
@@ -99,20 +99,25 @@ fn run_views(
         ..RenderSettings::default()
     };
     let mut failure = None;
+    let mut unread = None;
     let mut index = 0;
-    let report = evaluate_views(
-        &activated.borrowed(),
-        // Each view's float values are made for its evaluation only (not all views at once).
-        views.iter().map(|v| EvalView {
+    // Each view's float values are made for its evaluation only (not all views at once; an
+    // on-demand image is decoded then).
+    let read = views.iter().map(|v| {
+        Ok::<_, bbsplat::scene::SceneError>(EvalView {
             name: &v.name,
             camera: &v.camera,
-            rgb: std::borrow::Cow::Owned(v.image.to_f32_rgb()),
+            rgb: std::borrow::Cow::Owned(v.image.get()?.to_f32_rgb()),
             mask: if masked {
                 v.mask.as_deref().or(v.coverage.as_deref())
             } else {
                 None
             },
-        }),
+        })
+    });
+    let report = evaluate_views(
+        &activated.borrowed(),
+        until_error(read, &mut unread),
         &settings,
         |view, rendered| {
             if failure.is_none()
@@ -130,6 +135,9 @@ fn run_views(
             index += 1;
         },
     )?;
+    if let Some(e) = unread {
+        return Err(e.into());
+    }
     match failure {
         Some(e) => Err(e),
         None => Ok(report),

@@ -5,6 +5,7 @@ use super::signals::Signals;
 use super::train_args::{InitArg, TrainArgs};
 use super::{preflight, resume, validate};
 use anyhow::{Context, Result};
+use bbsplat::memory::human_bytes;
 use bbsplat::plan::{RunLength, TrainPlan};
 use bbsplat::report::RunReport;
 use bbsplat::train::RunError;
@@ -84,6 +85,21 @@ pub fn run(args: TrainArgs) -> Result<()> {
         "{}: the scene has no training view",
         args.scene.display()
     );
+    if let Some(cache) = scene.image_cache()
+        && !args.quiet
+    {
+        let pixels: u64 = scene
+            .train
+            .iter()
+            .chain(&scene.test)
+            .map(|v| v.camera.pixel_count() as u64)
+            .sum();
+        println!(
+            "images: {} of 8-bit images do not fit in --image-memory {}: each is decoded from its file when used, through a cache of that size",
+            human_bytes(3 * pixels),
+            human_bytes(cache.budget())
+        );
+    }
     let request = args.request();
     let record = resume::record_of(&args, &scene);
     let mut automatic = Vec::new();
@@ -446,14 +462,21 @@ fn masked_summary(
         sh_degree: meta.sh_degree,
         ..Default::default()
     };
-    let views = test.iter().zip(masks).map(|(v, m)| bbsplat::eval::EvalView {
-        name: "",
-        camera: &v.camera,
-        rgb: v.rgb.to_f32(),
-        mask: m.as_deref(),
+    let views = test.iter().zip(masks).map(|(v, m)| {
+        Ok::<_, bbsplat::scene::SceneError>(bbsplat::eval::EvalView {
+            name: "",
+            camera: &v.camera,
+            rgb: v.rgb.to_f32()?,
+            mask: m.as_deref(),
+        })
     });
-    let report = bbsplat::eval::evaluate_views(&activated.borrowed(), views, &settings, |_, _| {})
+    let mut unread = None;
+    let read = bbsplat::eval::until_error(views, &mut unread);
+    let report = bbsplat::eval::evaluate_views(&activated.borrowed(), read, &settings, |_, _| {})
         .context("the masked evaluation of the test views")?;
+    if let Some(e) = unread {
+        return Err(anyhow::Error::new(e).context("the masked evaluation of the test views"));
+    }
     let (Some(psnr), Some(ssim)) = (report.mean_masked_psnr, report.mean_masked_ssim) else {
         return Ok(None);
     };

@@ -66,6 +66,10 @@ pub enum HullError {
     /// A grid resolution below 2.
     #[error("the hull grid resolution must be at least 2, got {0}")]
     Resolution(usize),
+    /// A view's image could not be decoded again for the points' colours (an on-demand image,
+    /// [`crate::scene::on_demand`]): the message names the file.
+    #[error("{0}")]
+    Image(String),
 }
 
 /// A view's mask, dilated and thresholded: `true` where the view sees the object.
@@ -201,21 +205,26 @@ pub fn visual_hull_points(
     if points.is_empty() {
         return Err(HullError::Empty);
     }
-    let colours = points
-        .par_iter()
-        .map(|&p| {
-            let (mut sum, mut n) = ([0.0f64; 3], 0u32);
-            for m in &masks {
-                if let Some(i) = pixel_of(m.view, p)
-                    && m.raw[i] >= 128
-                {
-                    let px = m.view.image.as_bytes();
-                    for c in 0..3 {
-                        sum[c] += f64::from(px[3 * i + c]) / 255.0;
-                    }
-                    n += 1;
+    // View by view (each image fetched once, decoded when it is on demand), each point's sum
+    // in view order.
+    let mut sums = vec![([0.0f64; 3], 0u32); points.len()];
+    for m in &masks {
+        let image = m.view.image.get().map_err(|e| HullError::Image(e.to_string()))?;
+        let px = image.as_bytes();
+        sums.par_iter_mut().zip(&points).for_each(|((sum, n), &p)| {
+            if let Some(i) = pixel_of(m.view, p)
+                && m.raw[i] >= 128
+            {
+                for c in 0..3 {
+                    sum[c] += f64::from(px[3 * i + c]) / 255.0;
                 }
+                *n += 1;
             }
+        });
+    }
+    let colours = sums
+        .into_iter()
+        .map(|(sum, n)| {
             if n == 0 {
                 [0.5; 3]
             } else {

@@ -12,7 +12,7 @@
 //! Cost: one hash of at most [`SAMPLES`] bytes per view, then a full comparison only of the views
 //! whose sizes and hashes agree.
 
-use super::{Image, View};
+use super::{Image, SceneError, View, ViewImage};
 use crate::camera::Camera;
 use std::collections::HashMap;
 
@@ -57,7 +57,7 @@ pub struct Duplicate {
 }
 
 /// FNV-1a 64 of the size and of at most [`SAMPLES`] evenly spaced bytes of `image`.
-fn sample_hash(image: &Image) -> u64 {
+pub(crate) fn sample_hash(image: &Image) -> u64 {
     let bytes = image.as_bytes();
     let stride = bytes.len().div_ceil(SAMPLES).max(1);
     let size = [image.width().to_le_bytes(), image.height().to_le_bytes()].concat();
@@ -71,8 +71,19 @@ fn single_colour(image: &Image) -> bool {
     bytes.chunks_exact(3).all(|p| p == &bytes[..3])
 }
 
+/// [`sample_hash`] of a view's image (an on-demand image's, kept from its first decode).
+fn sample_hash_of(image: &ViewImage) -> u64 {
+    match image {
+        ViewImage::InMemory(image) => sample_hash(image),
+        ViewImage::OnDemand(image) => image.sample_hash(),
+    }
+}
+
 /// Every view of `train` then `test` whose image equals an earlier one's, in that order.
-pub fn find(train: &[View], test: &[View]) -> Vec<Duplicate> {
+///
+/// # Errors
+/// An on-demand image ([`super::on_demand`]) that cannot be decoded again for the comparison.
+pub fn find(train: &[View], test: &[View]) -> Result<Vec<Duplicate>, SceneError> {
     let all: Vec<((Split, usize), &View)> = train
         .iter()
         .enumerate()
@@ -92,17 +103,21 @@ pub fn find(train: &[View], test: &[View]) -> Vec<Duplicate> {
     let mut seen: HashMap<u64, Vec<usize>> = HashMap::new();
     let mut out = Vec::new();
     for (k, &(at, view)) in all.iter().enumerate() {
-        let image = &view.image;
-        let firsts = seen.entry(sample_hash(image)).or_default();
-        let original = firsts.iter().copied().find(|&j| {
+        let firsts = seen.entry(sample_hash_of(&view.image)).or_default();
+        let mut original = None;
+        for &j in firsts.iter() {
             let other = all[j].1;
-            let same_image = other.image.width() == image.width()
-                && other.image.height() == image.height()
-                && other.image.as_bytes() == image.as_bytes();
-            same_image && same_pose(&other.camera, &view.camera, spread)
-        });
+            let same_size = (other.image.width(), other.image.height()) == (view.image.width(), view.image.height());
+            if same_size
+                && same_pose(&other.camera, &view.camera, spread)
+                && other.image.get()?.as_bytes() == view.image.get()?.as_bytes()
+            {
+                original = Some(j);
+                break;
+            }
+        }
         match original {
-            Some(j) if !single_colour(image) => out.push(Duplicate {
+            Some(j) if !single_colour(&*view.image.get()?) => out.push(Duplicate {
                 copy: at,
                 original: all[j].0,
             }),
@@ -110,15 +125,19 @@ pub fn find(train: &[View], test: &[View]) -> Vec<Duplicate> {
             None => firsts.push(k),
         }
     }
-    out
+    Ok(out)
 }
 
 /// Removes every [`find`] copy from `train` and `test`, with a warning naming it and its
 /// original.
-pub(crate) fn leave_out(train: &mut Vec<View>, test: &mut Vec<View>, warnings: &mut Vec<String>) {
-    let found = find(train, test);
+pub(crate) fn leave_out(
+    train: &mut Vec<View>,
+    test: &mut Vec<View>,
+    warnings: &mut Vec<String>,
+) -> Result<(), SceneError> {
+    let found = find(train, test)?;
     if found.is_empty() {
-        return;
+        return Ok(());
     }
     let name = |(split, i): (Split, usize)| match split {
         Split::Train => format!("training view {:?}", train[i].name),
@@ -148,6 +167,7 @@ pub(crate) fn leave_out(train: &mut Vec<View>, test: &mut Vec<View>, warnings: &
     };
     drop(Split::Train, train);
     drop(Split::Test, test);
+    Ok(())
 }
 
 #[cfg(test)]
@@ -160,7 +180,7 @@ mod tests {
             name: name.into(),
             path: name.into(),
             camera: Camera::identity(2, 1),
-            image: Image::new(2, 1, pixels.to_vec()).unwrap(),
+            image: Image::new(2, 1, pixels.to_vec()).unwrap().into(),
             coverage: None,
             mask: None,
         }
@@ -176,7 +196,7 @@ mod tests {
             view("u", &[7, 7, 7, 1, 1, 1]),
             view("u2", &[7, 7, 7, 1, 1, 1]),
         ];
-        let found = find(&train, &test);
+        let found = find(&train, &test).unwrap();
         assert_eq!(
             found,
             vec![
@@ -195,7 +215,7 @@ mod tests {
             ]
         );
         let mut warnings = Vec::new();
-        leave_out(&mut train, &mut test, &mut warnings);
+        leave_out(&mut train, &mut test, &mut warnings).unwrap();
         let names = |v: &[View]| v.iter().map(|v| v.name.clone()).collect::<Vec<_>>();
         assert_eq!(names(&train), ["a", "b"]);
         assert_eq!(names(&test), ["u"]);
@@ -210,12 +230,12 @@ mod tests {
     fn single_colour_frames_and_different_sizes_are_not_copies() {
         let blank = [5, 5, 5, 5, 5, 5];
         let train = vec![view("a", &blank), view("b", &blank)];
-        assert!(find(&train, &[]).is_empty());
+        assert!(find(&train, &[]).unwrap().is_empty());
         let wide = View {
-            image: Image::new(1, 2, vec![1, 2, 3, 4, 5, 6]).unwrap(),
+            image: Image::new(1, 2, vec![1, 2, 3, 4, 5, 6]).unwrap().into(),
             ..view("c", &[1, 2, 3, 4, 5, 6])
         };
-        assert!(find(&[view("d", &[1, 2, 3, 4, 5, 6]), wide], &[]).is_empty());
+        assert!(find(&[view("d", &[1, 2, 3, 4, 5, 6]), wide], &[]).unwrap().is_empty());
     }
 
     #[test]
@@ -225,10 +245,14 @@ mod tests {
         moved.camera.translation.x = 1.0;
         let mut turned = view("c", &a);
         turned.camera.rotation = glam::Mat3::from_rotation_y(0.01);
-        assert!(find(&[view("a", &a), moved.clone(), turned.clone()], &[]).is_empty());
+        assert!(
+            find(&[view("a", &a), moved.clone(), turned.clone()], &[])
+                .unwrap()
+                .is_empty()
+        );
         // A hair's breadth away is the same pose (spread 2/3 from the moved view).
         let mut near = view("d", &a);
         near.camera.translation.x = 1e-4;
-        assert_eq!(find(&[view("a", &a), moved, near], &[]).len(), 1);
+        assert_eq!(find(&[view("a", &a), moved, near], &[]).unwrap().len(), 1);
     }
 }

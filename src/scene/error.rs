@@ -111,6 +111,15 @@ pub enum SceneError {
         /// The decoder's description.
         message: String,
     },
+    /// An image decoded on demand ([`super::on_demand`]) no longer gives the pixels it gave when
+    /// the scene was loaded: its file was edited or replaced since.
+    #[error("{}: the image changed on disk since the scene was loaded: {message}", image.display())]
+    ImageChanged {
+        /// The image file.
+        image: PathBuf,
+        /// What differs.
+        message: String,
+    },
     /// An image's size differs from its camera's.
     #[error(
         "{}: image is {}x{} pixels but its camera in {} ({location}) is {}x{}",

@@ -139,10 +139,15 @@ pub(crate) fn load_nerf_synthetic(
     let (train, test) = if names_a_file(&test_file) {
         let test_json = read_transforms(&test_file)?;
         let test_sources = sources_of(&test_file, &test_json, false, warnings)?;
-        (
-            views::load_all(train_sources, options, warnings)?,
-            views::load_all(test_sources, options, warnings)?,
-        )
+        // One load for both, so that they share one image budget.
+        let train_count = train_sources.len();
+        let mut train = views::load_all(
+            train_sources.into_iter().chain(test_sources).collect(),
+            options,
+            warnings,
+        )?;
+        let test = train.split_off(train_count);
+        (train, test)
     } else {
         let views = sort_by_name(views::load_all(train_sources, options, warnings)?);
         split::split_every(views, options.test_every)

@@ -183,9 +183,13 @@ fn r3(k: usize) -> [f64; 3] {
 
 /// The initial points of the views (module rule): `per_view` points each, view `v` using the
 /// points `v·per_view ..` of the sequence, at depth uniform in disparity between its bounds.
-pub fn frustum_points(views: &[(&View, [f64; 2])], per_view: usize) -> PointCloud {
+///
+/// # Errors
+/// An on-demand image ([`super::on_demand`]) that cannot be decoded again for the colours.
+pub fn frustum_points(views: &[(&View, [f64; 2])], per_view: usize) -> Result<PointCloud, SceneError> {
     let mut cloud = PointCloud::default();
     for (v, (view, [near, far])) in views.iter().enumerate() {
+        let image = view.image.get()?;
         let cam = &view.camera;
         let (w, h) = (cam.width as f64, cam.height as f64);
         let r_t = cam.rotation.as_dmat3().transpose();
@@ -203,10 +207,10 @@ pub fn frustum_points(views: &[(&View, [f64; 2])], per_view: usize) -> PointClou
             let p = centre + r_t * (ray * depth);
             cloud.positions.push(p.as_vec3());
             let (x, y) = ((px as u32).min(cam.width - 1), (py as u32).min(cam.height - 1));
-            cloud.colours.push(view.image.pixel_f32(x, y));
+            cloud.colours.push(image.pixel_f32(x, y));
         }
     }
-    cloud
+    Ok(cloud)
 }
 
 pub(crate) fn load(file: &Path, options: &LoadOptions, warnings: &mut Vec<String>) -> Result<Scene, SceneError> {
@@ -276,7 +280,7 @@ pub(crate) fn load(file: &Path, options: &LoadOptions, warnings: &mut Vec<String
     let bounds: Vec<[f64; 2]> = poses.iter().map(|p| p.bounds).collect();
     let indexed: Vec<(View, [f64; 2])> = views.into_iter().zip(bounds).collect();
     let (train, test) = split::split_every(indexed, options.test_every);
-    let points = frustum_points(&train.iter().map(|(v, b)| (v, *b)).collect::<Vec<_>>(), POINTS_PER_VIEW);
+    let points = frustum_points(&train.iter().map(|(v, b)| (v, *b)).collect::<Vec<_>>(), POINTS_PER_VIEW)?;
     Ok(Scene {
         name: dir.file_name().and_then(|n| n.to_str()).unwrap_or("scene").to_string(),
         format: SceneFormat::Llff,

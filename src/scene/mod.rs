@@ -42,6 +42,7 @@ pub mod mask;
 pub mod nerf_json;
 mod neus;
 pub mod npy;
+pub mod on_demand;
 pub mod ply;
 pub mod projection;
 pub mod reference_size;
@@ -135,6 +136,88 @@ impl Image {
     }
 }
 
+/// The image of a [`View`]: decoded and held in memory, or decoded from its file when needed
+/// through a bounded cache ([`on_demand`]; [`load`] chooses by [`LoadOptions::image_memory`]).
+#[derive(Clone, Debug, PartialEq)]
+pub enum ViewImage {
+    /// Held in memory.
+    InMemory(Image),
+    /// Decoded again from its file when needed.
+    OnDemand(on_demand::OnDemandImage),
+}
+
+/// An image borrowed from a [`ViewImage`] held in memory, or shared with an on-demand cache.
+#[derive(Debug)]
+pub enum ImageRef<'a> {
+    /// Borrowed from the view.
+    Borrowed(&'a Image),
+    /// Shared with the cache.
+    Shared(std::sync::Arc<Image>),
+}
+
+impl std::ops::Deref for ImageRef<'_> {
+    type Target = Image;
+    fn deref(&self) -> &Image {
+        match self {
+            ImageRef::Borrowed(image) => image,
+            ImageRef::Shared(image) => image,
+        }
+    }
+}
+
+impl ViewImage {
+    /// Width in pixels.
+    pub fn width(&self) -> u32 {
+        match self {
+            ViewImage::InMemory(image) => image.width(),
+            ViewImage::OnDemand(image) => image.width(),
+        }
+    }
+
+    /// Height in pixels.
+    pub fn height(&self) -> u32 {
+        match self {
+            ViewImage::InMemory(image) => image.height(),
+            ViewImage::OnDemand(image) => image.height(),
+        }
+    }
+
+    /// The image, decoding it when it is not in memory ([`on_demand::OnDemandImage::load`]).
+    ///
+    /// # Errors
+    /// Only for an on-demand image: its file no longer decodes, or decodes to other pixels
+    /// ([`SceneError::ImageChanged`]).
+    pub fn get(&self) -> Result<ImageRef<'_>, SceneError> {
+        match self {
+            ViewImage::InMemory(image) => Ok(ImageRef::Borrowed(image)),
+            ViewImage::OnDemand(image) => image.load().map(ImageRef::Shared),
+        }
+    }
+
+    /// The image when it is held in memory.
+    pub fn in_memory(&self) -> Option<&Image> {
+        match self {
+            ViewImage::InMemory(image) => Some(image),
+            ViewImage::OnDemand(_) => None,
+        }
+    }
+
+    /// Bytes of pixels this view holds by itself (an on-demand image's cache is shared and
+    /// counted by [`Scene::image_bytes`]).
+    pub fn held_bytes(&self) -> u64 {
+        match self {
+            ViewImage::InMemory(image) => image.as_bytes().len() as u64,
+            ViewImage::OnDemand(_) => 0,
+        }
+    }
+}
+
+impl From<Image> for ViewImage {
+    fn from(image: Image) -> Self {
+        ViewImage::InMemory(image)
+    }
+}
+
 /// The smallest side, in pixels, that [`LoadOptions::downscale`] and [`LoadOptions::max_width`]
 /// may shrink an image to (a smaller image has too few pixels to train on; images stored smaller
 /// are loaded as they are).
@@ -149,8 +232,9 @@ pub struct View {
     pub path: PathBuf,
     /// The undistorted pinhole camera at the final image resolution.
     pub camera: Camera,
-    /// The undistorted, downscaled, background-composited image (`camera.width × camera.height`).
-    pub image: Image,
+    /// The undistorted, downscaled, background-composited image (`camera.width × camera.height`),
+    /// in memory or decoded on demand ([`ViewImage`]).
+    pub image: ViewImage,
     /// The image's own alpha channel at the final resolution (`camera.width × camera.height`
     /// values, row-major, 0 = background), when the file had one and needed no undistortion
     /// (e.g. NeRF-synthetic renders). Used by the visual-hull initialisation
@@ -272,6 +356,11 @@ pub struct LoadOptions {
     /// What loading does with the masks ([`mask::MaskMode`]; default: composite the images onto
     /// the background outside them).
     pub mask_mode: mask::MaskMode,
+    /// Bytes of 8-bit images the scene may hold in memory (default
+    /// [`on_demand::DEFAULT_IMAGE_MEMORY`], 2 GiB). When the images of all its views fit, they
+    /// are held in memory; otherwise every view is decoded on demand from its file through a
+    /// cache of this size ([`on_demand`]), which gives the same pixels.
+    pub image_memory: u64,
 }
 
 impl Default for LoadOptions {
@@ -289,6 +378,7 @@ impl Default for LoadOptions {
             unfold: true,
             masks_dir: None,
             mask_mode: mask::MaskMode::Composite,
+            image_memory: on_demand::DEFAULT_IMAGE_MEMORY,
         }
     }
 }
@@ -320,6 +410,24 @@ pub struct Scene {
     pub warnings: Vec<String>,
 }
 
+impl Scene {
+    /// The cache the scene's on-demand images share ([`on_demand`]), `None` when its images are
+    /// held in memory.
+    pub fn image_cache(&self) -> Option<&std::sync::Arc<on_demand::ImageCache>> {
+        self.train.iter().chain(&self.test).find_map(|v| match &v.image {
+            ViewImage::OnDemand(image) => Some(image.cache()),
+            ViewImage::InMemory(_) => None,
+        })
+    }
+
+    /// The most bytes of 8-bit images the scene holds: the images held in memory, or the
+    /// budget of its on-demand cache.
+    pub fn image_bytes(&self) -> u64 {
+        let held: u64 = self.train.iter().chain(&self.test).map(|v| v.image.held_bytes()).sum();
+        held + self.image_cache().map_or(0, |c| c.budget())
+    }
+}
+
 /// Loads the dataset at `path`: a dataset folder, a COLMAP model folder, or a transforms JSON
 /// file. See the module documentation and `docs/scene.md`.
 ///
@@ -345,7 +453,7 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
         SceneFormat::Neus => neus::load(&source, options, &mut warnings)?,
         SceneFormat::Llff => llff::load(&source, options, &mut warnings)?,
     };
-    duplicates::leave_out(&mut scene.train, &mut scene.test, &mut warnings);
+    duplicates::leave_out(&mut scene.train, &mut scene.test, &mut warnings)?;
     if scene.train.is_empty() {
         return Err(SceneError::Empty {
             path: source,

@@ -6,14 +6,16 @@ use super::colmap::Intrinsics;
 use super::error::{Location, SceneError};
 use super::mask::{self, MaskMode};
 use super::nerf_json::IntrinsicFields;
+use super::on_demand::{ImageCache, OnDemandImage, Recipe};
 use super::reference_size::{ReferenceSize, scale_to_image};
 use super::undistort;
-use super::{Image, LoadOptions, View, image_io};
+use super::{Image, LoadOptions, View, ViewImage, image_io};
 use crate::camera::Camera;
 use crate::file_io::{FileKind, kind_of, not_regular};
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 /// How the camera of a view is known.
 pub(crate) enum CameraSpec {
@@ -66,7 +68,9 @@ impl ViewSource {
 
 /// Loads every view in parallel; the first error in list order is returned. Warnings about
 /// damaged images accepted by [`LoadOptions::allow_damaged_images`] are added to `warnings`, in
-/// list order.
+/// list order. The images are held in memory while they fit in [`LoadOptions::image_memory`];
+/// when they do not, every view is turned on demand, sharing one cache of that size
+/// ([`super::on_demand`]).
 pub(crate) fn load_all(
     sources: Vec<ViewSource>,
     options: &LoadOptions,
@@ -99,16 +103,57 @@ pub(crate) fn load_all(
             Err(e) => return Err(SceneError::io(&s.image_path, e)),
         }
     }
-    let results: Vec<Result<LoadedView, SceneError>> = sources.into_par_iter().map(|s| load_view(s, options)).collect();
-    let mut views = Vec::with_capacity(results.len());
+    let cache = Arc::new(ImageCache::new(options.image_memory));
+    let mut views: Vec<View> = Vec::with_capacity(sources.len());
+    // While the images are held in memory: each view's recipe, to turn it on demand later.
+    let mut recipes: Vec<Arc<Recipe>> = Vec::new();
+    let (mut held, mut on_demand) = (0u64, false);
     let mut turned: Vec<(PathBuf, &'static str)> = Vec::new();
-    for r in results {
-        let (view, warning, turn) = r?;
-        warnings.extend(warning);
-        if let Some(turn) = turn {
-            turned.push((view.path.clone(), turn));
+    // In chunks, so that no more than the budget and one chunk of images is ever held.
+    let chunk = 2 * rayon::current_num_threads().max(4);
+    let mut sources = sources.into_iter();
+    loop {
+        let batch: Vec<ViewSource> = sources.by_ref().take(chunk).collect();
+        if batch.is_empty() {
+            break;
         }
-        views.push(view);
+        let results: Vec<(ViewSource, Result<LoadedView, SceneError>)> = batch
+            .into_par_iter()
+            .map(|s| {
+                let loaded = load_view(&s, options);
+                (s, loaded)
+            })
+            .collect();
+        for (source, r) in results {
+            let (mut view, warning, turn) = r?;
+            warnings.extend(warning);
+            if let Some(turn) = turn {
+                turned.push((view.path.clone(), turn));
+            }
+            let recipe = Arc::new(Recipe {
+                source,
+                options: options.clone(),
+            });
+            if on_demand {
+                view.image = turn_on_demand(view.image, recipe, &cache, views.len());
+            } else {
+                held += view.image.held_bytes();
+                recipes.push(recipe);
+            }
+            views.push(view);
+        }
+        if !on_demand && held > options.image_memory {
+            on_demand = true;
+            views = std::mem::take(&mut views)
+                .into_iter()
+                .zip(recipes.drain(..))
+                .enumerate()
+                .map(|(key, (view, recipe))| View {
+                    image: turn_on_demand(view.image, recipe, &cache, key),
+                    ..view
+                })
+                .collect();
+        }
     }
     if let Some((first, turn)) = turned.first() {
         warnings.push(format!(
@@ -124,11 +169,23 @@ pub(crate) fn load_all(
     Ok(views)
 }
 
+/// `image` (just decoded from `recipe`) as an on-demand image of `cache` under `key`.
+fn turn_on_demand(image: ViewImage, recipe: Arc<Recipe>, cache: &Arc<ImageCache>, key: usize) -> ViewImage {
+    match image {
+        ViewImage::InMemory(image) => {
+            ViewImage::OnDemand(OnDemandImage::new(recipe, Arc::clone(cache), key, Arc::new(image)))
+        }
+        on_demand => on_demand,
+    }
+}
+
 /// A loaded view, the warning naming its damage (if accepted damaged) and its EXIF orientation
 /// (if not the normal one, [`image_io::exif_turn`]).
 type LoadedView = (View, Option<String>, Option<&'static str>);
 
-fn load_view(s: ViewSource, options: &LoadOptions) -> Result<LoadedView, SceneError> {
+/// Decodes and checks the view of `s` (in memory); [`super::on_demand`] calls it again to decode
+/// an on-demand image.
+pub(crate) fn load_view(s: &ViewSource, options: &LoadOptions) -> Result<LoadedView, SceneError> {
     let background = options.background.rgb();
     let (image, alpha, damage, turn) = image_io::decode_with_alpha(
         &s.image_path,
@@ -255,10 +312,10 @@ fn load_view(s: ViewSource, options: &LoadOptions) -> Result<LoadedView, SceneEr
         )));
     }
     let view = View {
-        name: s.name,
-        path: s.image_path,
+        name: s.name.clone(),
+        path: s.image_path.clone(),
         camera,
-        image,
+        image: ViewImage::InMemory(image),
         coverage,
         mask,
     };

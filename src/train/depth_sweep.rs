@@ -42,15 +42,6 @@ pub trait SweepImage {
     fn rgb(&self, x: u32, y: u32) -> [f32; 3];
 }
 
-impl SweepImage for crate::scene::View {
-    fn camera(&self) -> &Camera {
-        &self.camera
-    }
-    fn rgb(&self, x: u32, y: u32) -> [f32; 3] {
-        self.image.pixel_f32(x, y)
-    }
-}
-
 /// Sweep settings.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SweepConfig {
@@ -94,13 +85,13 @@ impl Sweep {
     }
 }
 
-/// The `k` views whose camera centres are nearest view `i`'s (not `i`), nearest first, ties to
-/// the lower index.
-pub fn nearest_views<V: SweepImage>(views: &[V], i: usize, k: usize) -> Vec<usize> {
-    let c = views[i].camera().centre();
-    let mut others: Vec<(f32, usize)> = (0..views.len())
+/// The `k` views whose camera centres (`centres`, one per view) are nearest view `i`'s (not
+/// `i`), nearest first, ties to the lower index.
+pub fn nearest_views(centres: &[Vec3], i: usize, k: usize) -> Vec<usize> {
+    let c = centres[i];
+    let mut others: Vec<(f32, usize)> = (0..centres.len())
         .filter(|&j| j != i)
-        .map(|j| ((views[j].camera().centre() - c).length(), j))
+        .map(|j| ((centres[j] - c).length(), j))
         .collect();
     others.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
     others.into_iter().take(k).map(|(_, j)| j).collect()

@@ -30,6 +30,16 @@ pub enum TrainError {
         /// Values found.
         got: usize,
     },
+    /// A view's image could not be read: an on-demand image ([`crate::scene::on_demand`]) whose
+    /// file went away or changed since the scene was loaded. The step was not taken (the trainer
+    /// is unchanged).
+    #[error("training view {view}: {message}")]
+    ViewImage {
+        /// Index of the view in the slice passed to `step` (or evaluated).
+        view: usize,
+        /// What went wrong, naming the file.
+        message: String,
+    },
     /// The view-order stack (shuffled earlier, or restored from a checkpoint) names a view
     /// beyond the slice passed to `step`: the view list changed within an epoch.
     #[error("the shuffled view order refers to view {index}, but only {views} views were given")]

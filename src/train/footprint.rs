@@ -67,8 +67,27 @@ pub fn scene_training_bytes(
     let views = scene.train.iter().chain(&scene.test);
     let view_pixels: u64 = views.clone().map(|v| v.camera.pixel_count() as u64).sum();
     let largest_view = views.map(|v| v.camera.pixel_count() as u64).max().unwrap_or(0);
-    training_bytes(billboards.max(growth_cap), texture_size, view_pixels, largest_view)
+    let Some(cache) = scene.image_cache() else {
+        return training_bytes(billboards.max(growth_cap), texture_size, view_pixels, largest_view);
+    };
+    // On demand: the cache's budget, the masks and coverage held, and each view's record.
+    let held: u64 = scene
+        .train
+        .iter()
+        .chain(&scene.test)
+        .map(|v| {
+            let extra = v.mask.as_ref().map_or(0, Vec::len) + v.coverage.as_ref().map_or(0, Vec::len);
+            extra as u64 + ON_DEMAND_VIEW_BYTES
+        })
+        .sum();
+    training_bytes(billboards.max(growth_cap), texture_size, 0, largest_view)
+        .saturating_add(cache.budget())
+        .saturating_add(held)
 }
+
+/// Bytes of an on-demand view's record (name, paths, camera, recipe) and its share of the
+/// cache's table; an allowance, above the few hundred bytes they take.
+pub const ON_DEMAND_VIEW_BYTES: u64 = 4096;
 
 /// Estimated size, in bytes, of the files a run writes: the checkpoint (raw parameters and two
 /// Adam moments as f32, 3 row copies) and the model folder (60 floats of PLY and `4·TS²`

@@ -60,6 +60,7 @@ use crate::raster::{
     render_with,
 };
 use crate::rng::Rng;
+use crate::scene::ViewImage;
 pub use crate::stages::composite::ClampGradient;
 use adam::{AdamGroup, AdamParams, StepFactors, update_row_with};
 pub use checkpoint::CheckpointError;
@@ -73,7 +74,7 @@ pub use run::{
     RunConfig, RunError, RunOutcome, RunWarning, SnapshotRequest, StepClock, StopReason, StopSignal, TrainEvent, run,
 };
 use serde::{Deserialize, Serialize};
-pub use view_pixels::ViewPixels;
+pub use view_pixels::{OnDemandPixels, ViewPixels};
 
 /// A posed image: camera and interleaved RGB values (8-bit or float, [`ViewPixels`]).
 #[derive(Clone, Debug)]
@@ -84,22 +85,32 @@ pub struct TrainView {
     pub rgb: ViewPixels,
 }
 
-impl depth_sweep::SweepImage for TrainView {
+/// A view's camera and float values, fetched for a depth sweep ([`Trainer::place_on_error`]).
+struct FetchedView<'a> {
+    camera: Camera,
+    rgb: std::borrow::Cow<'a, [f32]>,
+}
+
+impl depth_sweep::SweepImage for FetchedView<'_> {
     fn camera(&self) -> &Camera {
         &self.camera
     }
     fn rgb(&self, x: u32, y: u32) -> [f32; 3] {
         let i = 3 * (y as usize * self.camera.width as usize + x as usize);
-        [self.rgb.value(i), self.rgb.value(i + 1), self.rgb.value(i + 2)]
+        [self.rgb[i], self.rgb[i + 1], self.rgb[i + 2]]
     }
 }
 
 impl TrainView {
-    /// A loaded scene view (its background-composited image), kept as its 8-bit values.
+    /// A loaded scene view (its background-composited image), kept as its 8-bit values, or on
+    /// demand when the scene is ([`crate::scene::on_demand`]).
     pub fn from_view(view: &crate::scene::View) -> Self {
         Self {
             camera: view.camera,
-            rgb: ViewPixels::U8(view.image.as_bytes().to_vec()),
+            rgb: match &view.image {
+                ViewImage::InMemory(image) => ViewPixels::U8(image.as_bytes().to_vec()),
+                ViewImage::OnDemand(image) => ViewPixels::OnDemand(OnDemandPixels::new(image.clone())),
+            },
         }
     }
 
@@ -108,7 +119,10 @@ impl TrainView {
     pub fn from_owned_view(view: crate::scene::View) -> Self {
         Self {
             camera: view.camera,
-            rgb: ViewPixels::U8(view.image.into_bytes()),
+            rgb: match view.image {
+                ViewImage::InMemory(image) => ViewPixels::U8(image.into_bytes()),
+                ViewImage::OnDemand(image) => ViewPixels::OnDemand(OnDemandPixels::new(image)),
+            },
         }
     }
 
@@ -852,6 +866,17 @@ impl Trainer {
         self.activated.alive_count()
     }
 
+    /// Puts view `vi`, just drawn by [`Trainer::next_view`], back: the stack as it was, the RNG
+    /// as before a refill (`refills`: the stack was empty; `rng_before`: the RNG then).
+    fn undo_draw(&mut self, vi: usize, refills: bool, rng_before: [u64; 4]) {
+        if refills {
+            self.order.clear();
+            self.rng = Rng::from_state(rng_before);
+        } else {
+            self.order.push(vi);
+        }
+    }
+
     fn next_view(&mut self, views: usize) -> usize {
         if self.order.is_empty() {
             self.order = (0..views).collect();
@@ -923,6 +948,20 @@ impl Trainer {
         let vi = self.next_view(views.len());
         let view = &views[vi];
         let cam = &view.camera;
+        // An 8-bit view is converted to floats here, into a buffer recycled from step to step
+        // (decoded first when on demand; a view that cannot be read refuses the step).
+        let mut target_buffer = std::mem::take(&mut self.target);
+        let target = match view.rgb.as_f32(&mut target_buffer) {
+            Ok(target) => target,
+            Err(e) => {
+                self.target = target_buffer;
+                self.undo_draw(vi, refills, rng_before);
+                return Err(TrainError::ViewImage {
+                    view: vi,
+                    message: e.to_string(),
+                });
+            }
+        };
         let mut settings = self.settings();
         let geometry = &self.config.geometry;
         let lambda_normal = geometry
@@ -948,9 +987,6 @@ impl Trainer {
         }
         let buffers = std::mem::take(&mut self.render_buffers);
         let out = render_with(&self.activated.borrowed(), cam, &settings, buffers);
-        // An 8-bit view is converted to floats here, into a buffer recycled from step to step.
-        let mut target_buffer = std::mem::take(&mut self.target);
-        let target = view.rgb.as_f32(&mut target_buffer);
         let loss = TrainingLoss {
             simd: self.config.simd,
             ..TrainingLoss::default()
@@ -1018,6 +1054,15 @@ impl Trainer {
         };
         let placed = (new_rows > 0).then(|| self.place_on_error(new_rows, &out, target, views, vi));
         self.target = target_buffer;
+        let placed = match placed.transpose() {
+            Ok(placed) => placed,
+            Err(e) => {
+                self.render_buffers = out.into_buffers();
+                self.undo_draw(vi, refills, rng_before);
+                self.grads = RenderGradients::zeros(self.model.len(), self.model.texture_size);
+                return Err(e);
+            }
+        };
         self.render_buffers = out.into_buffers();
         let total = if lambda_normal.is_some() || lambda_distortion.is_some() {
             loss.loss + texture_reg + opacity_reg + geometry_loss.normal + geometry_loss.distortion
@@ -1033,12 +1078,7 @@ impl Trainer {
         };
         if let Some(value) = bad {
             // Refuse the step: the view goes back on the stack, the gradients back to zero.
-            if refills {
-                self.order.clear();
-                self.rng = Rng::from_state(rng_before);
-            } else {
-                self.order.push(vi);
-            }
+            self.undo_draw(vi, refills, rng_before);
             self.grads = RenderGradients::zeros(self.model.len(), self.model.texture_size);
             return Err(TrainError::NonFinite {
                 step: self.step + 1,
@@ -1411,7 +1451,8 @@ impl Trainer {
     }
 
     /// The billboards of this step's growth placed on the view's error ([`place`]): the share
-    /// [`TrainConfig::error_growth`] of `new_rows` (none in Gaussian mode).
+    /// [`TrainConfig::error_growth`] of `new_rows` (none in Gaussian mode). Fails only when a
+    /// neighbouring view's image cannot be read (on demand).
     fn place_on_error(
         &mut self,
         new_rows: usize,
@@ -1419,7 +1460,7 @@ impl Trainer {
         target: &[f32],
         views: &[TrainView],
         vi: usize,
-    ) -> RawBillboards {
+    ) -> Result<RawBillboards, TrainError> {
         let cam = &views[vi].camera;
         let share = if self.config.texture_mode == TextureMode::Full {
             self.config.error_growth
@@ -1436,18 +1477,42 @@ impl Trainer {
         // rendered depth; the rendered depth where no depth is distinct (an even surface).
         let sweep = depth_sweep::SweepConfig::default();
         let neighbours = if count > 0 {
-            depth_sweep::nearest_views(views, vi, sweep.neighbours)
+            let centres: Vec<Vec3> = views.iter().map(|v| v.camera.centre()).collect();
+            depth_sweep::nearest_views(&centres, vi, sweep.neighbours)
         } else {
             Vec::new()
         };
+        // The view (its values are the target) and its neighbours, each read once.
+        let mut fetched = vec![FetchedView {
+            camera: *cam,
+            rgb: std::borrow::Cow::Borrowed(target),
+        }];
+        for &j in &neighbours {
+            let rgb = views[j].rgb.to_f32().map_err(|e| TrainError::ViewImage {
+                view: j,
+                message: e.to_string(),
+            })?;
+            fetched.push(FetchedView {
+                camera: views[j].camera,
+                rgb,
+            });
+        }
+        let others: Vec<usize> = (1..fetched.len()).collect();
         let refine = |x: u32, y: u32, z: f32| -> f32 {
             let (near, far) = (z / place::SWEEP_RANGE, z * place::SWEEP_RANGE);
-            match depth_sweep::sweep_pixel(views, vi, &neighbours, x, y, near, far, &sweep) {
+            match depth_sweep::sweep_pixel(&fetched, 0, &others, x, y, near, far, &sweep) {
                 Some(found) if found.distinct() => found.depth,
                 _ => z,
             }
         };
-        place::place_on_error(&view, cam, count, self.model.texture_size, &mut self.rng, refine)
+        Ok(place::place_on_error(
+            &view,
+            cam,
+            count,
+            self.model.texture_size,
+            &mut self.rng,
+            refine,
+        ))
     }
 
     /// Appends `copies` copies of billboards drawn ∝ mean alpha ([`grow`]) and then the rows of
@@ -1494,7 +1559,11 @@ impl Trainer {
 
     /// Mean PSNR (on 8-bit quantised images, as the reference evaluates) over `views`, rendered
     /// with the full SH degree of the config.
-    pub fn evaluate(&self, views: &[TrainView]) -> f64 {
+    ///
+    /// # Errors
+    /// [`TrainError::ViewImage`] when a view's image cannot be read (on demand, its file went
+    /// away or changed).
+    pub fn evaluate(&self, views: &[TrainView]) -> Result<f64, TrainError> {
         let settings = RenderSettings {
             background: self.config.background,
             sh_degree: self.config.sh_degree,
@@ -1505,21 +1574,22 @@ impl Trainer {
         // Lazy Adam: rendered with every row's pending steps applied (on a copy).
         let caught_up = self.lazy_textures().then(|| self.export_model().activate());
         let activated = caught_up.as_ref().unwrap_or(&self.activated);
-        let total: f64 = views
-            .iter()
-            .map(|v| {
-                let out = render_with(
-                    &activated.borrowed(),
-                    &v.camera,
-                    &settings,
-                    std::mem::take(&mut buffers),
-                );
-                let psnr = psnr_u8(&out.rgb, &v.rgb.to_f32()).unwrap_or(f64::NAN);
-                buffers = out.into_buffers();
-                psnr
-            })
-            .sum();
-        total / views.len().max(1) as f64
+        let mut total = 0.0;
+        for (i, v) in views.iter().enumerate() {
+            let truth = v.rgb.to_f32().map_err(|e| TrainError::ViewImage {
+                view: i,
+                message: e.to_string(),
+            })?;
+            let out = render_with(
+                &activated.borrowed(),
+                &v.camera,
+                &settings,
+                std::mem::take(&mut buffers),
+            );
+            total += psnr_u8(&out.rgb, &truth).unwrap_or(f64::NAN);
+            buffers = out.into_buffers();
+        }
+        Ok(total / views.len().max(1) as f64)
     }
 }
 

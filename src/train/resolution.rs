@@ -10,7 +10,8 @@
 //! the result does not depend on the thread count. The views of both phases are the same list in
 //! the same order (the trainer's shuffled stack indexes them).
 
-use super::TrainView;
+use super::{TrainView, ViewPixels};
+use crate::scene::SceneError;
 use crate::scene::image_io::resize_area;
 
 /// Which resolution step `s` of a run trains at.
@@ -42,7 +43,12 @@ impl ResolutionSchedule {
 
 /// `view` downscaled by `factor`: the image area-averaged to `round(size / factor)` pixels per
 /// side (at least 1), the camera scaled by the exact size ratio ([`crate::camera::Camera::scaled`]),
-/// so the image edges stay where they were.
+/// so the image edges stay where they were. An on-demand view ([`ViewPixels::OnDemand`]) stays
+/// on demand, downscaled when it is decoded.
+///
+/// # Errors
+/// Only for an on-demand view downscaled already (it is decoded now, and its file no longer
+/// gives its pixels).
 ///
 /// ```
 /// use bbsplat::camera::Camera;
@@ -51,20 +57,28 @@ impl ResolutionSchedule {
 /// use glam::Vec3;
 /// let camera = Camera::look_at(Vec3::new(0.0, 0.0, -3.0), Vec3::ZERO, Vec3::Y, 40.0, 40.0, 4, 2);
 /// let rgb: Vec<f32> = (0..4 * 2 * 3).map(|k| (k / 3) as f32).collect();
-/// let small = downscale_view(&TrainView { camera, rgb: rgb.into() }, 2);
+/// let small = downscale_view(&TrainView { camera, rgb: rgb.into() }, 2).unwrap();
 /// assert_eq!((small.camera.width, small.camera.height, small.camera.fx), (2, 1, 20.0));
 /// // Each output pixel is the mean of a 2×2 block: pixels (0, 1, 4, 5) → 2.5.
-/// assert_eq!(&small.rgb.to_f32()[..3], &[2.5, 2.5, 2.5]);
+/// assert_eq!(&small.rgb.to_f32().unwrap()[..3], &[2.5, 2.5, 2.5]);
 /// ```
-pub fn downscale_view(view: &TrainView, factor: u32) -> TrainView {
+pub fn downscale_view(view: &TrainView, factor: u32) -> Result<TrainView, SceneError> {
     if factor <= 1 {
-        return view.clone();
+        return Ok(view.clone());
     }
     let camera = view.camera.scaled(1.0 / factor as f32);
+    if let ViewPixels::OnDemand(p) = &view.rgb
+        && p.size() == (p.image().width(), p.image().height())
+    {
+        return Ok(TrainView {
+            camera,
+            rgb: ViewPixels::OnDemand(p.downscaled(camera.width, camera.height)),
+        });
+    }
     let (w, h) = (view.camera.width as usize, view.camera.height as usize);
-    let rgb = resize_area(&view.rgb.to_f32(), w, h, camera.width as usize, camera.height as usize);
-    TrainView {
+    let rgb = resize_area(&view.rgb.to_f32()?, w, h, camera.width as usize, camera.height as usize);
+    Ok(TrainView {
         camera,
         rgb: rgb.into(),
-    }
+    })
 }

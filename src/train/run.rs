@@ -74,7 +74,7 @@ use super::resolution::{ResolutionSchedule, downscale_view};
 use super::run_time::RunTime;
 use super::{CheckpointError, NonFinite, ParamGroup, StepLog, TrainError, TrainView, Trainer};
 use crate::billboards::ActivatedBillboards;
-use crate::eval::{EvalView, evaluate_views, lpips_u8};
+use crate::eval::{EvalView, evaluate_views, lpips_u8, until_error};
 use crate::loss::LossError;
 use crate::lpips::Lpips;
 use crate::model_file::scene_mark::SceneMark;
@@ -423,6 +423,15 @@ pub enum RunError {
     /// An evaluation failed (a test image that does not match its camera).
     #[error("evaluating the test views: {0}")]
     Evaluation(#[from] LossError),
+    /// A test view's image could not be read for an evaluation (on demand,
+    /// [`crate::scene::on_demand`]: its file went away or changed since the scene was loaded).
+    #[error("evaluating the test views: test view {view}: {message}")]
+    TestImage {
+        /// Index of the view among the evaluated views.
+        view: usize,
+        /// What went wrong, naming the file.
+        message: String,
+    },
     /// The summary could not be encoded.
     #[error("encoding the summary: {0}")]
     Summary(serde_json::Error),
@@ -460,7 +469,7 @@ fn evaluate(
     views: &[&TrainView],
     settings: &RenderSettings,
     stop: &StopSignal,
-) -> Result<Option<(f64, f64, f64)>, LossError> {
+) -> Result<Option<(f64, f64, f64)>, RunError> {
     Ok(evaluate_with_lpips(set, views, settings, stop, None)?.map(|(p, s, ms, _)| (p, s, ms)))
 }
 
@@ -478,31 +487,42 @@ fn evaluate_with_lpips(
     settings: &RenderSettings,
     stop: &StopSignal,
     lpips: Option<&Lpips>,
-) -> Result<Option<Scores>, LossError> {
+) -> Result<Option<Scores>, RunError> {
     let mut distances: Vec<f64> = Vec::new();
     let mut lpips_error: Option<String> = None;
-    let report = evaluate_views(
-        set,
-        views.iter().take_while(|_| !stop.is_requested()).map(|v| EvalView {
-            name: "",
-            camera: &v.camera,
-            // An 8-bit view is converted for its evaluation only.
-            rgb: v.rgb.to_f32(),
-            mask: None,
-        }),
-        settings,
-        |view, rendered| {
-            if let Some(net) = lpips
-                && lpips_error.is_none()
-            {
-                let (w, h) = (view.camera.width as usize, view.camera.height as usize);
-                match lpips_u8(net, rendered, &view.rgb, w, h) {
-                    Ok(d) => distances.push(d),
-                    Err(e) => lpips_error = Some(e.to_string()),
-                }
+    // The first view whose image cannot be read ends the evaluation with its error.
+    let mut unread: Option<RunError> = None;
+    let read = views
+        .iter()
+        .enumerate()
+        .take_while(|_| !stop.is_requested())
+        .map(|(i, v)| {
+            // An 8-bit view is converted (an on-demand view decoded) for its evaluation only.
+            let rgb = v.rgb.to_f32().map_err(|e| RunError::TestImage {
+                view: i,
+                message: e.to_string(),
+            })?;
+            Ok(EvalView {
+                name: "",
+                camera: &v.camera,
+                rgb,
+                mask: None,
+            })
+        });
+    let report = evaluate_views(set, until_error(read, &mut unread), settings, |view, rendered| {
+        if let Some(net) = lpips
+            && lpips_error.is_none()
+        {
+            let (w, h) = (view.camera.width as usize, view.camera.height as usize);
+            match lpips_u8(net, rendered, &view.rgb, w, h) {
+                Ok(d) => distances.push(d),
+                Err(e) => lpips_error = Some(e.to_string()),
             }
-        },
-    )?;
+        }
+    })?;
+    if let Some(e) = unread {
+        return Err(e);
+    }
     if stop.is_requested() {
         return Ok(None);
     }
@@ -658,8 +678,17 @@ impl<'a> RunState<'a> {
         let coarse: Vec<TrainView> = if config.resolution.factor > 1 {
             train
                 .iter()
-                .map(|v| downscale_view(v, config.resolution.factor))
-                .collect()
+                .enumerate()
+                .map(|(i, v)| {
+                    downscale_view(v, config.resolution.factor).map_err(|e| RunError::Step {
+                        source: TrainError::ViewImage {
+                            view: i,
+                            message: e.to_string(),
+                        },
+                        checkpoint: None,
+                    })
+                })
+                .collect::<Result<_, _>>()?
         } else {
             Vec::new()
         };
@@ -964,13 +993,7 @@ impl<'a> RunState<'a> {
             None => trainer.activated().borrowed(),
         };
         let lpips = self.config.lpips.as_deref();
-        Ok(evaluate_with_lpips(
-            &set,
-            &all_test,
-            &self.eval_settings,
-            self.stop,
-            lpips,
-        )?)
+        evaluate_with_lpips(&set, &all_test, &self.eval_settings, self.stop, lpips)
     }
 
     /// The end: the final evaluation on the curve, the summary and the record

@@ -48,3 +48,45 @@ fn the_memory_estimate_is_within_a_quarter_of_the_peak() {
     );
     std::fs::remove_dir_all(&root).ok();
 }
+
+/// `--image-memory` below the scene's images: `train` says they are decoded on demand, and the
+/// run (coarse-to-fine, growth, evaluations: every default) writes the same model and checkpoint
+/// bytes as the run with its images in memory.
+#[test]
+fn images_decoded_on_demand_train_the_same_model() {
+    let root = temp("on-demand");
+    // 40 views of 48² (6.9 kB each): 276 kB of images against a 64 kB budget.
+    let data = export_demo(&root, 48, 400);
+    let train = |out: &std::path::Path, extra: &[&str]| {
+        let mut args = vec![
+            "train",
+            data.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--iterations",
+            "40",
+        ];
+        args.extend(extra);
+        run_ok(&args)
+    };
+    let (memory, lazy) = (root.join("memory"), root.join("lazy"));
+    let said_memory = train(&memory, &[]);
+    let said_lazy = train(&lazy, &["--image-memory", "64K"]);
+    assert!(!said_memory.contains("decoded from its file"), "{said_memory}");
+    assert!(
+        said_lazy.contains("do not fit in --image-memory 65.5 kB: each is decoded from its file when used"),
+        "{said_lazy}"
+    );
+    for file in [
+        "checkpoint.bin",
+        "model/point_cloud.ply",
+        "model/texture_alpha.npz",
+        "model/texture_color.npz",
+    ] {
+        assert!(
+            std::fs::read(memory.join(file)).unwrap() == std::fs::read(lazy.join(file)).unwrap(),
+            "{file} differs"
+        );
+    }
+    std::fs::remove_dir_all(&root).ok();
+}

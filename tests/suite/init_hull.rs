@@ -35,7 +35,7 @@ fn ball_views(size: u32) -> Vec<View> {
                 name: format!("{i}"),
                 path: PathBuf::from(format!("{i}.png")),
                 camera,
-                image: Image::new(size, size, rgb).unwrap(),
+                image: Image::new(size, size, rgb).unwrap().into(),
                 coverage: Some(coverage),
                 mask: None,
             }

@@ -33,7 +33,7 @@ fn scene(format: SceneFormat, cameras: Vec<Camera>, points: Option<PointCloud>) 
             name: format!("{i}"),
             path: PathBuf::from(format!("{i}.png")),
             camera,
-            image: Image::new(1, 1, vec![0; 3]).unwrap(),
+            image: Image::new(1, 1, vec![0; 3]).unwrap().into(),
             coverage: None,
             mask: None,
         })

@@ -74,6 +74,7 @@ mod scene_image_io;
 mod scene_llff;
 mod scene_load;
 mod scene_neus;
+mod scene_on_demand;
 mod scene_real_data;
 mod scene_registration;
 #[allow(dead_code)]

@@ -311,7 +311,7 @@ fn fox_model_straight_lines_are_straight_after_loading() {
     let view = &scene.train[0];
     let c = view.camera;
     let (ow, oh) = (c.width as usize, c.height as usize);
-    let out = view.image.to_f32_rgb();
+    let out = view.image.get().unwrap().to_f32_rgb();
     // Shift from the original pinhole pixels to the cropped output.
     let (du, dv) = (c.cx as f64 - cx, c.cy as f64 - cy);
     println!("fox lines: undistorted image {ow}x{oh}, principal point shifted by ({du:.3}, {dv:.3})");

@@ -35,7 +35,7 @@ fn colmap_binary_and_text_load_the_same_scene() {
         (30.0, 31.0, 16.0, 12.0)
     );
     assert_eq!((v0.camera.width, v0.camera.height), (32, 24));
-    assert_eq!(v0.image.pixel(3, 2), [24, 16, 100]);
+    assert_eq!(v0.image.get().unwrap().pixel(3, 2), [24, 16, 100]);
     // Pose: X_cam = R X + t, so the world origin is 3 units in front of every camera.
     for v in sb.train.iter().chain(&sb.test) {
         let p = v.camera.world_to_view(glam::Vec3::ZERO);
@@ -139,7 +139,7 @@ fn downscale_and_max_width_scale_intrinsics_exactly() {
         (15.0, 15.5, 8.0, 6.0)
     );
     // A 2×2 block average of (8x, 8y, 100): pixel (1, 1) covers x, y ∈ {2, 3} → (20, 20, 100).
-    assert_eq!(v.image.pixel(1, 1), [20, 20, 100]);
+    assert_eq!(v.image.get().unwrap().pixel(1, 1), [20, 20, 100]);
     let s = load(
         &d,
         &LoadOptions {
@@ -230,14 +230,14 @@ fn nerf_synthetic_composites_alpha_and_uses_the_test_file() {
     assert_eq!((v.camera.cx, v.camera.cy), (10.0, 5.0));
     // OpenGL c2w → camera at (0, 0, 4) looking down -z: the origin is 4 units ahead.
     assert!((v.camera.world_to_view(glam::Vec3::ZERO) - glam::Vec3::new(0.0, 0.0, 4.0)).length() < 1e-6);
-    assert_eq!(v.image.pixel(0, 0), [255, 0, 0]);
-    assert_eq!(v.image.pixel(19, 0), [255, 255, 255]);
+    assert_eq!(v.image.get().unwrap().pixel(0, 0), [255, 0, 0]);
+    assert_eq!(v.image.get().unwrap().pixel(19, 0), [255, 255, 255]);
     // 50 % green over white: (127.5, 255, 127.5) → rounded.
-    assert_eq!(v.image.pixel(0, 9), [127, 255, 127]);
+    assert_eq!(v.image.get().unwrap().pixel(0, 9), [127, 255, 127]);
     let black = load(&d, &quiet()).unwrap();
     assert_eq!(black.background, Background::Black);
-    assert_eq!(black.train[0].image.pixel(19, 0), [0, 0, 0]);
-    assert_eq!(black.train[0].image.pixel(0, 9), [0, 128, 0]);
+    assert_eq!(black.train[0].image.get().unwrap().pixel(19, 0), [0, 0, 0]);
+    assert_eq!(black.train[0].image.get().unwrap().pixel(0, 9), [0, 128, 0]);
     // Without a test file the every-n-th rule applies.
     let d2 = temp_dir("synthetic_no_test");
     nerf_synthetic(&d2, false);
@@ -265,7 +265,11 @@ fn the_background_comes_from_the_data() {
         (Background::White, Background::White)
     );
     assert!(choice.reason.contains("NeRF-synthetic"), "{}", choice.reason);
-    assert_eq!(s.train[0].image.pixel(19, 0), [255, 255, 255], "composited on white");
+    assert_eq!(
+        s.train[0].image.get().unwrap().pixel(19, 0),
+        [255, 255, 255],
+        "composited on white"
+    );
     // The same dataset as RGB images: black, and the images are those of any background.
     let rgb = temp_dir("data_background_rgb");
     nerf_synthetic(&rgb, false);

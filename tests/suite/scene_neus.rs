@@ -98,7 +98,7 @@ fn dtu_scan65_cameras_look_at_the_unit_sphere() {
             "{}: mask centroid ({mx}, {my}), origin at ({x}, {y})",
             v.name
         );
-        assert_eq!(v.image.pixel(0, 0), [0, 0, 0], "{}", v.name);
+        assert_eq!(v.image.get().unwrap().pixel(0, 0), [0, 0, 0], "{}", v.name);
     }
     let ignored = load(
         &dir,
@@ -111,7 +111,7 @@ fn dtu_scan65_cameras_look_at_the_unit_sphere() {
     let bright = ignored
         .train
         .iter()
-        .filter(|v| v.image.pixel(0, 0) != [0, 0, 0])
+        .filter(|v| v.image.get().unwrap().pixel(0, 0) != [0, 0, 0])
         .count();
     assert!(
         bright > 0,
@@ -212,7 +212,10 @@ fn synthetic_round_trip_recovers_the_cameras() {
         let mask = v.mask.as_ref().unwrap();
         assert_eq!((mask[0], mask[63]), (255, 0));
         // Composited on black outside the mask.
-        assert_eq!((v.image.pixel(0, 0), v.image.pixel(63, 0)), ([200, 100, 50], [0, 0, 0]));
+        assert_eq!(
+            (v.image.get().unwrap().pixel(0, 0), v.image.get().unwrap().pixel(63, 0)),
+            ([200, 100, 50], [0, 0, 0])
+        );
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
@@ -349,8 +352,8 @@ fn masks_dir_applies_to_any_format_matched_by_stem() {
     };
     let scene = load(&dir, &options).unwrap();
     for v in &scene.train {
-        assert_eq!(v.image.pixel(0, 0), [0, 0, 0]);
-        assert_eq!(v.image.pixel(63, 0), [200, 100, 50]);
+        assert_eq!(v.image.get().unwrap().pixel(0, 0), [0, 0, 0]);
+        assert_eq!(v.image.get().unwrap().pixel(63, 0), [200, 100, 50]);
     }
     std::fs::remove_file(other.join("000002.png")).unwrap();
     let e = load(&dir, &options).unwrap_err();

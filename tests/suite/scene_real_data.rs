@@ -68,7 +68,7 @@ fn lego_loads_with_nerf_synthetic_conventions() {
     }
     println!("lego: fx = {}", scene.train[0].camera.fx);
     // White background: the corners are white.
-    assert_eq!(scene.train[0].image.pixel(0, 0), [255, 255, 255]);
+    assert_eq!(scene.train[0].image.get().unwrap().pixel(0, 0), [255, 255, 255]);
 
     // Independent check of the focal length: carve a visual hull from the alpha masks of 16
     // training views and compare its silhouette in 4 test views with their masks. The focal
@@ -360,7 +360,7 @@ fn fox_loads_and_is_resampled_through_its_stated_model() {
                 let rad = 1.0 + k1 * r2 + k2 * r2 * r2;
                 let xd = x * rad + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
                 let yd = y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
-                let got = v.image.pixel(i, j);
+                let got = v.image.get().unwrap().pixel(i, j);
                 for (ch, &g) in got.iter().enumerate() {
                     sum += (sample(fx * xd + cx, fy * yd + cy, ch) - g as f64).abs();
                     // Control: ignoring the distortion.

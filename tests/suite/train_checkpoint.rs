@@ -435,7 +435,7 @@ fn bad_views_are_typed_errors_and_leave_the_trainer_unchanged() {
     let before = tr.checkpoint_bytes();
     assert_eq!(tr.step(&[]).unwrap_err(), TrainError::NoViews);
     let whole = views[2].rgb.clone();
-    let mut short = whole.to_f32().into_owned();
+    let mut short = whole.to_f32().unwrap().into_owned();
     short.pop();
     views[2].rgb = short.into();
     let err = tr.step(&views).unwrap_err();

@@ -51,12 +51,12 @@ pub(crate) fn run(
         ..TrainConfig::default()
     };
     let mut trainer = Trainer::new(model, tweak(config));
-    let before = trainer.evaluate(&test);
+    let before = trainer.evaluate(&test).unwrap();
     let mut losses = Vec::new();
     for _ in 0..iterations {
         losses.push(trainer.step(&train).unwrap().loss);
     }
-    (before, trainer.evaluate(&test), losses, trainer)
+    (before, trainer.evaluate(&test).unwrap(), losses, trainer)
 }
 
 #[test]

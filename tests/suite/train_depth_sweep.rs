@@ -2,10 +2,29 @@
 //! depth step, no distinct depth on an even surface, the neighbour rule, and degenerate input.
 
 use bbsplat::camera::Camera;
-use bbsplat::scene::{Image, View};
-use bbsplat::train::depth_sweep::{SweepConfig, nearest_views, sweep_pixel};
+use bbsplat::scene::Image;
+use bbsplat::train::depth_sweep::{SweepConfig, SweepImage, nearest_views, sweep_pixel};
 use glam::Vec3;
-use std::path::PathBuf;
+
+/// A camera and its image, as a sweep reads them.
+struct View {
+    camera: Camera,
+    image: Image,
+}
+
+impl SweepImage for View {
+    fn camera(&self) -> &Camera {
+        &self.camera
+    }
+    fn rgb(&self, x: u32, y: u32) -> [f32; 3] {
+        self.image.pixel_f32(x, y)
+    }
+}
+
+/// The camera centres of `views`.
+fn centres(views: &[View]) -> Vec<Vec3> {
+    views.iter().map(|v| v.camera.centre()).collect()
+}
 
 const W: u32 = 96;
 const H: u32 = 72;
@@ -59,12 +78,8 @@ fn views(n: usize, fill: Option<[f32; 3]>) -> Vec<View> {
             let eye = Vec3::new(4.0 * a.cos(), 2.5, 4.0 * a.sin());
             let camera = Camera::look_at(eye, Vec3::ZERO, Vec3::Y, F, F, W, H);
             View {
-                name: format!("{i}"),
-                path: PathBuf::from(format!("{i}.png")),
                 image: render(&camera, fill),
                 camera,
-                coverage: None,
-                mask: None,
             }
         })
         .collect()
@@ -81,7 +96,7 @@ fn plane_depth(cam: &Camera, x: u32, y: u32) -> f32 {
 fn a_pixel_sweep_finds_the_plane_depth_within_a_step() {
     let views = views(8, None);
     let config = SweepConfig::default();
-    let neighbours = nearest_views(&views, 3, config.neighbours);
+    let neighbours = nearest_views(&centres(&views), 3, config.neighbours);
     // Views 2 and 4 are one arc step away, 1 and 5 two (equal up to rounding).
     let mut near_pair = neighbours[..2].to_vec();
     near_pair.sort();
@@ -112,7 +127,7 @@ fn a_pixel_sweep_finds_the_plane_depth_within_a_step() {
 fn an_even_surface_or_the_sky_has_no_distinct_depth() {
     let config = SweepConfig::default();
     let even = views(8, Some([0.6, 0.6, 0.6]));
-    let neighbours = nearest_views(&even, 3, config.neighbours);
+    let neighbours = nearest_views(&centres(&even), 3, config.neighbours);
     let sweep = sweep_pixel(&even, 3, &neighbours, 48, 50, 2.0, 8.0, &config).unwrap();
     assert!(!sweep.distinct(), "{sweep:?}");
     assert_eq!(sweep.cost, 0.0);
@@ -149,7 +164,7 @@ fn degenerate_sweeps_find_nothing() {
 fn neighbours_are_the_nearest_camera_centres() {
     let views = views(6, None);
     // An arc: from an end, the others in order of index distance.
-    assert_eq!(nearest_views(&views, 0, 3), vec![1, 2, 3]);
-    assert_eq!(nearest_views(&views, 5, 10), vec![4, 3, 2, 1, 0]);
-    assert_eq!(nearest_views(&views, 2, 0), Vec::<usize>::new());
+    assert_eq!(nearest_views(&centres(&views), 0, 3), vec![1, 2, 3]);
+    assert_eq!(nearest_views(&centres(&views), 5, 10), vec![4, 3, 2, 1, 0]);
+    assert_eq!(nearest_views(&centres(&views), 2, 0), Vec::<usize>::new());
 }

@@ -161,7 +161,7 @@ fn without_an_output_folder_nothing_is_written_and_the_float_model_is_evaluated(
     };
     assert_eq!(summary.model_bytes, 0);
     // Trainer::evaluate is the mean 8-bit PSNR of the float model over the same views.
-    assert_eq!(summary.test_psnr, trainer.evaluate(&test));
+    assert_eq!(summary.test_psnr, trainer.evaluate(&test).unwrap());
 }
 
 /// A stop request (here raised from the callback after step 5) saves a checkpoint that, run to
@@ -264,7 +264,7 @@ fn a_nan_pixel_stops_the_run_with_the_last_good_state_on_disk() {
         test,
     } = setup(40, |c| c);
     let clean_views = train.clone();
-    let mut poisoned = train[BAD].rgb.to_f32().into_owned();
+    let mut poisoned = train[BAD].rgb.to_f32().unwrap().into_owned();
     poisoned[100] = f32::NAN;
     train[BAD].rgb = poisoned.into();
     let dir = temp_dir("nan-pixel");
@@ -849,6 +849,7 @@ fn eight_bit_views_train_bit_for_bit_as_their_float_copies() {
             .map(|v| {
                 v.rgb
                     .to_f32()
+                    .unwrap()
                     .iter()
                     .map(|x| (x * 255.0).round().clamp(0.0, 255.0) as u8)
                     .collect()
