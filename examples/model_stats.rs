@@ -15,33 +15,18 @@
 //! wall clock and process CPU time (all threads, without the time spent waiting for a core:
 //! the steadier figure on a shared machine).
 use bbsplat::billboards::planar_textures;
-use bbsplat::model::RawBillboards;
-use bbsplat::model_file::load_model;
 use bbsplat::raster::backward::ImageGradients;
 use bbsplat::raster::{RenderGradients, RenderSettings, WorkloadStats, render, render_backward_with};
 use bbsplat::report::process_cpu_ms;
 use bbsplat::scene::{Background, LoadOptions, load};
-use bbsplat::train::Trainer;
 use glam::Vec3;
 use std::hash::{DefaultHasher, Hash, Hasher};
 use std::path::Path;
 use std::time::Instant;
 
-/// The model, its SH degree and its background, from a model folder or a checkpoint.
-fn load_any(path: &Path) -> Result<(RawBillboards, u32, [f32; 3]), Box<dyn std::error::Error>> {
-    if path.is_dir() {
-        let (model, meta) = load_model(path)?;
-        Ok((model, meta.sh_degree, meta.background))
-    } else {
-        let trainer = Trainer::load_checkpoint(path)?;
-        let settings = trainer.settings();
-        Ok((
-            trainer.model().clone(),
-            settings.sh_degree,
-            settings.background.to_array(),
-        ))
-    }
-}
+#[path = "support/model_input.rs"]
+mod model_input;
+use model_input::load_any;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();

@@ -36,6 +36,7 @@ mod output;
 pub(crate) mod prefetch;
 pub mod preprocess;
 pub mod reference;
+pub mod replay;
 pub(crate) mod row_spans;
 pub(crate) mod schedule;
 mod texel_prefetch;

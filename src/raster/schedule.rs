@@ -12,13 +12,18 @@
 //! in `tests/suite/raster.rs`: 1, 2 and 8 threads over 20 tiles; the trainer's in
 //! `tests/suite/train_demo.rs`). `tests/suite/raster_schedule.rs` tests the hand-out itself.
 
+use super::replay::{PassTrace, TRACE, heaviest_first_order};
 use rayon::prelude::*;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
 
 /// Runs `work(scratch, index, item)` on every item of `items`, on the current rayon pool's
 /// threads, handing the items out one at a time in order of decreasing `cost` (ties by index);
 /// each thread makes one scratch with `init`. Returns the results in item order.
+///
+/// Inside [`super::replay::traced`] on the calling thread, each item's run is also timed and the
+/// pass's estimated costs and times are recorded ([`PassTrace`]); nothing else changes.
 pub(crate) fn map_heaviest_first<T, R, S>(
     items: Vec<T>,
     cost: impl Fn(usize) -> u64,
@@ -30,22 +35,37 @@ where
     R: Send,
 {
     let n = items.len();
-    let mut order: Vec<usize> = (0..n).collect();
-    order.sort_by_key(|&i| (std::cmp::Reverse(cost(i)), i));
+    let estimated: Vec<u64> = (0..n).map(&cost).collect();
+    let order = heaviest_first_order(&estimated);
     let inputs: Vec<Mutex<Option<T>>> = items.into_iter().map(|item| Mutex::new(Some(item))).collect();
     let outputs: Vec<Mutex<Option<R>>> = (0..n).map(|_| Mutex::new(None)).collect();
     let next = AtomicUsize::new(0);
     let workers = rayon::current_num_threads().min(n);
+    let tracing = TRACE.with_borrow(Option::is_some);
+    let pass_start = tracing.then(Instant::now);
+    let nanos: Vec<AtomicUsize> = (0..if tracing { n } else { 0 }).map(|_| AtomicUsize::new(0)).collect();
     (0..workers).into_par_iter().for_each(|_| {
         let mut scratch = init();
         loop {
             let k = next.fetch_add(1, Ordering::Relaxed);
             let Some(&i) = order.get(k) else { break };
             let item = take(&inputs[i]).expect("each item is handed out once");
+            let start = tracing.then(Instant::now);
             let result = work(&mut scratch, i, item);
+            if let Some(start) = start {
+                nanos[i].store(start.elapsed().as_nanos() as usize, Ordering::Relaxed);
+            }
             *outputs[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(result);
         }
     });
+    if let Some(pass_start) = pass_start {
+        let trace = PassTrace {
+            wall: pass_start.elapsed().as_nanos() as u64,
+            estimated,
+            nanos: nanos.into_iter().map(|t| t.into_inner() as u64).collect(),
+        };
+        TRACE.with_borrow_mut(|traces| traces.as_mut().map(|t| t.push(trace)));
+    }
     outputs
         .into_iter()
         .map(|slot| {
