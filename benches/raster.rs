@@ -49,14 +49,7 @@ fn bench(c: &mut Criterion) {
             let d_rgb = vec![1e-3f32; (size * size * 3) as usize];
             let mut grads = RenderGradients::zeros(n, set.texture_size);
             let mut backward_scratch = bbsplat::raster::BackwardScratch::default();
-            let ig = ImageGradients {
-                rgb: &d_rgb,
-                alpha: None,
-                depth: None,
-                normal: None,
-                distortion: None,
-                camera: false,
-            };
+            let ig = ImageGradients::colour(&d_rgb);
             group.bench_function(format!("fwd_bwd/{size}/{n}"), |b| {
                 b.iter(|| {
                     let out = render_with(&set, &cam, &settings, std::mem::take(&mut buffers));
@@ -100,14 +93,7 @@ fn bench_scene(c: &mut Criterion, group_name: &str, name: &str, scene: &Activate
     let d_rgb = vec![1e-3f32; (cam.width * cam.height * 3) as usize];
     let mut grads = RenderGradients::zeros(set.len(), set.texture_size);
     let mut backward_scratch = bbsplat::raster::BackwardScratch::default();
-    let ig = ImageGradients {
-        rgb: &d_rgb,
-        alpha: None,
-        depth: None,
-        normal: None,
-        distortion: None,
-        camera: false,
-    };
+    let ig = ImageGradients::colour(&d_rgb);
     group.bench_function(format!("{name}/fwd_bwd"), |b| {
         b.iter(|| {
             let out = render_with(&set, cam, &settings, std::mem::take(&mut buffers));

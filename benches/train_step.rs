@@ -12,11 +12,9 @@
 //! SH degree rises every 1/32. Each timed batch of `iters` steps therefore starts from a fresh
 //! trainer on a run of `16·iters + 64` steps and first runs, untimed, the steps up to 3/32 of the
 //! run, so every timed step has textures on and SH degree 3 (as in most of a real run).
-use bbsplat::billboards::{TrainedLikeConfig, random_scene_camera, trained_like_scene};
 use bbsplat::demo::{DemoConfig, generate};
 use bbsplat::init::fps::farthest_point_sampling;
 use bbsplat::model::RawBillboards;
-use bbsplat::raster::{RenderSettings, render};
 use bbsplat::scene::split::camera_extent;
 use bbsplat::train::adam::{AdamGroup, AdamParams};
 use bbsplat::train::street::{kept_share, street};
@@ -69,37 +67,11 @@ fn demo_setup(resolution: u32, billboards: usize) -> Setup {
     Setup { model, views, config }
 }
 
-/// The trained-like object scene (`billboards` billboards, 400×400) as a model to train, with one
-/// view: its camera, and as target the render of the same preset drawn with another seed (so the
-/// loss and every gradient are far from zero, as early in a run). The world extent is the
-/// object's distance from the camera.
+/// The trained-like object scene as a model to train, with one view
+/// ([`bbsplat::train::trained_like_case::trained_like_case`]).
 fn trained_like_setup(size: u32, billboards: usize) -> Setup {
-    let config = TrainedLikeConfig::object(billboards, size, size);
-    let scene = trained_like_scene(&config);
-    let target_scene = trained_like_scene(&TrainedLikeConfig { seed: 1, ..config });
-    let camera = random_scene_camera(size, size);
-    let settings = RenderSettings {
-        background: Vec3::ONE,
-        ..RenderSettings::default()
-    };
-    let target = render(&target_scene.borrowed(), &camera, &settings).rgb;
-    let views = vec![TrainView {
-        camera,
-        rgb: target.iter().map(|v| v.clamp(0.0, 1.0)).collect::<Vec<f32>>().into(),
-    }];
-    let config = TrainConfig {
-        iterations: 0,
-        sh_degree: 3,
-        background: Vec3::ONE,
-        seed: 0,
-        extent: bbsplat::billboards::trained_like::OBJECT_DEPTH,
-        ..TrainConfig::default()
-    };
-    Setup {
-        model: RawBillboards::from_activated(&scene),
-        views,
-        config,
-    }
+    let (model, views, config) = bbsplat::train::trained_like_case::trained_like_case(size, billboards);
+    Setup { model, views, config }
 }
 
 fn train_step(c: &mut Criterion) {

@@ -14,40 +14,21 @@
 //! kept. A step draws one view, so the number of views does not enter its time (only memory:
 //! docs/training.md, "Memory").
 
-use bbsplat::billboards::{TrainedLikeConfig, random_scene_camera, trained_like_scene};
-use bbsplat::model::RawBillboards;
-use bbsplat::raster::{RenderSettings, render};
-use bbsplat::train::{TrainConfig, TrainView, Trainer};
-use glam::Vec3;
+use bbsplat::train::trained_like_case::trained_like_case;
+use bbsplat::train::{TrainConfig, Trainer};
 use plotters::prelude::*;
 use std::time::Instant;
 
 /// Median seconds of a step at `size²` pixels with `billboards` billboards.
 fn step_seconds(size: u32, billboards: usize, steps: usize) -> f64 {
-    let config = TrainedLikeConfig::object(billboards, size, size);
-    let scene = trained_like_scene(&config);
-    let target_scene = trained_like_scene(&TrainedLikeConfig { seed: 1, ..config });
-    let camera = random_scene_camera(size, size);
-    let settings = RenderSettings {
-        background: Vec3::ONE,
-        ..RenderSettings::default()
-    };
-    let target = render(&target_scene.borrowed(), &camera, &settings).rgb;
-    drop(target_scene);
-    let views = vec![TrainView {
-        camera,
-        rgb: target.iter().map(|v| v.clamp(0.0, 1.0)).collect::<Vec<f32>>().into(),
-    }];
-    let train_config = TrainConfig {
-        iterations: 64,
-        sh_degree: 3,
-        background: Vec3::ONE,
-        seed: 0,
-        extent: bbsplat::billboards::trained_like::OBJECT_DEPTH,
-        ..TrainConfig::default()
-    };
-    let mut trainer = Trainer::new(RawBillboards::from_activated(&scene), train_config);
-    drop(scene);
+    let (model, views, config) = trained_like_case(size, billboards);
+    let mut trainer = Trainer::new(
+        model,
+        TrainConfig {
+            iterations: 64,
+            ..config
+        },
+    );
     for _ in 0..6 {
         trainer.step(&views).expect("a step");
     }

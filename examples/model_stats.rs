@@ -90,14 +90,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             fwd_ms += start.elapsed().as_secs_f64() * 1e3;
             fwd_cpu += process_cpu_ms() - cpu_start;
             let d_rgb: Vec<f32> = out.rgb.iter().zip(&target).map(|(r, t)| r - t).collect();
-            let ig = ImageGradients {
-                rgb: &d_rgb,
-                alpha: None,
-                depth: None,
-                normal: None,
-                distortion: None,
-                camera: false,
-            };
+            let ig = ImageGradients::colour(&d_rgb);
             let touched = render_backward_with(&set, &out, &ig, &mut grads, &mut backward_scratch);
             both_ms += start.elapsed().as_secs_f64() * 1e3;
             both_cpu += process_cpu_ms() - cpu_start;

@@ -80,14 +80,7 @@ fn main() {
             } else {
                 render(&set, &cam, &settings)
             };
-            let ig = ImageGradients {
-                rgb: &d_rgb,
-                alpha: None,
-                depth: None,
-                normal: None,
-                distortion: None,
-                camera: false,
-            };
+            let ig = ImageGradients::colour(&d_rgb);
             let touched = render_backward_with(&set, &out, &ig, &mut grads, &mut backward_scratch).len();
             if recycle {
                 buffers = out.into_buffers();
@@ -98,14 +91,7 @@ fn main() {
         // Checksum of the first call's images and gradients, to confirm bit-identical changes.
         let out = render(&set, &cam, &settings);
         let mut g1 = RenderGradients::zeros(n, set.texture_size);
-        let ig = ImageGradients {
-            rgb: &d_rgb,
-            alpha: None,
-            depth: None,
-            normal: None,
-            distortion: None,
-            camera: false,
-        };
+        let ig = ImageGradients::colour(&d_rgb);
         render_backward(&set, &out, &ig, &mut g1);
         let mut h = 0xcbf29ce484222325u64;
         let mix = |h: &mut u64, v: &[f32]| {
@@ -164,14 +150,7 @@ fn main() {
         render_backward_with(
             &set,
             &out,
-            &ImageGradients {
-                rgb: &d_rgb,
-                alpha: None,
-                depth: None,
-                normal: None,
-                distortion: None,
-                camera: false,
-            },
+            &ImageGradients::colour(&d_rgb),
             &mut grads,
             &mut backward_scratch,
         );

@@ -42,14 +42,7 @@ fn step(
         let out = render_with(set, camera, settings, std::mem::take(&mut state.buffers));
         nanos += start.elapsed().as_nanos() as u64;
         let d_rgb: Vec<f32> = out.rgb.iter().zip(target).map(|(r, t)| r - t).collect();
-        let ig = ImageGradients {
-            rgb: &d_rgb,
-            alpha: None,
-            depth: None,
-            normal: None,
-            distortion: None,
-            camera: false,
-        };
+        let ig = ImageGradients::colour(&d_rgb);
         let start = Instant::now();
         let touched = render_backward_with(set, &out, &ig, &mut state.grads, &mut state.scratch);
         nanos += start.elapsed().as_nanos() as u64;

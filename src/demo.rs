@@ -359,7 +359,6 @@ pub fn generate(config: &DemoConfig) -> DemoScene {
 /// [`SceneError`](crate::scene::SceneError) when a file cannot be written.
 pub fn export_colmap(scene: &DemoScene, dir: &std::path::Path) -> Result<(), crate::scene::SceneError> {
     use crate::scene::SceneError;
-    use crate::scene::colmap::{CameraModel, ColmapCamera, ColmapImage, ColmapModel, ColmapPoint3D};
     let mut views: Vec<&DemoView> = scene.train.iter().chain(&scene.test).collect();
     // Ring order: sort by the camera's azimuth so names follow the ring.
     views.sort_by(|a, b| {
@@ -371,13 +370,35 @@ pub fn export_colmap(scene: &DemoScene, dir: &std::path::Path) -> Result<(), cra
     });
     let images_dir = dir.join("images");
     std::fs::create_dir_all(&images_dir).map_err(|e| SceneError::io(&images_dir, e))?;
+    let mut named = Vec::with_capacity(views.len());
+    for (i, v) in views.iter().enumerate() {
+        let c = &v.camera;
+        let name = format!("view_{i:03}.png");
+        let bytes: Vec<u8> = v.rgb.iter().map(|&x| crate::loss::psnr::quantize_u8(x)).collect();
+        let path = images_dir.join(&name);
+        image::save_buffer(&path, &bytes, c.width, c.height, image::ColorType::Rgb8)
+            .map_err(|e| SceneError::io(&path, std::io::Error::other(e)))?;
+        named.push((name, *c));
+    }
+    write_colmap_model(dir, &named, &scene.points, &scene.colours)
+}
+
+/// Writes `dir/sparse/0/{cameras,images,points3D}.bin`: one PINHOLE camera per named view (w2c
+/// pose), and the points with their colours quantised to 8 bits.
+fn write_colmap_model(
+    dir: &std::path::Path,
+    views: &[(String, Camera)],
+    points: &[Vec3],
+    colours: &[[f32; 3]],
+) -> Result<(), crate::scene::SceneError> {
+    use crate::scene::SceneError;
+    use crate::scene::colmap::{CameraModel, ColmapCamera, ColmapImage, ColmapModel, ColmapPoint3D};
     let mut model = ColmapModel {
         cameras: Vec::new(),
         images: Vec::new(),
         points: Vec::new(),
     };
-    for (i, v) in views.iter().enumerate() {
-        let c = &v.camera;
+    for (i, (name, c)) in views.iter().enumerate() {
         model.cameras.push(ColmapCamera {
             id: i as u32 + 1,
             model: CameraModel::Pinhole,
@@ -386,7 +407,6 @@ pub fn export_colmap(scene: &DemoScene, dir: &std::path::Path) -> Result<(), cra
             params: vec![c.fx as f64, c.fy as f64, c.cx as f64, c.cy as f64],
         });
         let q = glam::Quat::from_mat3(&c.rotation).normalize();
-        let name = format!("view_{i:03}.png");
         model.images.push(ColmapImage {
             id: i as u32 + 1,
             qvec: [q.w as f64, q.x as f64, q.y as f64, q.z as f64],
@@ -395,12 +415,8 @@ pub fn export_colmap(scene: &DemoScene, dir: &std::path::Path) -> Result<(), cra
             name: name.clone(),
             points2d: Vec::new(),
         });
-        let bytes: Vec<u8> = v.rgb.iter().map(|&x| crate::loss::psnr::quantize_u8(x)).collect();
-        let path = images_dir.join(&name);
-        image::save_buffer(&path, &bytes, c.width, c.height, image::ColorType::Rgb8)
-            .map_err(|e| SceneError::io(&path, std::io::Error::other(e)))?;
     }
-    for (i, (p, col)) in scene.points.iter().zip(&scene.colours).enumerate() {
+    for (i, (p, col)) in points.iter().zip(colours).enumerate() {
         model.points.push(ColmapPoint3D {
             id: i as u64 + 1,
             xyz: p.to_array().map(f64::from),
@@ -442,7 +458,6 @@ pub fn export_capture(
     height: u32,
 ) -> Result<(), crate::scene::SceneError> {
     use crate::scene::SceneError;
-    use crate::scene::colmap::{CameraModel, ColmapCamera, ColmapImage, ColmapModel, ColmapPoint3D};
     use rayon::prelude::*;
     let images = dir.join("images");
     std::fs::create_dir_all(&images).map_err(|e| SceneError::io(&images, e))?;
@@ -460,40 +475,10 @@ pub fn export_capture(
             .map_err(|e| SceneError::io(&path, std::io::Error::other(e)))
     })?;
     let (points, colours) = surface_points(20_000, &mut Rng::new(0));
-    let mut model = ColmapModel {
-        cameras: Vec::new(),
-        images: Vec::new(),
-        points: Vec::new(),
-    };
-    for (i, name) in names.iter().enumerate() {
-        let c = dome_camera(i, count, width, height);
-        model.cameras.push(ColmapCamera {
-            id: i as u32 + 1,
-            model: CameraModel::Pinhole,
-            width: width as u64,
-            height: height as u64,
-            params: vec![c.fx as f64, c.fy as f64, c.cx as f64, c.cy as f64],
-        });
-        let q = glam::Quat::from_mat3(&c.rotation).normalize();
-        model.images.push(ColmapImage {
-            id: i as u32 + 1,
-            qvec: [q.w as f64, q.x as f64, q.y as f64, q.z as f64],
-            tvec: c.translation.to_array().map(f64::from),
-            camera_id: i as u32 + 1,
-            name: name.clone(),
-            points2d: Vec::new(),
-        });
-    }
-    for (i, (p, col)) in points.iter().zip(&colours).enumerate() {
-        model.points.push(ColmapPoint3D {
-            id: i as u64 + 1,
-            xyz: p.to_array().map(f64::from),
-            rgb: col.map(crate::loss::psnr::quantize_u8),
-            error: 0.0,
-            track: Vec::new(),
-        });
-    }
-    let sparse = dir.join("sparse/0");
-    std::fs::create_dir_all(&sparse).map_err(|e| SceneError::io(&sparse, e))?;
-    crate::scene::colmap_binary::write_model(&model, &sparse)
+    let named: Vec<(String, Camera)> = names
+        .into_iter()
+        .enumerate()
+        .map(|(i, name)| (name, dome_camera(i, count, width, height)))
+        .collect();
+    write_colmap_model(dir, &named, &points, &colours)
 }

@@ -123,7 +123,20 @@ pub struct ImageGradients<'a> {
     pub camera: bool,
 }
 
-impl ImageGradients<'_> {
+impl<'a> ImageGradients<'a> {
+    /// The gradient of a loss on the colour image alone (`rgb`, no other map, no camera
+    /// gradient), as the photometric loss gives it.
+    pub fn colour(rgb: &'a [f32]) -> Self {
+        ImageGradients {
+            rgb,
+            alpha: None,
+            depth: None,
+            normal: None,
+            distortion: None,
+            camera: false,
+        }
+    }
+
     /// True when a gradient of the normal or distortion map is given (the backward pass then
     /// carries four more channels per entry).
     #[inline]

@@ -45,6 +45,7 @@ pub mod run_time;
 pub mod street;
 pub mod texture_step;
 pub mod time_budget;
+pub mod trained_like_case;
 pub mod view_pixels;
 
 use crate::billboards::ActivatedBillboards;

@@ -929,14 +929,7 @@ fn texture_gradients_sum_each_billboards_owner_then_other_entries_in_tile_order(
         .collect();
     let backward = |d_rgb: &[f32]| {
         let mut g = RenderGradients::zeros(scene.len(), scene.texture_size);
-        let ig = ImageGradients {
-            rgb: d_rgb,
-            alpha: None,
-            depth: None,
-            normal: None,
-            distortion: None,
-            camera: false,
-        };
+        let ig = ImageGradients::colour(d_rgb);
         render_backward(&scene.borrowed(), &out, &ig, &mut g);
         g.textures
     };
@@ -1177,14 +1170,7 @@ fn backward_refuses_overlapping_tile_ranges() {
     offsets[2] = 0;
     let d_rgb = vec![1e-3f32; 3 * cam.pixel_count()];
     let mut g = RenderGradients::zeros(scene.len(), scene.texture_size);
-    let grads_in = ImageGradients {
-        rgb: &d_rgb,
-        alpha: None,
-        depth: None,
-        normal: None,
-        distortion: None,
-        camera: false,
-    };
+    let grads_in = ImageGradients::colour(&d_rgb);
     render_backward(&scene.borrowed(), &out, &grads_in, &mut g);
 }
 
@@ -1271,19 +1257,7 @@ fn non_finite_parameters_never_render_as_plausible_values() {
     // The backward of a render with skipped NaN alphas gives the billboard no gradient.
     let mut g = RenderGradients::zeros(m.len(), m.texture_size);
     let d_rgb = vec![1.0; out.rgb.len()];
-    let touched = render_backward(
-        &m.borrowed(),
-        &out,
-        &ImageGradients {
-            rgb: &d_rgb,
-            alpha: None,
-            depth: None,
-            normal: None,
-            distortion: None,
-            camera: false,
-        },
-        &mut g,
-    );
+    let touched = render_backward(&m.borrowed(), &out, &ImageGradients::colour(&d_rgb), &mut g);
     assert!(!touched.contains(&(b as u32)));
     assert!(g.textures.iter().flatten().all(|x| x.is_finite()));
 }
