@@ -53,6 +53,7 @@ fn demo_setup(resolution: u32, billboards: usize) -> Setup {
         .map(|v| TrainView {
             camera: v.camera,
             rgb: v.rgb.clone().into(),
+            loss_mask: None,
         })
         .collect();
     let cameras: Vec<_> = views.iter().map(|v| v.camera).collect();

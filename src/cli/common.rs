@@ -65,8 +65,9 @@ pub struct SceneArgs {
     #[arg(long, value_name = "DIR")]
     pub masks: Option<std::path::PathBuf>,
     /// What training does with the masks: `composite` the photographs onto the background
-    /// outside them (NeuS/2DGS practice on DTU), or `ignore` them (they still serve `eval
-    /// --masked`).
+    /// outside them (NeuS/2DGS practice on DTU), `weight` the loss by them (pixels outside are
+    /// left out of training, as nerfstudio's splatfacto), or `ignore` them (they still serve
+    /// `eval --masked`).
     #[arg(long, value_enum, default_value_t = MaskModeArg::Composite)]
     pub mask_mode: MaskModeArg,
     /// Memory for the 8-bit images (K, M or G; a bare number is MiB). When all the scene's
@@ -83,6 +84,9 @@ pub enum MaskModeArg {
     Composite,
     /// Leave the photographs as they are.
     Ignore,
+    /// Leave the photographs as they are and weight the loss by the mask (pixels outside it
+    /// are left out of training).
+    Weight,
 }
 
 impl From<MaskModeArg> for MaskMode {
@@ -90,6 +94,7 @@ impl From<MaskModeArg> for MaskMode {
         match m {
             MaskModeArg::Composite => MaskMode::Composite,
             MaskModeArg::Ignore => MaskMode::Ignore,
+            MaskModeArg::Weight => MaskMode::Weight,
         }
     }
 }

@@ -1,6 +1,7 @@
 //! What `--resume` compares: the run record ([`bbsplat::train::run_record`]) of the flags and
 //! the dataset of this command against the one stored in the checkpoint.
 
+use super::common::MaskModeArg;
 use super::train_args::TrainArgs;
 use anyhow::Result;
 use bbsplat::scene::Scene;
@@ -54,6 +55,11 @@ pub fn record_of(args: &TrainArgs, scene: &Scene) -> RunRecord {
     // The geometry regularisers are recorded only when on, so that a run without them keeps
     // the record of checkpoints written before they existed.
     let mut arguments = arguments;
+    // Likewise a mask mode other than the default (it changes what the loss sees).
+    if args.scene_args.mask_mode != MaskModeArg::Composite {
+        let mode = format!("{:?}", args.scene_args.mask_mode).to_lowercase();
+        arguments.insert("--mask-mode".into(), mode);
+    }
     // Likewise the error-growth share (recorded when given).
     if let Some(share) = args.error_growth {
         arguments.insert("--error-growth".into(), share.to_string());

@@ -1,6 +1,6 @@
 //! `bbsplat train <scene> -o <out>`: the main job.
 
-use super::common::start_threads;
+use super::common::{MaskModeArg, start_threads};
 use super::signals::Signals;
 use super::train_args::{InitArg, TrainArgs};
 use super::{preflight, resume, validate};
@@ -83,6 +83,12 @@ pub fn run(args: TrainArgs) -> Result<()> {
     anyhow::ensure!(
         !scene.train.is_empty(),
         "{}: the scene has no training view",
+        args.scene.display()
+    );
+    let weight_by_masks = args.scene_args.mask_mode == MaskModeArg::Weight;
+    anyhow::ensure!(
+        !weight_by_masks || scene.train.iter().any(|v| v.mask.is_some()),
+        "{}: --mask-mode weight, but no training view has a mask (a NeuS mask/ folder, or --masks DIR)",
         args.scene.display()
     );
     if let Some(cache) = scene.image_cache()
@@ -204,7 +210,15 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let mut scene_warnings = scene.warnings;
     scene_warnings.extend(resume_warnings);
     let train_names: Vec<String> = scene.train.iter().map(|v| v.name.clone()).collect();
-    let train: Vec<TrainView> = scene.train.into_iter().map(TrainView::from_owned_view).collect();
+    // With --mask-mode weight each training view's mask weights its loss.
+    let train: Vec<TrainView> = scene
+        .train
+        .into_iter()
+        .map(|mut v| {
+            let loss_mask = if weight_by_masks { v.mask.take() } else { None };
+            TrainView::from_owned_view(v).with_loss_mask(loss_mask)
+        })
+        .collect();
     // The test views' masks (NeuS mask/, --masks), for the masked figures of the summary.
     let test_masks: Vec<Option<Vec<u8>>> = scene.test.iter().map(|v| v.mask.clone()).collect();
     let test: Vec<TrainView> = scene.test.into_iter().map(TrainView::from_owned_view).collect();

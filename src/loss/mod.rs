@@ -32,6 +32,7 @@
 
 pub mod distortion;
 pub mod l1;
+pub mod masked;
 pub mod normal_consistency;
 pub mod psnr;
 pub mod ssim;
@@ -48,7 +49,7 @@ pub enum LossError {
     /// A buffer does not hold the number of values its shape implies.
     #[error("{which} holds {got} values but {expected} were expected")]
     BadLength {
-        /// Which argument: `"a"`, `"b"`, `"render"`, `"target"` or `"d_map"`.
+        /// Which argument: `"a"`, `"b"`, `"render"`, `"target"`, `"d_map"` or `"mask"`.
         which: &'static str,
         /// The number of values expected from the shape (or from the first image).
         expected: usize,

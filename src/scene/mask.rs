@@ -11,7 +11,8 @@
 //! background outside the mask at load, `c' = c·m + background·(1 − m)` with `m = mask / 255`
 //! (what NeuS/2DGS-class tools do for DTU): the billboards then learn the object in front of
 //! the background colour. [`MaskMode::Ignore`] loads the masks (for masked evaluation) and leaves
-//! the photographs as they are. An image's own alpha channel is not a mask here: RGBA images are
+//! the photographs as they are. [`MaskMode::Weight`] leaves the photographs as they are and
+//! weights the loss by the mask instead (pixels outside it are left out of training). An image's own alpha channel is not a mask here: RGBA images are
 //! composited onto the background whatever the mode (as before), and their alpha is kept as
 //! [`crate::scene::View::coverage`].
 //!
@@ -35,6 +36,12 @@ pub enum MaskMode {
     Composite,
     /// Keep the photograph as it is (the mask still serves masked evaluation).
     Ignore,
+    /// Keep the photograph as it is and weight the training loss by the mask: render and
+    /// target multiplied by `mask / 255` before the loss ([`crate::loss::masked`]), so pixels
+    /// outside it count for nothing and what the billboards draw there is free. The trainer
+    /// reads the mask from [`crate::train::TrainView::loss_mask`]
+    /// (`TrainView::from_view(&view).with_loss_mask(view.mask.clone())`).
+    Weight,
 }
 
 /// Extensions tried, in order, for a mask file.

@@ -30,6 +30,19 @@ pub enum TrainError {
         /// Values found.
         got: usize,
     },
+    /// A view's loss mask ([`super::TrainView::loss_mask`]) does not hold one value per pixel of
+    /// its camera.
+    #[error("training view {view}: loss mask has {got} values but its {width}x{height} camera has {} pixels", *width as usize * *height as usize)]
+    MaskSize {
+        /// Index of the view in the slice passed to `step`.
+        view: usize,
+        /// Camera width in pixels.
+        width: u32,
+        /// Camera height in pixels.
+        height: u32,
+        /// Values found.
+        got: usize,
+    },
     /// A view's image could not be read: an on-demand image ([`crate::scene::on_demand`]) whose
     /// file went away or changed since the scene was loaded. The step was not taken (the trainer
     /// is unchanged).

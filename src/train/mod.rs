@@ -84,6 +84,11 @@ pub struct TrainView {
     pub camera: Camera,
     /// `width · height · 3` values.
     pub rgb: ViewPixels,
+    /// A mask weighting the loss per pixel (`width · height` values, 255 = keep, 0 = leave out;
+    /// [`crate::loss::masked`]), when the scene's masks are used that way
+    /// ([`crate::scene::mask::MaskMode::Weight`], [`TrainView::with_loss_mask`]); `None`: every
+    /// pixel counts fully.
+    pub loss_mask: Option<Vec<u8>>,
 }
 
 /// A view's camera and float values, fetched for a depth sweep ([`Trainer::place_on_error`]).
@@ -112,6 +117,7 @@ impl TrainView {
                 ViewImage::InMemory(image) => ViewPixels::U8(image.as_bytes().to_vec()),
                 ViewImage::OnDemand(image) => ViewPixels::OnDemand(OnDemandPixels::new(image.clone())),
             },
+            loss_mask: None,
         }
     }
 
@@ -124,6 +130,7 @@ impl TrainView {
                 ViewImage::InMemory(image) => ViewPixels::U8(image.into_bytes()),
                 ViewImage::OnDemand(image) => ViewPixels::OnDemand(OnDemandPixels::new(image)),
             },
+            loss_mask: None,
         }
     }
 
@@ -132,12 +139,24 @@ impl TrainView {
         views.iter().map(Self::from_view).collect()
     }
 
+    /// This view with `mask` weighting its loss ([`TrainView::loss_mask`]): what training does
+    /// with a scene loaded with [`crate::scene::mask::MaskMode::Weight`], e.g.
+    /// `TrainView::from_view(&view).with_loss_mask(view.mask.clone())`. `None` leaves every
+    /// pixel weighted fully.
+    pub fn with_loss_mask(self, mask: Option<Vec<u8>>) -> Self {
+        Self {
+            loss_mask: mask,
+            ..self
+        }
+    }
+
     /// A view of the embedded demo scene ([`crate::demo`], feature `tools`).
     #[cfg(feature = "tools")]
     pub fn from_demo(view: &crate::demo::DemoView) -> Self {
         Self {
             camera: view.camera,
             rgb: view.rgb.clone().into(),
+            loss_mask: None,
         }
     }
 }
@@ -595,6 +614,8 @@ pub struct Trainer {
     target: Vec<f32>,
     /// The SSIM gradient's partial maps (recycled from step to step; values never carried over).
     ssim_scratch: SsimScratch,
+    /// The mask-weighted render and target of a view with a loss mask.
+    masked_buffers: crate::loss::masked::MaskedBuffers,
     /// The backward pass's records and texel lists (recycled likewise).
     backward_scratch: BackwardScratch,
     /// Per billboard, the regularisers' gradient of the current step, which the texture step
@@ -669,6 +690,7 @@ impl Trainer {
             opacity_logits,
             render_buffers: RenderBuffers::default(),
             ssim_scratch: SsimScratch::default(),
+            masked_buffers: Default::default(),
             backward_scratch: BackwardScratch::default(),
             target: Vec::new(),
             lazy_logs: Default::default(),
@@ -916,6 +938,15 @@ impl Trainer {
                     got: v.rgb.len(),
                 });
             }
+            let pixels = v.camera.width as usize * v.camera.height as usize;
+            if let Some(mask) = v.loss_mask.as_ref().filter(|m| m.len() != pixels) {
+                return Err(TrainError::MaskSize {
+                    view: i,
+                    width: v.camera.width,
+                    height: v.camera.height,
+                    got: mask.len(),
+                });
+            }
         }
         if let Some(&index) = self.order.iter().find(|&&i| i >= views.len()) {
             return Err(TrainError::ViewSetChanged {
@@ -988,16 +1019,23 @@ impl Trainer {
         }
         let buffers = std::mem::take(&mut self.render_buffers);
         let out = render_with(&self.activated.borrowed(), cam, &settings, buffers);
-        let loss = TrainingLoss {
+        let loss_fn = TrainingLoss {
             simd: self.config.simd,
             ..TrainingLoss::default()
+        };
+        let dims = (cam.width as usize, cam.height as usize, 3);
+        let loss = match &view.loss_mask {
+            None => loss_fn.evaluate_in(&out.rgb, target, dims, &mut self.ssim_scratch),
+            Some(mask) => crate::loss::masked::evaluate_masked(
+                &loss_fn,
+                &out.rgb,
+                target,
+                mask,
+                dims,
+                &mut self.ssim_scratch,
+                &mut self.masked_buffers,
+            ),
         }
-        .evaluate_in(
-            &out.rgb,
-            target,
-            (cam.width as usize, cam.height as usize, 3),
-            &mut self.ssim_scratch,
-        )
         .expect("sizes validated above");
         let psnr = crate::loss::psnr::psnr(&out.rgb, target).unwrap_or(f64::NAN);
         // Both geometry terms off: no map gradient (the plain backward pass).
@@ -1469,10 +1507,24 @@ impl Trainer {
             0.0
         };
         let count = (new_rows as f64 * share as f64).round() as usize;
-        let view = place::ViewError {
-            rendered: &out.rgb,
-            target,
-            median_depth: &out.median_depth,
+        // With a loss mask, the error is that of the weighted images (none outside the mask).
+        let weighted = views[vi].loss_mask.as_ref().map(|mask| {
+            let (mut weighted_render, mut weighted_target) = (Vec::new(), Vec::new());
+            crate::loss::masked::weight_pixels_into(&out.rgb, mask, 3, &mut weighted_render);
+            crate::loss::masked::weight_pixels_into(target, mask, 3, &mut weighted_target);
+            (weighted_render, weighted_target)
+        });
+        let view = match &weighted {
+            None => place::ViewError {
+                rendered: &out.rgb,
+                target,
+                median_depth: &out.median_depth,
+            },
+            Some((rendered, weighted_target)) => place::ViewError {
+                rendered,
+                target: weighted_target,
+                median_depth: &out.median_depth,
+            },
         };
         // The depth where the neighbouring views agree on the pixel, searched around the
         // rendered depth; the rendered depth where no depth is distinct (an even surface).

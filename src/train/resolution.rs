@@ -12,7 +12,7 @@
 
 use super::{TrainView, ViewPixels};
 use crate::scene::SceneError;
-use crate::scene::image_io::resize_area;
+use crate::scene::image_io::{resize_area, resize_area_u8};
 
 /// Which resolution step `s` of a run trains at.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -57,7 +57,7 @@ impl ResolutionSchedule {
 /// use glam::Vec3;
 /// let camera = Camera::look_at(Vec3::new(0.0, 0.0, -3.0), Vec3::ZERO, Vec3::Y, 40.0, 40.0, 4, 2);
 /// let rgb: Vec<f32> = (0..4 * 2 * 3).map(|k| (k / 3) as f32).collect();
-/// let small = downscale_view(&TrainView { camera, rgb: rgb.into() }, 2).unwrap();
+/// let small = downscale_view(&TrainView { camera, rgb: rgb.into(), loss_mask: None }, 2).unwrap();
 /// assert_eq!((small.camera.width, small.camera.height, small.camera.fx), (2, 1, 20.0));
 /// // Each output pixel is the mean of a 2×2 block: pixels (0, 1, 4, 5) → 2.5.
 /// assert_eq!(&small.rgb.to_f32().unwrap()[..3], &[2.5, 2.5, 2.5]);
@@ -73,6 +73,7 @@ pub fn downscale_view(view: &TrainView, factor: u32) -> Result<TrainView, SceneE
         return Ok(TrainView {
             camera,
             rgb: ViewPixels::OnDemand(p.downscaled(camera.width, camera.height)),
+            loss_mask: downscale_mask(view, &camera),
         });
     }
     let (w, h) = (view.camera.width as usize, view.camera.height as usize);
@@ -80,5 +81,20 @@ pub fn downscale_view(view: &TrainView, factor: u32) -> Result<TrainView, SceneE
     Ok(TrainView {
         camera,
         rgb: rgb.into(),
+        loss_mask: downscale_mask(view, &camera),
     })
+}
+
+/// The view's loss mask averaged over the same blocks as its pixels (`camera`: the downscaled
+/// camera), rounded to 8 bits.
+fn downscale_mask(view: &TrainView, camera: &crate::camera::Camera) -> Option<Vec<u8>> {
+    let mask = view.loss_mask.as_ref()?;
+    let (w, h) = (view.camera.width as usize, view.camera.height as usize);
+    Some(resize_area_u8(
+        mask,
+        w,
+        h,
+        camera.width as usize,
+        camera.height as usize,
+    ))
 }

@@ -34,6 +34,7 @@ pub fn street(
             street_views.push(TrainView {
                 camera,
                 rgb: v.rgb.clone(),
+                loss_mask: None,
             });
         }
     }

@@ -26,6 +26,7 @@ pub fn trained_like_case(size: u32, billboards: usize) -> (RawBillboards, Vec<Tr
     let views = vec![TrainView {
         camera: random_scene_camera(size, size),
         rgb: target.iter().map(|v| v.clamp(0.0, 1.0)).collect::<Vec<f32>>().into(),
+        loss_mask: None,
     }];
     let train_config = TrainConfig {
         iterations: 0,

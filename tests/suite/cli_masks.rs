@@ -65,3 +65,48 @@ fn a_neus_scene_trains_with_no_flag_and_reports_masked_figures() {
     assert!(!ok && err.contains("nowhere"), "{err}");
     std::fs::remove_dir_all(&root).ok();
 }
+
+#[test]
+fn mask_mode_weight_trains_on_the_masks_and_is_refused_without_them() {
+    let root = temp("mask-weight");
+    let data = root.join("neus");
+    write_neus(&data, &known_cameras(), glam::DMat4::IDENTITY, 4.0);
+    let d = data.to_str().unwrap();
+    let train = |out: &str, extra: &[&str]| {
+        let mut args = vec![
+            "train",
+            d,
+            "-o",
+            out,
+            "--iterations",
+            "10",
+            "--billboards",
+            "100",
+            "--texture-size",
+            "4",
+            "--quiet",
+        ];
+        args.extend_from_slice(extra);
+        run(&args)
+    };
+    let (weighted, composite) = (root.join("weighted"), root.join("composite"));
+    let (ok, err) = train(weighted.to_str().unwrap(), &["--mask-mode", "weight"]);
+    assert!(ok, "{err}");
+    assert!(train(composite.to_str().unwrap(), &[]).0);
+    // The loss saw other images: another model.
+    let model = |dir: &std::path::Path| std::fs::read(dir.join("model").join("texture_color.npz")).unwrap();
+    assert_ne!(model(&weighted), model(&composite));
+    // The mode is part of the run's record: resuming the weighted run without it is refused.
+    let checkpoint = weighted.join("checkpoint.bin");
+    let resumed = root.join("resumed");
+    let (ok, err) = train(resumed.to_str().unwrap(), &["--resume", checkpoint.to_str().unwrap()]);
+    assert!(!ok && err.contains("--mask-mode"), "{err}");
+    // Without masks the mode is refused, naming the scene and what is missing.
+    std::fs::remove_dir_all(data.join("mask")).unwrap();
+    let (ok, err) = train(root.join("no-masks").to_str().unwrap(), &["--mask-mode", "weight"]);
+    assert!(
+        !ok && err.contains("no training view has a mask") && err.contains("neus"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&root).ok();
+}

@@ -40,6 +40,7 @@ mod init_fps;
 mod init_hull;
 mod init_scene;
 mod layering;
+mod loss_masked;
 mod loss_normal_consistency;
 mod loss_ssim;
 mod lpips;

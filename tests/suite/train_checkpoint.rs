@@ -27,6 +27,7 @@ fn setup(adam: AdamMode, texture_mode: TextureMode) -> (Trainer, Vec<TrainView>)
         .map(|v| TrainView {
             camera: v.camera,
             rgb: v.rgb.clone().into(),
+            loss_mask: None,
         })
         .collect();
     let mut model = RawBillboards::from_points(&scene.points, &scene.colours, 4, 8);

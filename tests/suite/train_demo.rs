@@ -37,6 +37,7 @@ pub(crate) fn run(
             .map(|v| TrainView {
                 camera: v.camera,
                 rgb: v.rgb.clone().into(),
+                loss_mask: None,
             })
             .collect()
     };

@@ -164,6 +164,7 @@ fn relocation_resets_the_moments_of_sources_and_dead_slots_only() {
         .map(|v| TrainView {
             camera: v.camera,
             rgb: v.rgb.clone().into(),
+            loss_mask: None,
         })
         .collect();
     let model = RawBillboards::from_points(&scene.points, &scene.colours, TS, 4);

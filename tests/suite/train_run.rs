@@ -867,6 +867,7 @@ fn eight_bit_views_train_bit_for_bit_as_their_float_copies() {
                 } else {
                     ViewPixels::U8(b.clone())
                 },
+                loss_mask: None,
             })
             .collect()
     };
