@@ -122,6 +122,54 @@ pub enum BenchmarkError {
     },
 }
 
+/// How long each scene of a benchmark trains: `bbsplat train --minutes M` (the paper's way
+/// of comparing at equal time) or `--iterations N` (equal steps; a run of a step count is the same
+/// model on any machine and thread count).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum BenchmarkBudget {
+    /// A time budget in minutes (`--minutes`).
+    Minutes(f64),
+    /// A step count (`--iterations`).
+    Steps(usize),
+}
+
+impl BenchmarkBudget {
+    /// The `bbsplat train` flag and value of this budget.
+    pub fn train_flag(&self) -> [String; 2] {
+        match self {
+            Self::Minutes(m) => ["--minutes".into(), m.to_string()],
+            Self::Steps(n) => ["--iterations".into(), n.to_string()],
+        }
+    }
+
+    /// "30 minutes" or "7000 steps".
+    pub fn describe(&self) -> String {
+        match self {
+            Self::Minutes(m) => format!("{m} minutes"),
+            Self::Steps(n) => format!("{n} steps"),
+        }
+    }
+
+    /// Whether `row` (a finished run) is a run of this budget.
+    pub fn holds(&self, row: &BenchmarkRow) -> bool {
+        match (*self, row.budget_minutes) {
+            (Self::Minutes(m), Some(b)) => (b - m).abs() <= 1e-9 * m.max(1.0),
+            (Self::Steps(n), None) => row.iterations == Some(n),
+            _ => false,
+        }
+    }
+
+    /// The run a finished `row` holds, in the words of [`BenchmarkBudget::describe`] ("a
+    /// --minutes 5 run", "a 300-step run").
+    pub fn of_row(row: &BenchmarkRow) -> String {
+        match (row.budget_minutes, row.iterations) {
+            (Some(b), _) => format!("a --minutes {b} run"),
+            (None, Some(n)) => format!("a {n}-step run"),
+            (None, None) => "a run of unknown length".into(),
+        }
+    }
+}
+
 /// What one scene's run gave (all `None` but the names and `error` when it failed).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct BenchmarkRow {
@@ -218,18 +266,20 @@ fn cell(v: Option<f64>, decimals: usize) -> String {
     v.map_or("-".into(), |v| format!("{v:.decimals$}"))
 }
 
-/// The markdown table of `rows` (a `--minutes` run of each): ours and the paper's figures
-/// side by side, then the failed scenes with their errors.
+/// The markdown table of `rows` (a run of `budget` each): ours and the paper's figures side by
+/// side, then the failed scenes with their errors.
 ///
 /// ```
-/// use bbsplat::benchmark::{BenchmarkRow, markdown_table};
+/// use bbsplat::benchmark::{BenchmarkBudget, BenchmarkRow, markdown_table};
 /// let row = BenchmarkRow::failed("dtu_scan65", "data/dtu_scan65", "no such folder".into());
-/// let md = markdown_table(&[row], 30.0);
+/// let md = markdown_table(&[row], BenchmarkBudget::Minutes(30.0));
 /// assert!(md.contains("| dtu_scan65 |") && md.contains("29.67") && md.contains("no such folder"));
+/// assert!(md.contains("--minutes 30 "));
 /// ```
-pub fn markdown_table(rows: &[BenchmarkRow], minutes: f64) -> String {
+pub fn markdown_table(rows: &[BenchmarkRow], budget: BenchmarkBudget) -> String {
+    let [flag, value] = budget.train_flag();
     let mut out = format!(
-        "Each scene trained by `bbsplat train SCENE --minutes {minutes}` with no other flag; test \
+        "Each scene trained by `bbsplat train SCENE {flag} {value}` with no other flag; test \
          views as the scene's protocol (its test split, else every 8th view). Paper: {PAPER_SOURCE}; \
          \"not in Table 9\" where the scene is not one of its scenes.\n\n\
          | scene | PSNR (dB) | SSIM | LPIPS | masked PSNR / SSIM | test views | train time (s) | steps | billboards | peak memory (MB) | paper PSNR / SSIM / LPIPS |\n\

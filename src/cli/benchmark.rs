@@ -1,6 +1,8 @@
-//! `bbsplat benchmark SCENE... -o OUT --minutes M`: trains each scene with the defaults into
-//! `OUT/<name>` and writes the table of their figures ([`bbsplat::benchmark`]) as
-//! `OUT/benchmark.md` and `OUT/benchmark.json`.
+//! `bbsplat benchmark SCENE... -o OUT --minutes M` (or `--iterations N`): trains each scene with
+//! the defaults into `OUT/<name>` and writes the table of their figures ([`bbsplat::benchmark`])
+//! as `OUT/benchmark.md` and `OUT/benchmark.json`. With `--slurm` it writes the same runs as a
+//! Slurm array job (one task per scene) and a collect job that writes the table, instead of
+//! running them ([`bbsplat::sweep::array_scripts`], docs/cluster.md).
 //!
 //! Each scene runs as its own `bbsplat train SCENE -o OUT/<name> --minutes M` process (this very
 //! binary), not in this process: the peak memory a summary records is the process's high-water
@@ -11,7 +13,7 @@
 //! then ends with an error naming the failed scenes.
 
 use anyhow::{Context, Result};
-use bbsplat::benchmark::{BenchmarkRow, PAPER_SOURCE, markdown_table};
+use bbsplat::benchmark::{BenchmarkBudget, BenchmarkRow, PAPER_SOURCE, markdown_table};
 use bbsplat::train::run::{CHECKPOINT_FILE, SUMMARY_FILE};
 use clap::Args;
 use std::path::{Path, PathBuf};
@@ -28,8 +30,12 @@ pub struct BenchmarkArgs {
     #[arg(short, long)]
     pub output: PathBuf,
     /// The time budget of each scene's training (`bbsplat train --minutes`).
+    #[arg(long, required_unless_present = "iterations", conflicts_with = "iterations")]
+    pub minutes: Option<f64>,
+    /// A step count for each scene instead of a time budget (`bbsplat train --iterations`): the
+    /// same models on any machine and thread count.
     #[arg(long)]
-    pub minutes: f64,
+    pub iterations: Option<usize>,
     /// Also compute LPIPS of the final test views (`bbsplat train --lpips`; `--lpips=alex`).
     #[arg(long, value_enum, num_args = 0..=1, require_equals = true, default_missing_value = "vgg", value_name = "NETWORK")]
     pub lpips: Option<super::common::LpipsNetwork>,
@@ -40,6 +46,35 @@ pub struct BenchmarkArgs {
     /// Rayon worker threads of each run (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Write the runs as Slurm jobs into `OUT/slurm/` instead of running them:
+    /// `benchmark.sbatch` (an array job, one task per scene, each resumed from its checkpoint when
+    /// requeued), `collect.sbatch` (this command without `--slurm`, after every task succeeded:
+    /// it writes the table) and `submit.sh`.
+    #[arg(long)]
+    pub slurm: bool,
+    /// With --slurm: CPUs per task (each run gets as many threads).
+    #[arg(long, default_value_t = 2, requires = "slurm")]
+    pub cpus_per_task: u32,
+    /// With --slurm: memory per task in MB.
+    #[arg(long, requires = "slurm")]
+    pub mem: Option<u64>,
+    /// With --slurm: time limit per task, in Slurm's syntax (e.g. `45:00`).
+    #[arg(long, requires = "slurm")]
+    pub time: Option<String>,
+    /// With --slurm: the partition.
+    #[arg(long, requires = "slurm")]
+    pub partition: Option<String>,
+}
+
+impl BenchmarkArgs {
+    /// The budget of each scene's run.
+    fn budget(&self) -> BenchmarkBudget {
+        match (self.minutes, self.iterations) {
+            (_, Some(n)) => BenchmarkBudget::Steps(n),
+            (Some(m), None) => BenchmarkBudget::Minutes(m),
+            (None, None) => unreachable!("clap requires --minutes or --iterations"),
+        }
+    }
 }
 
 /// The name of a scene's row and run folder: the last component of its path.
@@ -50,19 +85,20 @@ fn scene_name(scene: &Path) -> Result<String> {
         .with_context(|| format!("{}: a scene path must end in a folder or file name", scene.display()))
 }
 
+/// `--lpips=vgg` or `--lpips=alex`.
+fn lpips_flag(net: super::common::LpipsNetwork) -> &'static str {
+    match net {
+        super::common::LpipsNetwork::Vgg => "--lpips=vgg",
+        super::common::LpipsNetwork::Alex => "--lpips=alex",
+    }
+}
+
 /// The `bbsplat train` arguments of one scene's run (`resume`: its checkpoint to continue).
 fn train_arguments(args: &BenchmarkArgs, scene: &Path, out: &Path, resume: Option<&Path>) -> Vec<std::ffi::OsString> {
     let mut a: Vec<std::ffi::OsString> = vec!["train".into(), scene.into(), "-o".into(), out.into()];
-    a.push("--minutes".into());
-    a.push(args.minutes.to_string().into());
+    a.extend(args.budget().train_flag().map(Into::into));
     if let Some(net) = args.lpips {
-        a.push(
-            match net {
-                super::common::LpipsNetwork::Vgg => "--lpips=vgg",
-                super::common::LpipsNetwork::Alex => "--lpips=alex",
-            }
-            .into(),
-        );
+        a.push(lpips_flag(net).into());
     }
     if let Some(t) = args.threads {
         a.push("--threads".into());
@@ -86,8 +122,8 @@ fn bench_scene(args: &BenchmarkArgs, scene: &Path, name: &str) -> BenchmarkRow {
         let checkpoint = out.join(CHECKPOINT_FILE);
         let resume = checkpoint.exists().then_some(checkpoint.as_path());
         println!(
-            "{name}: training {shown} for {} min{}",
-            args.minutes,
+            "{name}: training {shown} for {}{}",
+            args.budget().describe(),
             resume.map_or(String::new(), |c| format!(" (resuming {})", c.display()))
         );
         if let Err(e) = train_scene(args, scene, &out, resume) {
@@ -96,29 +132,26 @@ fn bench_scene(args: &BenchmarkArgs, scene: &Path, name: &str) -> BenchmarkRow {
         }
     }
     match BenchmarkRow::from_summary(name, &shown, &summary) {
-        Ok(row) => check_budget(row, &summary, args.minutes),
+        Ok(row) => check_budget(row, &summary, args.budget()),
         Err(e) => BenchmarkRow::failed(name, &shown, e.to_string()),
     }
 }
 
 /// A finished run of another budget is not a row of this table: failed, saying so.
-fn check_budget(row: BenchmarkRow, summary: &Path, minutes: f64) -> BenchmarkRow {
-    match row.budget_minutes {
-        Some(b) if (b - minutes).abs() <= 1e-9 * minutes.max(1.0) => row,
-        other => {
-            let what = other.map_or("a run without --minutes".to_string(), |b| {
-                format!("a --minutes {b} run")
-            });
-            BenchmarkRow::failed(
-                &row.name,
-                &row.scene,
-                format!(
-                    "{} holds {what}, not --minutes {minutes}: remove that folder or choose another -o",
-                    summary.display()
-                ),
-            )
-        }
+fn check_budget(row: BenchmarkRow, summary: &Path, budget: BenchmarkBudget) -> BenchmarkRow {
+    if budget.holds(&row) {
+        return row;
     }
+    let [flag, value] = budget.train_flag();
+    BenchmarkRow::failed(
+        &row.name,
+        &row.scene,
+        format!(
+            "{} holds {}, not {flag} {value}: remove that folder or choose another -o",
+            summary.display(),
+            BenchmarkBudget::of_row(&row)
+        ),
+    )
 }
 
 /// Spawns `bbsplat train` for one scene: its standard output is shown as it comes, its standard
@@ -146,12 +179,14 @@ fn train_scene(args: &BenchmarkArgs, scene: &Path, out: &Path, resume: Option<&P
 }
 
 /// Runs `bbsplat benchmark`.
-pub fn run(args: BenchmarkArgs) -> Result<()> {
-    anyhow::ensure!(
-        args.minutes.is_finite() && args.minutes > 0.0,
-        "--minutes {}: must be a finite number > 0",
-        args.minutes
-    );
+pub fn run(mut args: BenchmarkArgs) -> Result<()> {
+    if let Some(minutes) = args.minutes {
+        anyhow::ensure!(
+            minutes.is_finite() && minutes > 0.0,
+            "--minutes {minutes}: must be a finite number > 0"
+        );
+    }
+    anyhow::ensure!(args.iterations != Some(0), "--iterations 0: must be at least 1");
     let mut names = Vec::new();
     for scene in &args.scenes {
         let name = scene_name(scene)?;
@@ -165,6 +200,9 @@ pub fn run(args: BenchmarkArgs) -> Result<()> {
     }
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("{}: cannot create the output folder", args.output.display()))?;
+    if args.slurm {
+        return write_slurm(&mut args, &names);
+    }
     let mut rows = Vec::new();
     for (scene, name) in args.scenes.iter().zip(&names) {
         rows.push(bench_scene(&args, scene, name));
@@ -178,7 +216,7 @@ pub fn run(args: BenchmarkArgs) -> Result<()> {
         let path = args.output.join("curve.svg");
         super::common::write_text_atomic(&path, &svg).with_context(|| format!("writing {}", path.display()))?;
     }
-    print!("{}", markdown_table(&rows, args.minutes));
+    print!("{}", markdown_table(&rows, args.budget()));
     let failed: Vec<&str> = rows
         .iter()
         .filter(|r| r.error.is_some())
@@ -199,13 +237,14 @@ pub fn run(args: BenchmarkArgs) -> Result<()> {
 fn write_tables(args: &BenchmarkArgs, rows: &[BenchmarkRow]) -> Result<()> {
     let md = args.output.join("benchmark.md");
     let text = format!(
-        "# bbsplat benchmark, {} minutes per scene\n\n{}",
-        args.minutes,
-        markdown_table(rows, args.minutes)
+        "# bbsplat benchmark, {} per scene\n\n{}",
+        args.budget().describe(),
+        markdown_table(rows, args.budget())
     );
     super::common::write_text_atomic(&md, &text).with_context(|| format!("writing {}", md.display()))?;
     let json = serde_json::json!({
         "minutes": args.minutes,
+        "iterations": args.iterations,
         "paper_source": PAPER_SOURCE,
         "units": "psnr dB, train_seconds s, peak_rss_bytes bytes, curve (minutes, psnr dB)",
         "rows": rows,
@@ -213,4 +252,58 @@ fn write_tables(args: &BenchmarkArgs, rows: &[BenchmarkRow]) -> Result<()> {
     let path = args.output.join("benchmark.json");
     let text = serde_json::to_string_pretty(&json).context("encoding the benchmark table")?;
     super::common::write_text_atomic(&path, &text).with_context(|| format!("writing {}", path.display()))
+}
+
+/// `--slurm`: the array job of the scenes' runs, the collect job (this command without its Slurm
+/// flags) and the submit script, in `OUT/slurm/`. Paths are made absolute: the jobs may start in
+/// another folder, on another node.
+fn write_slurm(args: &mut BenchmarkArgs, names: &[String]) -> Result<()> {
+    args.output = std::path::absolute(&args.output).context("resolving -o")?;
+    for scene in &mut args.scenes {
+        *scene = std::path::absolute(&*scene).with_context(|| format!("resolving {}", scene.display()))?;
+    }
+    let text = |p: &std::ffi::OsStr| -> Result<String> {
+        p.to_str()
+            .map(str::to_string)
+            .with_context(|| format!("{}: a path of a Slurm job must be UTF-8", p.to_string_lossy()))
+    };
+    let local = BenchmarkArgs {
+        threads: None,
+        ..args.clone()
+    };
+    let mut tasks = Vec::new();
+    for (scene, name) in args.scenes.iter().zip(names) {
+        let run_dir = args.output.join(name);
+        let train = train_arguments(&local, scene, &run_dir, None);
+        let args = train.iter().map(|a| text(a)).collect::<Result<Vec<_>>>()?;
+        tasks.push(bbsplat::sweep::ArrayTask { run_dir, args });
+    }
+    let exe = std::env::current_exe().context("finding the bbsplat binary the jobs run")?;
+    let mut collect = vec![text(exe.as_os_str())?, "benchmark".to_string()];
+    for scene in &args.scenes {
+        collect.push(text(scene.as_os_str())?);
+    }
+    collect.extend(["-o".to_string(), text(args.output.as_os_str())?]);
+    collect.extend(args.budget().train_flag());
+    if let Some(net) = args.lpips {
+        collect.push(lpips_flag(net).into());
+    }
+    if args.curve {
+        collect.push("--curve".into());
+    }
+    let options = bbsplat::sweep::SlurmOptions {
+        cpus_per_task: args.cpus_per_task,
+        mem_mb: args.mem,
+        time: args.time.clone(),
+        partition: args.partition.clone(),
+    };
+    let dir = args.output.join("slurm");
+    let scripts = bbsplat::sweep::array_scripts("benchmark", &exe, &tasks, &collect, &dir, &options);
+    let paths =
+        bbsplat::sweep::write_slurm_scripts(&dir, &scripts).with_context(|| format!("writing {}", dir.display()))?;
+    for p in &paths {
+        println!("wrote {}", p.display());
+    }
+    println!("{} scenes; submit with: sh {}", tasks.len(), paths[2].display());
+    Ok(())
 }

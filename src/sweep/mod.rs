@@ -48,7 +48,9 @@ pub use output::{CSV_HEADER, SweepFiles, csv_table, markdown_table, write_atomic
 pub use pareto::pareto_front;
 pub use plot::{plot_curves_svg, plot_lines_svg, plot_psnr_vs_size_svg, plot_psnr_vs_time_svg};
 pub use runner::{SubprocessRunner, subprocess_runner};
-pub use slurm::{SlurmOptions, SlurmScripts, shell_quote, slurm_scripts, write_slurm_scripts};
+pub use slurm::{
+    ArrayTask, SlurmOptions, SlurmScripts, array_scripts, shell_quote, slurm_scripts, write_slurm_scripts,
+};
 
 use crate::report::TrainSummary;
 use serde::{Deserialize, Serialize};

@@ -67,12 +67,14 @@ fn opt<T: ToString>(v: Option<T>) -> String {
 /// Header of [`csv_table`].
 pub const CSV_HEADER: &str = "slug,iterations,billboards,alive,texture_size,sh_degree,width,height,max_width,\
 texture_threshold,texture_mode,seed,threads,train_seconds,render_ms_per_frame,test_psnr,test_ssim,test_views,\
-model_bytes,peak_rss_bytes,pareto_time,pareto_size";
+model_bytes,peak_rss_bytes,pareto_time,pareto_size,test_lpips,lpips_network";
 
 /// The records as CSV with header [`CSV_HEADER`]: one row per record, in order. Iterations,
 /// billboards, texture size and seed are the values the run reports; `max_width`,
 /// `texture_threshold` and `texture_mode` are the requested flags (empty: trainer default).
-/// Units: seconds, milliseconds, bytes, dB. The Pareto columns are `1` or `0`.
+/// Units: seconds, milliseconds, bytes, dB. The Pareto columns are `1` or `0`. `test_lpips` and
+/// `lpips_network` are empty for a run without LPIPS (a sweep computes it when its runs are given
+/// `--lpips`: `-- --lpips` after the sweep's own flags).
 pub fn csv_table(records: &[SweepRecord]) -> String {
     let (time, size) = fronts(records);
     let mut out = String::from(CSV_HEADER);
@@ -102,6 +104,8 @@ pub fn csv_table(records: &[SweepRecord]) -> String {
             m.peak_rss_bytes.to_string(),
             u8::from(time[i]).to_string(),
             u8::from(size[i]).to_string(),
+            opt(m.test_lpips),
+            opt(m.lpips_network.as_deref()),
         ];
         let quoted: Vec<String> = fields.iter().map(|f| csv_field(f)).collect();
         out.push_str(&quoted.join(","));
@@ -130,7 +134,8 @@ pub(crate) fn csv_field(f: &str) -> String {
 /// The records as a markdown table, in order: budget, measured speed and quality, and a Pareto
 /// column naming the fronts the run is on (`time`: PSNR vs training time, `size`: PSNR vs model
 /// size). Model size and peak RSS in MB (10⁶ bytes); `n/a` where the summary has 0 (no model saved,
-/// or no peak-RSS reading on the platform), and such a run is on no size front.
+/// or no peak-RSS reading on the platform), and such a run is on no size front. LPIPS with its
+/// network (`0.1234 vgg`), `-` for a run without it.
 ///
 /// ```
 /// use bbsplat::sweep::markdown_table;
@@ -142,8 +147,8 @@ pub fn markdown_table(records: &[SweepRecord]) -> String {
     let (time, size) = fronts(records);
     let mut out = String::from(
         "| run | iterations | billboards | alive | TS | mode | σ | resolution | train s | render ms | \
-         PSNR dB | SSIM | model MB | peak RSS MB | Pareto |\n\
-         |---|--:|--:|--:|--:|---|--:|---|--:|--:|--:|--:|--:|--:|---|\n",
+         PSNR dB | SSIM | LPIPS | model MB | peak RSS MB | Pareto |\n\
+         |---|--:|--:|--:|--:|---|--:|---|--:|--:|--:|--:|--:|--:|--:|---|\n",
     );
     for (i, r) in records.iter().enumerate() {
         let (s, m) = (&r.setting, &r.summary);
@@ -156,7 +161,7 @@ pub fn markdown_table(records: &[SweepRecord]) -> String {
         let or_default = |v: String| if v.is_empty() { "default".to_string() } else { v };
         let _ = writeln!(
             out,
-            "| {} | {} | {} | {} | {} | {} | {} | {}×{} | {:.1} | {:.2} | {:.2} | {:.4} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {}×{} | {:.1} | {:.2} | {:.2} | {:.4} | {} | {} | {} | {} |",
             s.slug(),
             m.iterations,
             m.billboards,
@@ -170,6 +175,10 @@ pub fn markdown_table(records: &[SweepRecord]) -> String {
             m.render_ms_per_frame,
             m.test_psnr,
             m.test_ssim,
+            m.test_lpips.map_or("-".into(), |d| format!(
+                "{d:.4} {}",
+                m.lpips_network.as_deref().unwrap_or("?")
+            )),
             mb(m.model_bytes, 2),
             mb(m.peak_rss_bytes, 0),
             pareto

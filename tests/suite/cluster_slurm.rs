@@ -208,3 +208,89 @@ fn shell_quoted_words_read_back_unchanged() {
     let back: Vec<&str> = std::str::from_utf8(&out.stdout).unwrap().lines().collect();
     assert_eq!(back, words);
 }
+
+/// `bbsplat benchmark --slurm`: the scenes' runs as an array job, the table as its collect job;
+/// task 1 is requeued while it trains (Slurm's SIGTERM makes it save a checkpoint) and resumes;
+/// both models are bit for bit those of the same benchmark run locally.
+#[test]
+fn a_benchmark_runs_as_slurm_jobs_and_a_requeued_scene_resumes_to_the_local_result() {
+    let test = "a_benchmark_runs_as_slurm_jobs";
+    let Some(conf) = cluster(test) else { return };
+    let root = temp("slurm-benchmark");
+    let bbsplat = env!("CARGO_BIN_EXE_bbsplat");
+    let scenes: Vec<PathBuf> = [("small", "16"), ("large", "48")]
+        .iter()
+        .map(|(name, resolution)| {
+            let dir = root.join(name);
+            crate::cli::run_ok(&["demo", "--export", dir.to_str().unwrap(), "--resolution", resolution]);
+            dir
+        })
+        .collect();
+    let benchmark = |out: &Path, extra: &[&str]| {
+        let mut args: Vec<&str> = vec!["benchmark"];
+        args.extend(scenes.iter().map(|s| s.to_str().unwrap()));
+        args.extend(["-o", out.to_str().unwrap(), "--iterations", "400"]);
+        args.extend_from_slice(extra);
+        let out = Command::new(bbsplat).args(&args).output().unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let local = root.join("local");
+    benchmark(&local, &[]);
+    let remote = root.join("slurm");
+    let printed = benchmark(&remote, &["--slurm", "--cpus-per-task", "1"]);
+    assert!(printed.contains("2 scenes; submit with"), "{printed}");
+    assert!(
+        !remote.join("benchmark.md").exists(),
+        "--slurm trained instead of writing jobs"
+    );
+    let start = Instant::now();
+    let submitted = slurm(&conf, "sh", &[remote.join("slurm/submit.sh").to_str().unwrap()]);
+    let ids: Vec<&str> = submitted
+        .trim()
+        .split([' ', ','])
+        .filter(|w| w.chars().all(|c| c.is_ascii_digit()) && !w.is_empty())
+        .collect();
+    let [array, collect] = ids[..] else {
+        panic!("two job ids in {submitted:?}")
+    };
+    // Requeue task 1 once it trains (the line printed as training starts, after the signals
+    // are armed); Slurm's SIGTERM stops it with a checkpoint, and the requeued task resumes.
+    let log1 = remote.join("large").join("train.log");
+    wait_until(start, "task 1 did not start training", || {
+        std::fs::read_to_string(&log1).is_ok_and(|l| l.contains("test views at"))
+    });
+    let task = format!("{array}_1");
+    slurm(&conf, "scontrol", &["requeue", &task]);
+    wait_until(start, "task 1 was not pending again", || {
+        slurm(&conf, "squeue", &["-h", "-j", &task, "-o", "%T"]).trim() == "PENDING"
+    });
+    slurm(
+        &conf,
+        "scontrol",
+        &["update", &format!("JobId={task}"), "StartTime=now"],
+    );
+    wait_until(start, "the collect job did not end", || {
+        slurm(&conf, "squeue", &["-h", "-j", collect]).trim().is_empty()
+    });
+    let log = std::fs::read_to_string(&log1).unwrap();
+    assert!(
+        log.contains("interrupted at step") && log.contains("resuming at step"),
+        "task 1 was not interrupted and resumed: {log}"
+    );
+    for name in ["small", "large"] {
+        let (a, b) = (model_bytes(&local.join(name)), model_bytes(&remote.join(name)));
+        assert!(
+            a.len() >= 2 && a == b,
+            "{name}: the Slurm model differs from the local one"
+        );
+    }
+    let table = std::fs::read_to_string(remote.join("benchmark.md")).expect("the collect job wrote the table");
+    assert!(
+        table.contains("| small |") && table.contains("| large |") && table.contains("--iterations 400"),
+        "{table}"
+    );
+    assert!(!table.contains("failed"), "{table}");
+    println!("jobs done in {:?}", start.elapsed());
+    std::fs::remove_dir_all(&root).ok();
+}

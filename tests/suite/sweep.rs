@@ -282,6 +282,29 @@ mod output {
     }
 
     #[test]
+    fn lpips_is_a_column_of_both_tables_when_a_run_has_it() {
+        let mut recs = records();
+        recs[1].summary.test_lpips = Some(0.123456);
+        recs[1].summary.lpips_network = Some("vgg".into());
+        let csv = csv_table(&recs);
+        let header: Vec<&str> = CSV_HEADER.split(',').collect();
+        let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+        let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+        assert_eq!(rows[1][col("test_lpips")], "0.123456");
+        assert_eq!(rows[1][col("lpips_network")], "vgg");
+        assert_eq!((rows[0][col("test_lpips")], rows[0][col("lpips_network")]), ("", ""));
+        let table = markdown_table(&recs);
+        let lines: Vec<&str> = table.lines().collect();
+        let lpips_col = lines[0].split('|').position(|c| c.trim() == "LPIPS").unwrap();
+        assert_eq!(
+            lines[3].split('|').nth(lpips_col).unwrap().trim(),
+            "0.1235 vgg",
+            "{table}"
+        );
+        assert_eq!(lines[2].split('|').nth(lpips_col).unwrap().trim(), "-", "{table}");
+    }
+
+    #[test]
     fn csv_quotes_fields_that_need_it() {
         assert_eq!(csv_field("a,b"), "\"a,b\"");
         assert_eq!(csv_field("say \"hi\""), "\"say \"\"hi\"\"\"");
