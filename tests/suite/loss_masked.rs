@@ -230,3 +230,23 @@ fn a_loss_mask_of_the_wrong_size_is_refused() {
     assert!(matches!(err, TrainError::MaskSize { view: 1, got: 7, .. }), "{err:?}");
     assert!(err.to_string().contains("loss mask has 7 values"), "{err}");
 }
+
+#[test]
+fn a_coarse_view_keeps_its_loss_mask_averaged_like_its_pixels() {
+    use bbsplat::train::resolution::downscale_view;
+    let camera = bbsplat::camera::Camera::look_at(Vec3::new(0.0, 0.0, -3.0), Vec3::ZERO, Vec3::Y, 40.0, 40.0, 4, 2);
+    let rgb: Vec<f32> = vec![0.5; 4 * 2 * 3];
+    // Columns 0 and 1 kept, 2 half, 3 left out.
+    let mask: Vec<u8> = (0..8).map(|p| [255, 255, 128, 0][p % 4]).collect();
+    let view = TrainView {
+        camera,
+        rgb: rgb.into(),
+        loss_mask: None,
+    }
+    .with_loss_mask(Some(mask));
+    let small = downscale_view(&view, 2).unwrap();
+    // Each coarse pixel is the mean of a 2×2 block: 255 and 64 (= round(128 / 2)).
+    assert_eq!(small.loss_mask, Some(vec![255, 64]));
+    let unmasked = downscale_view(&view.with_loss_mask(None), 2).unwrap();
+    assert_eq!(unmasked.loss_mask, None);
+}
