@@ -266,20 +266,26 @@ fn cell(v: Option<f64>, decimals: usize) -> String {
     v.map_or("-".into(), |v| format!("{v:.decimals$}"))
 }
 
-/// The markdown table of `rows` (a run of `budget` each): ours and the paper's figures side by
-/// side, then the failed scenes with their errors.
+/// The markdown table of `rows` (a run of `budget` each, `bbsplat train` given `extra_flags`
+/// besides, e.g. `--lpips=vgg`): ours and the paper's figures side by side, then the failed
+/// scenes with their errors.
 ///
 /// ```
 /// use bbsplat::benchmark::{BenchmarkBudget, BenchmarkRow, markdown_table};
 /// let row = BenchmarkRow::failed("dtu_scan65", "data/dtu_scan65", "no such folder".into());
-/// let md = markdown_table(&[row], BenchmarkBudget::Minutes(30.0));
+/// let md = markdown_table(&[row], BenchmarkBudget::Minutes(30.0), &["--lpips=vgg".into()]);
 /// assert!(md.contains("| dtu_scan65 |") && md.contains("29.67") && md.contains("no such folder"));
-/// assert!(md.contains("--minutes 30 "));
+/// assert!(md.contains("`bbsplat train SCENE --minutes 30 --lpips=vgg` with no other flag"));
 /// ```
-pub fn markdown_table(rows: &[BenchmarkRow], budget: BenchmarkBudget) -> String {
-    let [flag, value] = budget.train_flag();
+pub fn markdown_table(rows: &[BenchmarkRow], budget: BenchmarkBudget, extra_flags: &[String]) -> String {
+    let command: Vec<String> = budget
+        .train_flag()
+        .into_iter()
+        .chain(extra_flags.iter().cloned())
+        .collect();
+    let command = command.join(" ");
     let mut out = format!(
-        "Each scene trained by `bbsplat train SCENE {flag} {value}` with no other flag; test \
+        "Each scene trained by `bbsplat train SCENE {command}` with no other flag; test \
          views as the scene's protocol (its test split, else every 8th view). Paper: {PAPER_SOURCE}; \
          \"not in Table 9\" where the scene is not one of its scenes.\n\n\
          | scene | PSNR (dB) | SSIM | LPIPS | masked PSNR / SSIM | test views | train time (s) | steps | billboards | peak memory (MB) | paper PSNR / SSIM / LPIPS |\n\

@@ -68,6 +68,15 @@ pub struct BenchmarkArgs {
 
 impl BenchmarkArgs {
     /// The budget of each scene's run.
+    /// The flags each run gets besides its budget, as the table states them.
+    fn extra_flags(&self) -> Vec<String> {
+        let mut flags: Vec<String> = self.lpips.map(|net| lpips_flag(net).to_string()).into_iter().collect();
+        if let Some(t) = self.threads {
+            flags.extend(["--threads".to_string(), t.to_string()]);
+        }
+        flags
+    }
+
     fn budget(&self) -> BenchmarkBudget {
         match (self.minutes, self.iterations) {
             (_, Some(n)) => BenchmarkBudget::Steps(n),
@@ -216,7 +225,7 @@ pub fn run(mut args: BenchmarkArgs) -> Result<()> {
         let path = args.output.join("curve.svg");
         super::common::write_text_atomic(&path, &svg).with_context(|| format!("writing {}", path.display()))?;
     }
-    print!("{}", markdown_table(&rows, args.budget()));
+    print!("{}", markdown_table(&rows, args.budget(), &args.extra_flags()));
     let failed: Vec<&str> = rows
         .iter()
         .filter(|r| r.error.is_some())
@@ -239,7 +248,7 @@ fn write_tables(args: &BenchmarkArgs, rows: &[BenchmarkRow]) -> Result<()> {
     let text = format!(
         "# bbsplat benchmark, {} per scene\n\n{}",
         args.budget().describe(),
-        markdown_table(rows, args.budget())
+        markdown_table(rows, args.budget(), &args.extra_flags())
     );
     super::common::write_text_atomic(&md, &text).with_context(|| format!("writing {}", md.display()))?;
     let json = serde_json::json!({
