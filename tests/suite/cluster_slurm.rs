@@ -73,6 +73,35 @@ fn wait_until(start: Instant, what: &str, mut done: impl FnMut() -> bool) {
     }
 }
 
+/// Submits the jobs of `submit` (a `submit.sh`: an array job, then its collect job), requeues
+/// array task 1 once `ready` holds, lets it start again at once, and waits until the collect job
+/// has ended; returns when the jobs were submitted.
+fn submit_requeuing_task_1(conf: &str, submit: &Path, not_ready: &str, ready: impl FnMut() -> bool) -> Instant {
+    let start = Instant::now();
+    let submitted = slurm(conf, "sh", &[submit.to_str().unwrap()]);
+    let ids: Vec<&str> = submitted
+        .trim()
+        .split([' ', ','])
+        .filter(|w| w.chars().all(|c| c.is_ascii_digit()) && !w.is_empty())
+        .collect();
+    let [array, collect] = ids[..] else {
+        panic!("two job ids in {submitted:?}")
+    };
+    wait_until(start, not_ready, ready);
+    let task = format!("{array}_1");
+    slurm(conf, "scontrol", &["requeue", &task]);
+    // A requeued job is held back before it may start again (its begin time is set about two
+    // minutes ahead): once it is pending, let it start now.
+    wait_until(start, "task 1 was not pending again", || {
+        slurm(conf, "squeue", &["-h", "-j", &task, "-o", "%T"]).trim() == "PENDING"
+    });
+    slurm(conf, "scontrol", &["update", &format!("JobId={task}"), "StartTime=now"]);
+    wait_until(start, "the collect job did not end", || {
+        slurm(conf, "squeue", &["-h", "-j", collect]).trim().is_empty()
+    });
+    start
+}
+
 /// The model files (the PLY and the textures; not `bbsplat.json`, which names its folder).
 fn model_bytes(run: &Path) -> Vec<(String, Vec<u8>)> {
     let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(run.join("model"))
@@ -132,36 +161,14 @@ fn a_sweep_runs_as_slurm_jobs_and_a_requeued_task_resumes_to_the_local_result() 
         .output()
         .unwrap();
     assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
-    let start = Instant::now();
-    let submitted = slurm(&conf, "sh", &[remote.join("slurm/submit.sh").to_str().unwrap()]);
-    let ids: Vec<&str> = submitted
-        .trim()
-        .split([' ', ','])
-        .filter(|w| w.chars().all(|c| c.is_ascii_digit()) && !w.is_empty())
-        .collect();
-    let [array, collect] = ids[..] else {
-        panic!("two job ids in {submitted:?}")
-    };
     // Requeue task 1 once it has saved a checkpoint (it trains 300 steps, saving every 20).
     let run1 = remote.join("runs/it300_bb120");
-    wait_until(start, "no checkpoint of task 1", || {
-        run1.join("checkpoint.bin").is_file()
-    });
-    let task = format!("{array}_1");
-    slurm(&conf, "scontrol", &["requeue", &task]);
-    // A requeued job is held back before it may start again (its begin time is set about two
-    // minutes ahead): once it is pending, let it start now.
-    wait_until(start, "task 1 was not pending again", || {
-        slurm(&conf, "squeue", &["-h", "-j", &task, "-o", "%T"]).trim() == "PENDING"
-    });
-    slurm(
+    let start = submit_requeuing_task_1(
         &conf,
-        "scontrol",
-        &["update", &format!("JobId={task}"), "StartTime=now"],
+        &remote.join("slurm/submit.sh"),
+        "no checkpoint of task 1",
+        || run1.join("checkpoint.bin").is_file(),
     );
-    wait_until(start, "the collect job did not end", || {
-        slurm(&conf, "squeue", &["-h", "-j", collect]).trim().is_empty()
-    });
     let log = std::fs::read_to_string(run1.join("train.log")).unwrap();
     println!("{log}");
     assert!(
@@ -244,35 +251,15 @@ fn a_benchmark_runs_as_slurm_jobs_and_a_requeued_scene_resumes_to_the_local_resu
         !remote.join("benchmark.md").exists(),
         "--slurm trained instead of writing jobs"
     );
-    let start = Instant::now();
-    let submitted = slurm(&conf, "sh", &[remote.join("slurm/submit.sh").to_str().unwrap()]);
-    let ids: Vec<&str> = submitted
-        .trim()
-        .split([' ', ','])
-        .filter(|w| w.chars().all(|c| c.is_ascii_digit()) && !w.is_empty())
-        .collect();
-    let [array, collect] = ids[..] else {
-        panic!("two job ids in {submitted:?}")
-    };
     // Requeue task 1 once it trains (the line printed as training starts, after the signals
     // are armed); Slurm's SIGTERM stops it with a checkpoint, and the requeued task resumes.
     let log1 = remote.join("large").join("train.log");
-    wait_until(start, "task 1 did not start training", || {
-        std::fs::read_to_string(&log1).is_ok_and(|l| l.contains("test views at"))
-    });
-    let task = format!("{array}_1");
-    slurm(&conf, "scontrol", &["requeue", &task]);
-    wait_until(start, "task 1 was not pending again", || {
-        slurm(&conf, "squeue", &["-h", "-j", &task, "-o", "%T"]).trim() == "PENDING"
-    });
-    slurm(
+    let start = submit_requeuing_task_1(
         &conf,
-        "scontrol",
-        &["update", &format!("JobId={task}"), "StartTime=now"],
+        &remote.join("slurm/submit.sh"),
+        "task 1 did not start training",
+        || std::fs::read_to_string(&log1).is_ok_and(|l| l.contains("test views at")),
     );
-    wait_until(start, "the collect job did not end", || {
-        slurm(&conf, "squeue", &["-h", "-j", collect]).trim().is_empty()
-    });
     let log = std::fs::read_to_string(&log1).unwrap();
     assert!(
         log.contains("interrupted at step") && log.contains("resuming at step"),
