@@ -207,11 +207,11 @@ pub fn run(mut args: BenchmarkArgs) -> Result<()> {
         );
         names.push(name);
     }
-    std::fs::create_dir_all(&args.output)
-        .with_context(|| format!("{}: cannot create the output folder", args.output.display()))?;
     if args.slurm {
         return write_slurm(&mut args, &names);
     }
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("{}: cannot create the output folder", args.output.display()))?;
     let mut rows = Vec::new();
     for (scene, name) in args.scenes.iter().zip(&names) {
         rows.push(bench_scene(&args, scene, name));
@@ -269,6 +269,12 @@ fn write_tables(args: &BenchmarkArgs, rows: &[BenchmarkRow]) -> Result<()> {
 fn write_slurm(args: &mut BenchmarkArgs, names: &[String]) -> Result<()> {
     args.output = std::path::absolute(&args.output).context("resolving -o")?;
     for scene in &mut args.scenes {
+        // A missing scene would fail its task, and with it the collect job (afterok): refused now.
+        anyhow::ensure!(
+            scene.exists(),
+            "{}: no such scene (nothing was written)",
+            scene.display()
+        );
         *scene = std::path::absolute(&*scene).with_context(|| format!("resolving {}", scene.display()))?;
     }
     let text = |p: &std::ffi::OsStr| -> Result<String> {

@@ -1514,17 +1514,14 @@ impl Trainer {
             crate::loss::masked::weight_pixels_into(target, mask, 3, &mut weighted_target);
             (weighted_render, weighted_target)
         });
-        let view = match &weighted {
-            None => place::ViewError {
-                rendered: &out.rgb,
-                target,
-                median_depth: &out.median_depth,
-            },
-            Some((rendered, weighted_target)) => place::ViewError {
-                rendered,
-                target: weighted_target,
-                median_depth: &out.median_depth,
-            },
+        let (rendered, error_target) = match &weighted {
+            None => (out.rgb.as_slice(), target),
+            Some((rendered, weighted_target)) => (rendered.as_slice(), weighted_target.as_slice()),
+        };
+        let view = place::ViewError {
+            rendered,
+            target: error_target,
+            median_depth: &out.median_depth,
         };
         // The depth where the neighbouring views agree on the pixel, searched around the
         // rendered depth; the rendered depth where no depth is distinct (an even surface).

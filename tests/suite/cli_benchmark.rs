@@ -162,3 +162,32 @@ fn benchmark_refuses_two_scenes_of_one_name() {
     );
     assert!(!root.join("bench").exists(), "nothing written");
 }
+
+#[test]
+fn benchmark_slurm_refuses_a_missing_scene_before_writing_jobs() {
+    let root = temp("benchmark_slurm_missing");
+    let out = Command::new(env!("CARGO_BIN_EXE_bbsplat"))
+        .arg("benchmark")
+        .arg(root.join("nowhere"))
+        .arg("-o")
+        .arg(root.join("bench"))
+        .args(["--iterations", "10", "--slurm"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("nowhere: no such scene"),
+        "{stderr}"
+    );
+    assert!(!root.join("bench").exists(), "nothing written");
+    // And --minutes with --iterations is refused by the parser, naming both.
+    let out = Command::new(env!("CARGO_BIN_EXE_bbsplat"))
+        .args(["benchmark", "a", "-o", "b", "--minutes", "1", "--iterations", "5"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("--minutes") && stderr.contains("--iterations"),
+        "{stderr}"
+    );
+}
