@@ -5,18 +5,13 @@
 use super::cli::{run, run_ok, temp};
 use super::scene_neus::{known_cameras, write_neus};
 
-#[test]
-fn a_neus_scene_trains_with_no_flag_and_reports_masked_figures() {
-    let root = temp("masks");
-    let data = root.join("neus");
-    write_neus(&data, &known_cameras(), glam::DMat4::IDENTITY, 4.0);
-    let out = root.join("out");
-    let (d, o) = (data.to_str().unwrap(), out.to_str().unwrap());
-    let printed = run_ok(&[
+/// `bbsplat train DATA -o OUT` for 10 steps of 100 billboards at TS 4, then `extra`.
+fn train_args<'a>(data: &'a str, out: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
+    let mut args = vec![
         "train",
-        d,
+        data,
         "-o",
-        o,
+        out,
         "--iterations",
         "10",
         "--billboards",
@@ -24,7 +19,19 @@ fn a_neus_scene_trains_with_no_flag_and_reports_masked_figures() {
         "--texture-size",
         "4",
         "--quiet",
-    ]);
+    ];
+    args.extend_from_slice(extra);
+    args
+}
+
+#[test]
+fn a_neus_scene_trains_with_no_flag_and_reports_masked_figures() {
+    let root = temp("masks");
+    let data = root.join("neus");
+    write_neus(&data, &known_cameras(), glam::DMat4::IDENTITY, 4.0);
+    let out = root.join("out");
+    let (d, o) = (data.to_str().unwrap(), out.to_str().unwrap());
+    let printed = run_ok(&train_args(d, o, &[]));
     assert!(printed.contains("masked (over the mask pixels) PSNR"), "{printed}");
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
@@ -72,23 +79,7 @@ fn mask_mode_weight_trains_on_the_masks_and_is_refused_without_them() {
     let data = root.join("neus");
     write_neus(&data, &known_cameras(), glam::DMat4::IDENTITY, 4.0);
     let d = data.to_str().unwrap();
-    let train = |out: &str, extra: &[&str]| {
-        let mut args = vec![
-            "train",
-            d,
-            "-o",
-            out,
-            "--iterations",
-            "10",
-            "--billboards",
-            "100",
-            "--texture-size",
-            "4",
-            "--quiet",
-        ];
-        args.extend_from_slice(extra);
-        run(&args)
-    };
+    let train = |out: &str, extra: &[&str]| run(&train_args(d, out, extra));
     let (weighted, composite) = (root.join("weighted"), root.join("composite"));
     let (ok, err) = train(weighted.to_str().unwrap(), &["--mask-mode", "weight"]);
     assert!(ok, "{err}");
