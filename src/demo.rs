@@ -14,6 +14,7 @@ use crate::camera::Camera;
 use crate::rng::Rng;
 use glam::Vec3;
 
+pub mod street;
 pub mod surface;
 
 /// One rendered view of the demo scene.
@@ -74,6 +75,39 @@ pub const DEMO_BACKGROUND: [f32; 3] = [0.85, 0.88, 0.92];
 const FLOOR_RADIUS: f32 = 2.6;
 const LOOK_AT: Vec3 = Vec3::new(0.0, 0.5, 0.0);
 
+/// What the ground is: the demo's disc, or the street's strip.
+#[derive(Clone, Copy, Debug)]
+enum Floor {
+    /// `x² + z² ≤ radius²`.
+    Disc { radius: f32 },
+    /// `x₀ ≤ x ≤ x₁`, `z₀ ≤ z ≤ z₁`.
+    Strip { x: [f32; 2], z: [f32; 2] },
+}
+
+impl Floor {
+    fn contains(&self, p: Vec3) -> bool {
+        match *self {
+            Floor::Disc { radius } => p.x * p.x + p.z * p.z <= radius * radius,
+            Floor::Strip { x, z } => (x[0]..=x[1]).contains(&p.x) && (z[0]..=z[1]).contains(&p.z),
+        }
+    }
+}
+
+/// A world to ray-trace: a floor on `y = 0` and objects on it.
+#[derive(Clone, Debug)]
+struct World {
+    floor: Floor,
+    objects: Vec<Object>,
+}
+
+/// The demo world: the floor disc, two spheres and a box around the origin.
+fn demo_world() -> World {
+    World {
+        floor: Floor::Disc { radius: FLOOR_RADIUS },
+        objects: OBJECTS.to_vec(),
+    }
+}
+
 #[derive(Clone, Copy, Debug)]
 enum Object {
     Floor,
@@ -119,7 +153,7 @@ struct Hit {
     object: usize,
 }
 
-fn intersect_object(object: &Object, origin: Vec3, dir: Vec3) -> Option<(f32, Vec3)> {
+fn intersect_object(object: &Object, floor: &Floor, origin: Vec3, dir: Vec3) -> Option<(f32, Vec3)> {
     const T_MIN: f32 = 1e-4;
     match *object {
         Object::Floor => {
@@ -128,7 +162,7 @@ fn intersect_object(object: &Object, origin: Vec3, dir: Vec3) -> Option<(f32, Ve
             }
             let t = -origin.y / dir.y;
             let p = origin + t * dir;
-            (t > T_MIN && p.x * p.x + p.z * p.z <= FLOOR_RADIUS * FLOOR_RADIUS).then_some((t, Vec3::Y))
+            (t > T_MIN && floor.contains(p)).then_some((t, Vec3::Y))
         }
         Object::Sphere { centre, radius, .. } => {
             let oc = origin - centre;
@@ -172,10 +206,10 @@ fn intersect_object(object: &Object, origin: Vec3, dir: Vec3) -> Option<(f32, Ve
     }
 }
 
-fn trace(origin: Vec3, dir: Vec3) -> Option<Hit> {
+fn trace(world: &World, origin: Vec3, dir: Vec3) -> Option<Hit> {
     let mut best: Option<Hit> = None;
-    for (i, object) in OBJECTS.iter().enumerate() {
-        if let Some((t, normal)) = intersect_object(object, origin, dir)
+    for (i, object) in world.objects.iter().enumerate() {
+        if let Some((t, normal)) = intersect_object(object, &world.floor, origin, dir)
             && best.as_ref().is_none_or(|b| t < b.t)
         {
             best = Some(Hit {
@@ -189,9 +223,9 @@ fn trace(origin: Vec3, dir: Vec3) -> Option<Hit> {
     best
 }
 
-fn albedo(hit: &Hit) -> Vec3 {
+fn albedo(world: &World, hit: &Hit) -> Vec3 {
     let p = hit.point;
-    match OBJECTS[hit.object] {
+    match world.objects[hit.object] {
         Object::Floor => {
             let check = ((p.x * 2.5).floor() + (p.z * 2.5).floor()) as i64 & 1;
             let ring = ((p.x * p.x + p.z * p.z).sqrt() * 1.5).fract() < 0.08;
@@ -243,17 +277,23 @@ fn light_direction() -> Vec3 {
     Vec3::new(0.5, 1.0, 0.3).normalize()
 }
 
-fn shade(hit: &Hit) -> Vec3 {
+fn shade(world: &World, hit: &Hit) -> Vec3 {
     let l = light_direction();
     let lambert = hit.normal.dot(l).max(0.0);
     // Hard shadow towards the light.
-    let shadowed = trace(hit.point + hit.normal * 1e-3, l).is_some();
+    let shadowed = trace(world, hit.point + hit.normal * 1e-3, l).is_some();
     let direct = if shadowed { 0.0 } else { lambert };
-    (albedo(hit) * (0.35 + 0.65 * direct)).clamp(Vec3::ZERO, Vec3::ONE)
+    (albedo(world, hit) * (0.35 + 0.65 * direct)).clamp(Vec3::ZERO, Vec3::ONE)
 }
 
-/// Renders one view with one ray through every pixel centre (no anti-aliasing).
+/// Renders one view of the demo world with one ray through every pixel centre (no
+/// anti-aliasing).
 pub fn render_view(camera: &Camera) -> Vec<f32> {
+    render_world(&demo_world(), camera)
+}
+
+/// Renders one view of `world` (as [`render_view`]).
+fn render_world(world: &World, camera: &Camera) -> Vec<f32> {
     let (w, h) = (camera.width as usize, camera.height as usize);
     let r_c2w = camera.rotation.transpose();
     let origin = camera.centre();
@@ -263,7 +303,7 @@ pub fn render_view(camera: &Camera) -> Vec<f32> {
             let x = (i as f32 + 0.5 - camera.cx) / camera.fx;
             let y = (j as f32 + 0.5 - camera.cy) / camera.fy;
             let dir = (r_c2w * Vec3::new(x, y, 1.0)).normalize();
-            let c = trace(origin, dir).map_or(Vec3::from_array(DEMO_BACKGROUND), |hit| shade(&hit));
+            let c = trace(world, origin, dir).map_or(Vec3::from_array(DEMO_BACKGROUND), |hit| shade(world, &hit));
             rgb[(j * w + i) * 3..(j * w + i) * 3 + 3].copy_from_slice(&c.to_array());
         }
     }
@@ -282,18 +322,25 @@ fn ring_camera(index: usize, count: usize, offset: f32, rng: &mut Rng, resolutio
 /// Samples `n` points on the surfaces, uniformly per object area (approximately), with the
 /// shaded colour seen from straight above the point's normal.
 fn surface_points(n: usize, rng: &mut Rng) -> (Vec<Vec3>, Vec<[f32; 3]>) {
+    surface_points_of(&demo_world(), Vec3::ZERO, 0.0, n, rng)
+}
+
+/// [`surface_points`] of `world`, the rays shot from around `centre + (s, 0, 0)`, `s` uniform
+/// in `±spread` (the street's length).
+fn surface_points_of(world: &World, centre: Vec3, spread: f32, n: usize, rng: &mut Rng) -> (Vec<Vec3>, Vec<[f32; 3]>) {
     let mut points = Vec::with_capacity(n);
     let mut colours = Vec::with_capacity(n);
     while points.len() < n {
         // Shoot random rays from a random point on a sphere of radius 5 towards the scene: the
         // first hit is a visible surface point, as a structure-from-motion point would be.
+        let shift = centre + Vec3::new(rng.range(-spread, spread), 0.0, 0.0);
         let theta = rng.range(0.0, std::f32::consts::TAU);
         let y = rng.range(0.15, 1.0);
         let r = (1.0 - y * y).sqrt();
-        let eye = Vec3::new(r * theta.cos(), y, r * theta.sin()) * 5.0;
-        let target = Vec3::new(rng.range(-2.0, 2.0), rng.range(0.0, 1.0), rng.range(-2.0, 2.0));
-        if let Some(hit) = trace(eye, (target - eye).normalize()) {
-            colours.push(shade(&hit).to_array());
+        let eye = shift + Vec3::new(r * theta.cos(), y, r * theta.sin()) * 5.0;
+        let target = shift + Vec3::new(rng.range(-2.0, 2.0), rng.range(0.0, 1.0), rng.range(-2.0, 2.0));
+        if let Some(hit) = trace(world, eye, (target - eye).normalize()) {
+            colours.push(shade(world, &hit).to_array());
             points.push(hit.point);
         }
     }
@@ -358,7 +405,6 @@ pub fn generate(config: &DemoConfig) -> DemoScene {
 ///
 /// [`SceneError`](crate::scene::SceneError) when a file cannot be written.
 pub fn export_colmap(scene: &DemoScene, dir: &std::path::Path) -> Result<(), crate::scene::SceneError> {
-    use crate::scene::SceneError;
     let mut views: Vec<&DemoView> = scene.train.iter().chain(&scene.test).collect();
     // Ring order: sort by the camera's azimuth so names follow the ring.
     views.sort_by(|a, b| {
@@ -368,6 +414,18 @@ pub fn export_colmap(scene: &DemoScene, dir: &std::path::Path) -> Result<(), cra
         };
         az(a).total_cmp(&az(b))
     });
+    write_colmap_views(dir, &views, &scene.points, &scene.colours)
+}
+
+/// Writes `views` in their order as `dir/images/view_NNN.png` and the COLMAP model of them and
+/// of the points ([`write_colmap_model`]).
+fn write_colmap_views(
+    dir: &std::path::Path,
+    views: &[&DemoView],
+    points: &[Vec3],
+    colours: &[[f32; 3]],
+) -> Result<(), crate::scene::SceneError> {
+    use crate::scene::SceneError;
     let images_dir = dir.join("images");
     std::fs::create_dir_all(&images_dir).map_err(|e| SceneError::io(&images_dir, e))?;
     let mut named = Vec::with_capacity(views.len());
@@ -380,7 +438,7 @@ pub fn export_colmap(scene: &DemoScene, dir: &std::path::Path) -> Result<(), cra
             .map_err(|e| SceneError::io(&path, std::io::Error::other(e)))?;
         named.push((name, *c));
     }
-    write_colmap_model(dir, &named, &scene.points, &scene.colours)
+    write_colmap_model(dir, &named, points, colours)
 }
 
 /// Writes `dir/sparse/0/{cameras,images,points3D}.bin`: one PINHOLE camera per named view (w2c

@@ -117,6 +117,7 @@
 
 pub mod benchmark;
 pub mod billboards;
+pub mod blocks;
 pub mod camera;
 pub mod cpu;
 #[cfg(feature = "tools")]

@@ -46,9 +46,14 @@ enum Command {
         /// training, e.g. to try `bbsplat train` without downloading anything.
         #[arg(long)]
         export: Option<PathBuf>,
+        /// With --export: write the street instead, this many copies of the demo's objects along
+        /// a line seen from two tracks of cameras (8 per copy on each, at --resolution), the test
+        /// scene of block-wise training (docs/cluster.md).
+        #[arg(long, requires = "export", value_name = "COPIES", value_parser = clap::value_parser!(u16).range(1..=256))]
+        street: Option<u16>,
     },
     /// Train a billboard model on a dataset (COLMAP, NeRF-synthetic, instant-ngp, NeuS/IDR or LLFF, detected).
-    Train(cli::train_args::TrainArgs),
+    Train(Box<cli::train_args::TrainArgs>),
     /// Render a saved model from a dataset's cameras to PNG files.
     Render(cli::render::RenderArgs),
     /// Evaluate a saved model on a dataset's views: per-view and mean PSNR/SSIM (8-bit images).
@@ -61,6 +66,13 @@ enum Command {
     /// Train each scene with the defaults for `--minutes` and write a table of test PSNR, SSIM,
     /// LPIPS, time, steps, billboards and peak memory beside the paper's published figures.
     Benchmark(cli::benchmark::BenchmarkArgs),
+    /// The stages of a large scene trained as spatial blocks that are not `train` runs: `split`
+    /// (cells, each block's views and initial billboards, from a coarse model) and `merge`
+    /// (docs/cluster.md).
+    Blocks {
+        #[command(subcommand)]
+        command: cli::blocks::BlocksCommand,
+    },
     /// Write a self-contained WebGL2 viewer page of a saved model (optionally serve it locally).
     View(cli::view::ViewArgs),
 }
@@ -78,6 +90,7 @@ fn main() -> Result<()> {
             output,
             threads,
             export,
+            street,
         } => {
             cli::common::start_threads(threads)?;
             let size = cli::demo::DemoSize {
@@ -85,14 +98,18 @@ fn main() -> Result<()> {
                 train_views: views,
                 billboards,
             };
-            cli::demo::run(iterations, size, texture_size, seed, output, export)
+            match (street, &export) {
+                (Some(copies), Some(dir)) => cli::demo::export_street(copies.into(), resolution, seed, dir),
+                _ => cli::demo::run(iterations, size, texture_size, seed, output, export),
+            }
         }
-        Command::Train(args) => cli::train::run(args),
+        Command::Train(args) => cli::train::run(*args),
         Command::Render(args) => cli::render::render(args),
         Command::Eval(args) => cli::render::eval(args),
         Command::Export(args) => cli::export::run(args),
         Command::Mesh(args) => cli::mesh::run(args),
         Command::View(args) => cli::view::run(args),
         Command::Benchmark(args) => cli::benchmark::run(args),
+        Command::Blocks { command } => cli::blocks::run(command),
     }
 }

@@ -146,6 +146,37 @@ impl RawBillboards {
         self.positions.is_empty()
     }
 
+    /// The billboards `i` for which `keep(i)` holds, in their order, as a model of the same
+    /// texture size and alpha mask.
+    ///
+    /// ```
+    /// use bbsplat::model::RawBillboards;
+    /// use glam::Vec3;
+    /// let m = RawBillboards::from_points(&[Vec3::ZERO, Vec3::X, Vec3::Y], &[[0.5; 3]; 3], 4, 0);
+    /// let odd = m.rows_where(|i| i % 2 == 1);
+    /// assert_eq!((odd.len(), odd.positions[0]), (1, Vec3::X));
+    /// assert_eq!(odd.alpha_logits, m.alpha_logits[16..32]);
+    /// ```
+    pub fn rows_where(&self, keep: impl Fn(usize) -> bool) -> RawBillboards {
+        let t = self.texture_size * self.texture_size;
+        let rows: Vec<usize> = (0..self.len()).filter(|&i| keep(i)).collect();
+        let gather = |values: &[f32], width: usize| -> Vec<f32> {
+            rows.iter()
+                .flat_map(|&i| values[i * width..(i + 1) * width].iter().copied())
+                .collect()
+        };
+        RawBillboards {
+            positions: rows.iter().map(|&i| self.positions[i]).collect(),
+            quaternions: rows.iter().map(|&i| self.quaternions[i]).collect(),
+            log_scales: rows.iter().map(|&i| self.log_scales[i]).collect(),
+            sh: gather(&self.sh, SH_FLOATS),
+            alpha_logits: gather(&self.alpha_logits, t),
+            colour_logits: gather(&self.colour_logits, 3 * t),
+            alpha_mask: self.alpha_mask.clone(),
+            texture_size: self.texture_size,
+        }
+    }
+
     /// Mean activated alpha of billboard `i` over all `TS²` texels: [`mean_alpha`] of
     /// `sigmoid(logit)` on unmasked texels and 0 on masked ones. Panics if `i ≥ len()`.
     ///

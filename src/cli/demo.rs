@@ -25,6 +25,35 @@ pub struct DemoSize {
     pub billboards: usize,
 }
 
+/// `bbsplat demo --export DIR --street COPIES`: writes the street as a COLMAP dataset.
+pub fn export_street(copies: usize, resolution: u32, seed: u64, dir: &std::path::Path) -> Result<()> {
+    use bbsplat::demo::street::{StreetConfig, export_street};
+    anyhow::ensure!(
+        (8..=super::validate::MAX_DEMO_RESOLUTION).contains(&resolution),
+        "--resolution must be from 8 to {} (got {resolution})",
+        super::validate::MAX_DEMO_RESOLUTION
+    );
+    let config = StreetConfig {
+        copies,
+        resolution,
+        seed,
+        ..StreetConfig::default()
+    };
+    let views = 2 * config.views_per_copy * copies;
+    let pixels = resolution as u64 * resolution as u64;
+    super::validate::memory(
+        &format!("the street of {copies} copies at --resolution {resolution}"),
+        (views as u64).saturating_mul(pixels).saturating_mul(24),
+    )?;
+    export_street(&config, dir).with_context(|| format!("exporting the street to {}", dir.display()))?;
+    println!(
+        "wrote the street ({copies} copies, {views} views at {resolution}x{resolution}, {} points) as a COLMAP dataset to {}",
+        config.points,
+        dir.display()
+    );
+    Ok(())
+}
+
 /// Runs `bbsplat demo`: generates the demo scene, trains it with [`bbsplat::train::run`] (no
 /// files written, no intermediate evaluation) and reports the test PSNR before and after.
 pub fn run(

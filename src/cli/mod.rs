@@ -2,6 +2,9 @@
 //! write files).
 
 pub mod benchmark;
+pub mod blocks;
+pub mod blocks_chain;
+pub mod blocks_report;
 pub mod common;
 pub mod demo;
 pub mod export;

@@ -60,6 +60,10 @@ pub fn record_of(args: &TrainArgs, scene: &Scene) -> RunRecord {
         let mode = format!("{:?}", args.scene_args.mask_mode).to_lowercase();
         arguments.insert("--mask-mode".into(), mode);
     }
+    // Likewise the model a run starts from (its views are in the dataset fingerprint below).
+    if let Some(model) = &args.init_model {
+        arguments.insert("--init-model".into(), model.display().to_string());
+    }
     // Likewise the error-growth share (recorded when given).
     if let Some(share) = args.error_growth {
         arguments.insert("--error-growth".into(), share.to_string());

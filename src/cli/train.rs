@@ -54,6 +54,54 @@ fn rescue(trainer: &Trainer, error: &RunError, out: &std::path::Path) -> String 
     " (the trained state could not be saved anywhere)".into()
 }
 
+/// `--views FILE`: keeps the scene's views named in the file; a name that is no view of the
+/// scene, or a list that keeps no training view, is refused naming the file.
+fn keep_listed_views(scene: &mut bbsplat::scene::Scene, list: &std::path::Path) -> Result<()> {
+    let text = bbsplat::file_io::read_text_bounded(list, bbsplat::file_io::SCENE_FILE)
+        .with_context(|| format!("reading --views {}", list.display()))?;
+    let names: std::collections::BTreeSet<String> = text
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && !l.starts_with('#'))
+        .map(str::to_string)
+        .collect();
+    let unknown = scene.keep_views(&names);
+    if let Some(first) = unknown.first() {
+        anyhow::bail!(
+            "{}: {} of its {} names are no view of the scene, e.g. {first:?}",
+            list.display(),
+            unknown.len(),
+            names.len()
+        );
+    }
+    anyhow::ensure!(
+        !scene.train.is_empty(),
+        "{}: none of its {} views is a training view of the scene",
+        list.display(),
+        names.len()
+    );
+    Ok(())
+}
+
+/// `--init-model DIR`: the billboards to start from, of texture size `texture_size`.
+fn start_model(dir: &std::path::Path, texture_size: usize) -> Result<bbsplat::RawBillboards> {
+    let (model, _) = bbsplat::load_model(dir).with_context(|| format!("reading --init-model {}", dir.display()))?;
+    anyhow::ensure!(
+        model.texture_size == texture_size,
+        "--init-model {}: its textures are {}×{}, not --texture-size {texture_size}; give --texture-size {}",
+        dir.display(),
+        model.texture_size,
+        model.texture_size,
+        model.texture_size
+    );
+    anyhow::ensure!(
+        !model.is_empty(),
+        "--init-model {}: the model has no billboard",
+        dir.display()
+    );
+    Ok(model)
+}
+
 /// Runs `bbsplat train`: loads the scene, builds or resumes the trainer, and turns the events of
 /// [`bbsplat::train::run`] into the progress bar and printed lines; Ctrl-C raises its stop
 /// signal.
@@ -79,7 +127,10 @@ pub fn run(args: TrainArgs) -> Result<()> {
             .with_context(|| format!("resuming from {}", path.display()))?;
     }
     let threads = start_threads(args.threads)?;
-    let (scene, background) = args.scene_args.load_for_training(&args.scene)?;
+    let (mut scene, background) = args.scene_args.load_for_training(&args.scene)?;
+    if let Some(list) = &args.views {
+        keep_listed_views(&mut scene, list)?;
+    }
     anyhow::ensure!(
         !scene.train.is_empty(),
         "{}: the scene has no training view",
@@ -164,12 +215,24 @@ pub fn run(args: TrainArgs) -> Result<()> {
             t
         }
         None => {
-            let plan = TrainPlan::new(
+            let start_model = match &args.init_model {
+                Some(dir) => Some(start_model(dir, args.texture_size)?),
+                None => None,
+            };
+            let mut request = request;
+            if let Some(model) = &start_model {
+                request.billboards = Some(model.len());
+            }
+            let mut plan = TrainPlan::new(
                 &scene,
                 args.scene_args.background.is_none().then_some(&background),
                 &request,
             )
             .map_err(|e| anyhow::anyhow!("--{e}"))?;
+            if start_model.is_some() {
+                // The scene's initialisation is not used.
+                plan.choices.retain(|c| c.setting != "init");
+            }
             if !args.quiet {
                 for c in &plan.choices {
                     println!("{}: {} ({})", c.setting, c.value, c.reason);
@@ -187,20 +250,32 @@ pub fn run(args: TrainArgs) -> Result<()> {
                 estimated_peak,
             )?;
             preflight::free_space(&args.output, output_bytes(budget, args.texture_size))?;
-            if !args.quiet {
-                println!("initialising {budget} billboards...");
-            }
-            let (model, init) = plan
-                .init_model(&scene)
-                .with_context(|| format!("initialising {} billboards", budget))?;
-            if args.init == InitArg::Hull && init.hull == 0 {
-                eprintln!(
-                    "note: --init hull applies to scenes without SfM points; this one has them and they were used"
-                );
-            }
-            if !args.quiet {
-                println!("initial billboards: {init}");
-            }
+            let model = match start_model {
+                Some(model) => {
+                    if !args.quiet {
+                        let from = args.init_model.as_ref().map(|d| d.display().to_string());
+                        println!("initial billboards: {budget} from {}", from.unwrap_or_default());
+                    }
+                    model
+                }
+                None => {
+                    if !args.quiet {
+                        println!("initialising {budget} billboards...");
+                    }
+                    let (model, init) = plan
+                        .init_model(&scene)
+                        .with_context(|| format!("initialising {} billboards", budget))?;
+                    if args.init == InitArg::Hull && init.hull == 0 {
+                        eprintln!(
+                            "note: --init hull applies to scenes without SfM points; this one has them and they were used"
+                        );
+                    }
+                    if !args.quiet {
+                        println!("initial billboards: {init}");
+                    }
+                    model
+                }
+            };
             let mut trainer = plan.trainer(model);
             trainer.set_run_record(record);
             trainer

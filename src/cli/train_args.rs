@@ -129,6 +129,17 @@ pub struct TrainArgs {
     /// images' alpha masks (RGBA images such as NeRF-synthetic; see docs/training.md).
     #[arg(long, value_enum, default_value_t = InitArg::Auto)]
     pub init: InitArg,
+    /// Start from the billboards of this model folder (a `bbsplat train` output's `model/`, or
+    /// a block's `init/` written by `bbsplat blocks split`) instead of initialising them from the
+    /// scene; its texture size must be --texture-size. Growth and relocation go on from it.
+    #[arg(long, value_name = "MODEL", conflicts_with = "billboards")]
+    pub init_model: Option<PathBuf>,
+    /// Train and evaluate only the views named in this file, one image name per line as the
+    /// scene names them (blank lines and lines starting with `#` skipped); each keeps its split,
+    /// so a test view is never trained on. The scene extent follows the training views kept.
+    /// How a block trains on its own views (`bbsplat blocks split` writes the file).
+    #[arg(long, value_name = "FILE")]
+    pub views: Option<PathBuf>,
     /// Voxels per side of the `--init hull` grid.
     #[arg(long, default_value_t = plan::DEFAULT_HULL_RESOLUTION)]
     pub hull_resolution: usize,

@@ -8,7 +8,7 @@
 //! images were made). Together they give the surface the training views show, which is what a
 //! mesh fused from those views can recover.
 
-use super::{FLOOR_RADIUS, OBJECTS, Object, trace};
+use super::{FLOOR_RADIUS, OBJECTS, Object, demo_world, trace};
 use crate::camera::Camera;
 use crate::mesh::chamfer::SurfaceSamples;
 use crate::rng::Rng;
@@ -108,7 +108,7 @@ fn sees(camera: &Camera, p: Vec3, n: Vec3) -> bool {
     }
     let distance = to_eye.length();
     // The first hit along the ray from the eye must be the point itself.
-    trace(eye, -to_eye / distance).is_some_and(|hit| hit.t >= distance - 1e-3 * distance.max(1.0))
+    trace(&demo_world(), eye, -to_eye / distance).is_some_and(|hit| hit.t >= distance - 1e-3 * distance.max(1.0))
 }
 
 /// The samples of `s` that at least one of `cameras` sees (in front, inside the image, facing

@@ -411,6 +411,32 @@ pub struct Scene {
 }
 
 impl Scene {
+    /// Keeps only the views named in `names`, training and test views alike (each stays in its
+    /// split), and recomputes [`Scene::extent`] from the training views kept (outlying cameras
+    /// left out, as [`load`] does). Returns the names that are no view of the scene, in order.
+    /// How a block of a large scene trains on its own views ([`crate::blocks`]).
+    ///
+    /// ```
+    /// # use bbsplat::demo::{DemoConfig, export_colmap, generate};
+    /// # let dir = std::env::temp_dir().join(format!("bbsplat-keep-views-{}", std::process::id()));
+    /// # export_colmap(&generate(&DemoConfig { resolution: 8, train_views: 7, test_views: 1, points: 50, seed: 0 }), &dir)?;
+    /// let mut scene = bbsplat::load(&dir, &bbsplat::LoadOptions::default())?;
+    /// let names = [scene.train[0].name.clone(), scene.test[0].name.clone(), "no_such.png".into()];
+    /// let unknown = scene.keep_views(&names.into_iter().collect());
+    /// assert_eq!((scene.train.len(), scene.test.len()), (1, 1));
+    /// assert_eq!(unknown, ["no_such.png"]);
+    /// # std::fs::remove_dir_all(&dir)?;
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn keep_views(&mut self, names: &std::collections::BTreeSet<String>) -> Vec<String> {
+        self.train.retain(|v| names.contains(&v.name));
+        self.test.retain(|v| names.contains(&v.name));
+        self.extent = split::extent_without_outliers(self.train.iter().map(|v| &v.camera)).0;
+        let known: std::collections::BTreeSet<&str> =
+            self.train.iter().chain(&self.test).map(|v| v.name.as_str()).collect();
+        names.iter().filter(|n| !known.contains(n.as_str())).cloned().collect()
+    }
+
     /// The cache the scene's on-demand images share ([`on_demand`]), `None` when its images are
     /// held in memory.
     pub fn image_cache(&self) -> Option<&std::sync::Arc<on_demand::ImageCache>> {
@@ -465,7 +491,8 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
     }
     // Poses far from all others are reported and left out of the extent (they would inflate the
     // position learning rate and ruin the run).
-    let outliers = split::outlying_cameras(scene.train.iter().map(|v| &v.camera));
+    let outliers;
+    (scene.extent, outliers) = split::extent_without_outliers(scene.train.iter().map(|v| &v.camera));
     for o in &outliers {
         warnings.push(format!(
             "the camera of view {:?} lies {:.3} units from the median camera centre, {:.0} times the median distance ({:.3}): a misregistered pose? It is left out of the scene extent",
@@ -475,14 +502,6 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
             o.median_distance
         ));
     }
-    scene.extent = split::camera_extent(
-        scene
-            .train
-            .iter()
-            .enumerate()
-            .filter(|(i, _)| !outliers.iter().any(|o| o.index == *i))
-            .map(|(_, v)| &v.camera),
-    );
     if let Some(points) = &scene.points {
         far_points(points, &scene.train, scene.extent, &scene.source)?;
     }

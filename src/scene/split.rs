@@ -56,6 +56,20 @@ pub fn camera_extent<'a>(cameras: impl IntoIterator<Item = &'a Camera>) -> f32 {
     (1.1 * radius) as f32
 }
 
+/// [`camera_extent`] of `cameras` without the [`outlying_cameras`] among them, and those.
+pub fn extent_without_outliers<'a>(cameras: impl IntoIterator<Item = &'a Camera>) -> (f32, Vec<OutlyingCamera>) {
+    let cameras: Vec<&Camera> = cameras.into_iter().collect();
+    let outliers = outlying_cameras(cameras.iter().copied());
+    let extent = camera_extent(
+        cameras
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !outliers.iter().any(|o| o.index == *i))
+            .map(|(_, c)| *c),
+    );
+    (extent, outliers)
+}
+
 /// A camera far from all others: see [`outlying_cameras`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct OutlyingCamera {

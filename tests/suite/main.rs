@@ -4,10 +4,12 @@
 #![allow(clippy::needless_range_loop)]
 
 mod bench_scene;
+mod blocks;
 mod camera;
 #[cfg(feature = "cli")]
 mod cli;
 mod cli_benchmark;
+mod cli_blocks;
 mod cli_bounds;
 #[cfg(feature = "cli")]
 mod cli_export;
