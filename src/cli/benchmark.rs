@@ -52,18 +52,8 @@ pub struct BenchmarkArgs {
     /// it writes the table) and `submit.sh`.
     #[arg(long)]
     pub slurm: bool,
-    /// With --slurm: CPUs per task (each run gets as many threads).
-    #[arg(long, default_value_t = 2, requires = "slurm")]
-    pub cpus_per_task: u32,
-    /// With --slurm: memory per task in MB.
-    #[arg(long, requires = "slurm")]
-    pub mem: Option<u64>,
-    /// With --slurm: time limit per task, in Slurm's syntax (e.g. `45:00`).
-    #[arg(long, requires = "slurm")]
-    pub time: Option<String>,
-    /// With --slurm: the partition.
-    #[arg(long, requires = "slurm")]
-    pub partition: Option<String>,
+    #[command(flatten)]
+    pub slurm_flags: super::common::SlurmFlags,
 }
 
 impl BenchmarkArgs {
@@ -306,12 +296,7 @@ fn write_slurm(args: &mut BenchmarkArgs, names: &[String]) -> Result<()> {
     if args.curve {
         collect.push("--curve".into());
     }
-    let options = bbsplat::sweep::SlurmOptions {
-        cpus_per_task: args.cpus_per_task,
-        mem_mb: args.mem,
-        time: args.time.clone(),
-        partition: args.partition.clone(),
-    };
+    let options = args.slurm_flags.options();
     let dir = args.output.join("slurm");
     let scripts = bbsplat::sweep::array_scripts("benchmark", &exe, &tasks, &collect, &dir, &options);
     let paths =

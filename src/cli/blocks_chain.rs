@@ -23,7 +23,7 @@
 
 use super::blocks::{PLAN_FILE, block_dir};
 use anyhow::{Context, Result};
-use bbsplat::sweep::{ArrayTask, SlurmOptions, array_scripts, write_slurm_scripts};
+use bbsplat::sweep::{ArrayTask, array_scripts, write_slurm_scripts};
 use bbsplat::train::run::{CHECKPOINT_FILE, MODEL_DIR, SUMMARY_FILE};
 use clap::Args;
 use std::path::{Path, PathBuf};
@@ -62,18 +62,8 @@ pub struct ChainArgs {
     /// Write the stages as Slurm jobs into `DIR/slurm/` instead of running them.
     #[arg(long)]
     pub slurm: bool,
-    /// With --slurm: CPUs per task.
-    #[arg(long, default_value_t = 2, requires = "slurm")]
-    pub cpus_per_task: u32,
-    /// With --slurm: memory per task in MB.
-    #[arg(long, requires = "slurm")]
-    pub mem: Option<u64>,
-    /// With --slurm: time limit per task, in Slurm's syntax (e.g. `45:00`).
-    #[arg(long, requires = "slurm")]
-    pub time: Option<String>,
-    /// With --slurm: the partition.
-    #[arg(long, requires = "slurm")]
-    pub partition: Option<String>,
+    #[command(flatten)]
+    pub slurm_flags: super::common::SlurmFlags,
 }
 
 /// The chain's stages as `bbsplat` argument lists (trainings without `--threads` and
@@ -228,12 +218,7 @@ fn run_stage(exe: &Path, what: &str, stage: &[String]) -> Result<()> {
 /// `--slurm`: the three array jobs with their collect jobs, and the submit script chaining
 /// them.
 fn write_chain_scripts(args: &ChainArgs, stages: &Stages, exe: &Path) -> Result<()> {
-    let options = SlurmOptions {
-        cpus_per_task: args.cpus_per_task,
-        mem_mb: args.mem,
-        time: args.time.clone(),
-        partition: args.partition.clone(),
-    };
+    let options = args.slurm_flags.options();
     let slurm = args.output.join("slurm");
     let parts = [
         ("coarse", std::slice::from_ref(&stages.coarse), &stages.split),

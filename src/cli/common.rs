@@ -342,3 +342,33 @@ impl From<LpipsNetwork> for bbsplat::lpips::Variant {
         }
     }
 }
+
+/// The Slurm flags of the commands that can write their runs as Slurm jobs (`benchmark`,
+/// `blocks run`), each valid with `--slurm` only.
+#[derive(Args, Clone, Debug)]
+pub struct SlurmFlags {
+    /// With --slurm: CPUs per task (each run gets as many threads).
+    #[arg(long, default_value_t = 2, requires = "slurm")]
+    pub cpus_per_task: u32,
+    /// With --slurm: memory per task in MB.
+    #[arg(long, requires = "slurm")]
+    pub mem: Option<u64>,
+    /// With --slurm: time limit per task, in Slurm's syntax (e.g. `45:00`).
+    #[arg(long, requires = "slurm")]
+    pub time: Option<String>,
+    /// With --slurm: the partition.
+    #[arg(long, requires = "slurm")]
+    pub partition: Option<String>,
+}
+
+impl SlurmFlags {
+    /// What the jobs ask of Slurm.
+    pub fn options(&self) -> bbsplat::sweep::SlurmOptions {
+        bbsplat::sweep::SlurmOptions {
+            cpus_per_task: self.cpus_per_task,
+            mem_mb: self.mem,
+            time: self.time.clone(),
+            partition: self.partition.clone(),
+        }
+    }
+}

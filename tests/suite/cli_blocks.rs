@@ -6,8 +6,9 @@ use crate::cli::{run, run_ok, temp};
 use bbsplat::blocks::Partition;
 use std::path::Path;
 
-/// The model files of a model folder (the PLY and the textures; not `bbsplat.json`).
-fn model_files(dir: &Path) -> Vec<(String, Vec<u8>)> {
+/// The model files of a model folder (the PLY and the textures; not `bbsplat.json`, which
+/// names its folder).
+pub(crate) fn model_files(dir: &Path) -> Vec<(String, Vec<u8>)> {
     let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().path())
@@ -37,11 +38,11 @@ fn chain(data: &Path, out: &Path, threads: &str, extra: &[&str]) -> String {
         "--grid",
         "2x1",
         "--coarse-iterations",
-        "200",
-        "--block-iterations",
-        "300",
-        "--polish-iterations",
         "100",
+        "--block-iterations",
+        "150",
+        "--polish-iterations",
+        "50",
         "--threads",
         threads,
     ];

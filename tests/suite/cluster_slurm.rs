@@ -108,21 +108,9 @@ fn submit_requeuing_task_1(
     start
 }
 
-/// The model files (the PLY and the textures; not `bbsplat.json`, which names its folder).
+/// The model files of a run folder's model ([`crate::cli_blocks::model_files`]).
 fn model_bytes(run: &Path) -> Vec<(String, Vec<u8>)> {
-    let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(run.join("model"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|x| x != "json"))
-        .map(|p| {
-            (
-                p.file_name().unwrap().to_string_lossy().into_owned(),
-                std::fs::read(&p).unwrap(),
-            )
-        })
-        .collect();
-    files.sort();
-    files
+    crate::cli_blocks::model_files(&run.join("model"))
 }
 
 #[test]
