@@ -333,7 +333,9 @@ fn surface_points_of(world: &World, centre: Vec3, spread: f32, n: usize, rng: &m
     while points.len() < n {
         // Shoot random rays from a random point on a sphere of radius 5 towards the scene: the
         // first hit is a visible surface point, as a structure-from-motion point would be.
-        let shift = centre + Vec3::new(rng.range(-spread, spread), 0.0, 0.0);
+        // No draw without a spread: the demo's own points stay those of its sequence.
+        let along = if spread > 0.0 { rng.range(-spread, spread) } else { 0.0 };
+        let shift = centre + Vec3::new(along, 0.0, 0.0);
         let theta = rng.range(0.0, std::f32::consts::TAU);
         let y = rng.range(0.15, 1.0);
         let r = (1.0 - y * y).sqrt();

@@ -21,7 +21,7 @@
 //! six with `afterok` dependencies. `--iterations` runs are deterministic on any thread count, so
 //! the chain under Slurm gives the same models as here.
 
-use super::blocks::{PLAN_FILE, block_dir};
+use super::blocks_files::{PLAN_FILE, block_dir};
 use anyhow::{Context, Result};
 use bbsplat::sweep::{ArrayTask, array_scripts, write_slurm_scripts};
 use bbsplat::train::run::{CHECKPOINT_FILE, MODEL_DIR, SUMMARY_FILE};
@@ -145,7 +145,7 @@ fn stages(args: &ChainArgs, cells: usize) -> Stages {
 
 /// Runs `bbsplat blocks run`.
 pub fn run(args: &ChainArgs) -> Result<()> {
-    let (columns, rows) = super::blocks::grid(&args.grid).map_err(|e| anyhow::anyhow!("--grid {e}"))?;
+    let (columns, rows) = super::blocks_files::grid(&args.grid).map_err(|e| anyhow::anyhow!("--grid {e}"))?;
     for (flag, n) in [
         ("--coarse-iterations", args.coarse_iterations),
         ("--block-iterations", args.block_iterations),

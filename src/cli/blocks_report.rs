@@ -7,7 +7,7 @@
 //! evaluation and saving are not counted) and the wall seconds the split and the merge record
 //! themselves.
 
-use super::blocks::{MERGE_FILE, MergeRecord, block_dir, read_plan};
+use super::blocks_files::{MERGE_FILE, MergeRecord, block_dir, read_plan};
 use anyhow::{Context, Result};
 use bbsplat::benchmark::BenchmarkRow;
 use bbsplat::blocks::wall_time::chain_wall_time;

@@ -4,6 +4,7 @@
 pub mod benchmark;
 pub mod blocks;
 pub mod blocks_chain;
+pub mod blocks_files;
 pub mod blocks_report;
 pub mod common;
 pub mod demo;
