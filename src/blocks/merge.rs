@@ -28,6 +28,14 @@ pub fn block_init(partition: &Partition, coarse: &RawBillboards, cell: usize) ->
     coarse.rows_where(|i| partition.in_cell_or_margin(cell, partition.frame.project(coarse.positions[i])))
 }
 
+/// The billboards of `block` (the model trained for cell `cell`) whose centres lie in that cell:
+/// what the merge keeps of it. A caller merging models too large to hold together takes each
+/// block's share in turn and appends it ([`crate::train::grow::append_rows`]), as `bbsplat
+/// blocks merge` does.
+pub fn own_cell(partition: &Partition, block: &RawBillboards, cell: usize) -> RawBillboards {
+    block.rows_where(|i| partition.cell_of_point(block.positions[i]) == cell)
+}
+
 /// Block `k`'s billboards in cell `k`, for every block, joined (module docs), and how many
 /// each block kept.
 ///
@@ -43,7 +51,7 @@ pub fn merge(partition: &Partition, blocks: &[RawBillboards]) -> Result<(RawBill
     let mut merged: Option<RawBillboards> = None;
     let mut counts = Vec::with_capacity(blocks.len());
     for (k, block) in blocks.iter().enumerate() {
-        let kept = block.rows_where(|i| partition.cell_of_point(block.positions[i]) == k);
+        let kept = own_cell(partition, block, k);
         counts.push(kept.len());
         match &mut merged {
             None => merged = Some(kept),

@@ -28,7 +28,7 @@ pub mod visibility;
 pub mod wall_time;
 
 pub use ground::GroundFrame;
-pub use merge::{block_init, merge};
+pub use merge::{block_init, merge, own_cell};
 pub use partition::Partition;
 pub use visibility::{choose_views, impact_shares, overlap_factor};
 

@@ -177,42 +177,51 @@ fn split(args: &SplitArgs) -> Result<()> {
     Ok(())
 }
 
+/// Merges the blocks one at a time (loaded, cut to their own cell, appended, dropped), so that
+/// at most one block's model is held beside the merged one.
 fn merge(args: &MergeArgs) -> Result<()> {
     let start = std::time::Instant::now();
     let plan = read_plan(&args.blocks)?;
-    let mut models = Vec::new();
-    let mut first_meta: Option<ModelMeta> = None;
+    let mut merged: Option<(bbsplat::RawBillboards, ModelMeta)> = None;
+    let (mut kept, mut trained) = (Vec::new(), Vec::new());
     for block in &plan.blocks {
         let dir = block_dir(&args.blocks, block.cell)
             .join(&args.run)
             .join(bbsplat::train::run::MODEL_DIR);
         let (model, meta) = load_model(&dir).with_context(|| format!("reading block {}'s model", block.cell))?;
-        if let Some(first) = &first_meta {
-            anyhow::ensure!(
-                (first.sh_degree, first.background, first.texture_size)
-                    == (meta.sh_degree, meta.background, meta.texture_size),
-                "{}: SH degree, background or texture size differ from block 0's",
-                dir.display()
-            );
-        } else {
-            first_meta = Some(meta);
+        let own = blocks::own_cell(&plan.partition, &model, block.cell);
+        println!(
+            "block {}: {} of its {} billboards inside its cell",
+            block.cell,
+            own.len(),
+            model.len()
+        );
+        kept.push(own.len());
+        trained.push(model.len());
+        match &mut merged {
+            None => merged = Some((own, meta)),
+            Some((all, first)) => {
+                anyhow::ensure!(
+                    (first.sh_degree, first.background, first.texture_size)
+                        == (meta.sh_degree, meta.background, meta.texture_size),
+                    "{}: SH degree, background or texture size differ from block 0's",
+                    dir.display()
+                );
+                bbsplat::train::grow::append_rows(all, &own);
+            }
         }
-        models.push(model);
     }
-    let (merged, kept) = blocks::merge(&plan.partition, &models)?;
-    for (k, (model, kept)) in models.iter().zip(&kept).enumerate() {
-        println!("block {k}: {kept} of its {} billboards inside its cell", model.len());
-    }
+    let (merged, first) = merged.expect("a plan has at least one block");
     let meta = ModelMeta {
         billboards: merged.len(),
         scene: None,
-        ..first_meta.expect("a plan has at least one block")
+        ..first
     };
     save_model(&args.output, &merged, &meta).with_context(|| format!("writing {}", args.output.display()))?;
     println!("merged model: {} billboards in {}", merged.len(), args.output.display());
     let record = MergeRecord {
         kept,
-        trained: models.iter().map(|m| m.len()).collect(),
+        trained,
         seconds: start.elapsed().as_secs_f64(),
     };
     let json = serde_json::to_string_pretty(&record).context("encoding the merge record")?;

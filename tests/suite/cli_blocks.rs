@@ -263,5 +263,23 @@ fn the_block_stages_refuse_bad_inputs_by_name() {
         "0x1",
     ]);
     assert!(!ok && err.contains("from 1 to 64"), "{err}");
+    let (ok, err) = run(&[
+        "blocks",
+        "split",
+        data_s,
+        "--coarse",
+        model.to_str().unwrap(),
+        "-o",
+        root.join("b").to_str().unwrap(),
+        "--min-share",
+        "2",
+    ]);
+    assert!(
+        !ok && err.contains("--min-share must be a fraction from 0 to 1 (got 2)"),
+        "{err}"
+    );
+    // A report of a folder that holds no chain names the plan it looked for.
+    let (ok, err) = run(&["blocks", "report", root.to_str().unwrap()]);
+    assert!(!ok && err.contains("blocks.json"), "{err}");
     std::fs::remove_dir_all(&root).ok();
 }
