@@ -2,7 +2,7 @@
 //! `byte / 255` values), and optionally the two side by side (first left) in one PNG.
 //!
 //! ```text
-//! cargo run --release --example compare_images -- A.png B.png [--side-by-side OUT.png]
+//! cargo run --release --features examples --example compare_images -- A.png B.png [--side-by-side OUT.png]
 //! ```
 //! Used for the Blender and browser comparisons of docs/export.md.
 

@@ -5,7 +5,7 @@
 //! plot as SVG. docs/perf.md, "Cost model", has the figures.
 //!
 //! ```text
-//! cargo run --release --example cost_model -- OUT.svg [SIZES] [BILLBOARDS] [STEPS]
+//! cargo run --release --features examples --example cost_model -- OUT.svg [SIZES] [BILLBOARDS] [STEPS]
 //! ```
 //!
 //! `SIZES` and `BILLBOARDS` are comma-separated (default `200,400,800,1600` and

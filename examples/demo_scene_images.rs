@@ -1,6 +1,6 @@
 //! Writes the ground-truth images of the embedded demo scene as PNG files.
 //!
-//! `cargo run --release --example demo_scene_images -- out/demo_gt`
+//! `cargo run --release --features examples --example demo_scene_images -- out/demo_gt`
 use bbsplat::demo::{DemoConfig, generate};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

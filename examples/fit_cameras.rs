@@ -2,7 +2,7 @@
 //! under the frozen model ([`bbsplat::train::camera_fit::fit_camera`]).
 //!
 //! ```text
-//! cargo run --release --example fit_cameras -- MODEL SCENE_DIR [ITERATIONS] [ROTATION] [TRANSLATION] [FOCAL]
+//! cargo run --release --features examples --example fit_cameras -- MODEL SCENE_DIR [ITERATIONS] [ROTATION] [TRANSLATION] [FOCAL]
 //! ```
 //!
 //! `MODEL` is a model folder written by `bbsplat train`; the step sizes default to 1e-3 rad,

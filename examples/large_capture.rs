@@ -3,7 +3,7 @@
 //! loading at the sizes of real captures (docs/scene.md, "Large captures"). 3 000 photos of
 //! 1000×750 take 2 minutes and 200 MB of disk on 2 cores.
 //!
-//! `cargo run --release --example large_capture -- DIR [N [W [H]]]` (default 3000 1000 750)
+//! `cargo run --release --features examples --example large_capture -- DIR [N [W [H]]]` (default 3000 1000 750)
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);

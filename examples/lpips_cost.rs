@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! python3 tools/lpips_weights.py   # once
-//! cargo run --release --example lpips_cost -- [SIDE (400)] [REPEATS (3)]
+//! cargo run --release --features examples --example lpips_cost -- [SIDE (400)] [REPEATS (3)]
 //! ```
 //! The images are a deterministic pattern and the same pattern with noise; the time of each
 //! repeat is printed, then the median.

@@ -5,7 +5,7 @@
 //! harness for rasterizer changes (the printed checksum covers the images and every gradient).
 //!
 //! ```text
-//! cargo run --release --example model_stats -- MODEL SCENE_DIR [white|black] [VIEWS] [REPEATS] [DOWNSCALE]
+//! cargo run --release --features examples --example model_stats -- MODEL SCENE_DIR [white|black] [VIEWS] [REPEATS] [DOWNSCALE]
 //! ```
 //!
 //! `MODEL` is a model folder written by `bbsplat train` or a checkpoint file

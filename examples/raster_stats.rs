@@ -1,7 +1,7 @@
 //! Work statistics and phase timings of the rasterizer on the standard benchmark scene, or on a
 //! trained-like scene (`bbsplat::billboards::trained_like`).
 //!
-//! `cargo run --release --example raster_stats -- 256 50000`
+//! `cargo run --release --features examples --example raster_stats -- 256 50000`
 //!
 //! `raster_stats object 400 10000 ...` (or `capture`) uses the trained-like scene of that preset
 //! instead of the random benchmark scene, with the same modes below, and prints its workload

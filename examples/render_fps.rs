@@ -3,7 +3,7 @@
 //! footprint `width / sqrt(N)` so overlap per pixel stays roughly constant), one fixed view.
 //!
 //! ```text
-//! cargo run --release --example render_fps -- --sizes 400,800 --budgets 10000,50000,100000,200000 --frames 7
+//! cargo run --release --features examples --example render_fps -- --sizes 400,800 --budgets 10000,50000,100000,200000 --frames 7
 //! ```
 //!
 //! Per (size, budget): one warm-up frame, then `--frames` timed frames; prints the median and

@@ -6,7 +6,7 @@
 //! ```text
 //! bbsplat render MODEL SCENE -o RENDERS                   # RENDERS/0000_<name>.png, ...
 //! bbsplat export MODEL SCENE -o OUT --format splat-ply    # OUT/gaussians.ply
-//! cargo run --release --example splat_psnr -- OUT/gaussians.ply MODEL SCENE RENDERS [--views N] [--save DIR]
+//! cargo run --release --features examples --example splat_psnr -- OUT/gaussians.ply MODEL SCENE RENDERS [--views N] [--save DIR]
 //! ```
 //! The model folder gives the background and the SH degree (`bbsplat.json`); the scene is loaded
 //! with the default options (those of `bbsplat render` without flags). Prints one line per view

@@ -2,7 +2,7 @@
 //! run), then writes a CSV, JSON, markdown table and SVG plots of speed against error.
 //!
 //! ```text
-//! cargo build --release && cargo run --release --example sweep -- scenes/lego --out sweeps/lego \
+//! cargo build --release && cargo run --release --features examples --example sweep -- scenes/lego --out sweeps/lego \
 //!     --billboards 1000,3000 --iterations 500,2000 -- --threads 2 --downscale 2
 //! ```
 //!

@@ -6,7 +6,7 @@
 //! cores of a bigger machine", has the figures.
 //!
 //! ```text
-//! cargo run --release --example tile_replay -- MODEL SCENE_DIR [VIEWS] [REPEATS]
+//! cargo run --release --features examples --example tile_replay -- MODEL SCENE_DIR [VIEWS] [REPEATS]
 //! ```
 //!
 //! `MODEL` is a model folder or a checkpoint; `VIEWS` test views (default 4), each measured

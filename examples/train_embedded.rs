@@ -2,7 +2,7 @@
 //! as a COLMAP folder), planned as `bbsplat train` plans it, 300 steps, the model saved to a
 //! folder, one test view rendered to a PNG.
 //!
-//! `cargo run --release --example train_embedded [output folder]` (default: a folder in the
+//! `cargo run --release --features examples --example train_embedded [output folder]` (default: a folder in the
 //! system's temporary directory).
 
 use bbsplat::demo::{DemoConfig, export_colmap, generate};

@@ -107,7 +107,7 @@
 //!
 //! Without features (`default-features = false`) the crate is the core above (scene input,
 //! initialisation, model, training, model files, rendering, evaluation), built on glam, rayon,
-//! image, serde, serde_json, thiserror, kiddo, zip and libc.
+//! image, serde, serde_json, thiserror, zip and libc.
 
 #![deny(missing_docs)]
 #![warn(clippy::undocumented_unsafe_blocks, clippy::missing_safety_doc)]
@@ -134,6 +134,7 @@ pub mod fnv;
 #[cfg(feature = "testing")]
 pub mod gradcheck;
 pub mod init;
+pub mod kdtree;
 pub mod loss;
 pub mod lpips;
 pub mod memory;

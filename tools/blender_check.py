@@ -24,7 +24,7 @@ textures are sRGB: Blender linearises them, blends in linear light and encodes t
 sRGB), which is what a user opening the file gets.
 
 Compare with `bbsplat render` of the same camera (docs/export.md), e.g.
-    cargo run --release --example compare_images -- OUT.png RENDER.png --side-by-side both.png
+    cargo run --release --features examples --example compare_images -- OUT.png RENDER.png --side-by-side both.png
 """
 
 import json

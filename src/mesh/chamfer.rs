@@ -9,13 +9,14 @@
 //! nearest sample lies about `0.5·√(A/n)` away even on the same surface; sample densely. Normal
 //! consistency is the mean over both directions of `|n_p · n_q|` for each point `p` and its
 //! nearest neighbour `q` (Occupancy Networks' definition: unsigned, 1 for aligned surfaces).
-//! Nearest neighbours come from a k-d tree ([`kiddo`]) over f64 coordinates; sums run in sample
+//! Nearest neighbours come from the crate's k-d tree ([`crate::kdtree`]) over f64 coordinates
+//! (of several equally near samples, the first one's normal is used); sums run in sample
 //! order, so results do not depend on the thread count.
 
 use super::{MeshError, TriangleMesh};
+use crate::kdtree::KdTree;
 use crate::rng::Rng;
 use glam::Vec3;
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
 /// Points on a surface with their unit normals.
@@ -99,15 +100,15 @@ pub struct ChamferReport {
 /// Per point of `from`: distance to the nearest point of `to` and `|n·n'|` with its normal.
 fn nearest(from: &SurfaceSamples, to: &SurfaceSamples) -> Vec<(f64, f64)> {
     let coords: Vec<[f64; 3]> = to.points.iter().map(|p| p.as_dvec3().to_array()).collect();
-    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&coords).expect("finite points build a tree");
+    let tree = KdTree::new(&coords);
     from.points
         .par_iter()
         .zip(&from.normals)
         .map(|(p, n)| {
             let q = p.as_dvec3().to_array();
-            let hit = tree.query(&q).nearest_one::<SquaredEuclidean<f64>>().execute();
-            let other = to.normals[hit.item as usize];
-            (hit.distance.sqrt(), n.dot(other).abs() as f64)
+            let (distance, item) = tree.nearest::<1>(q, None).as_slice()[0];
+            let other = to.normals[item];
+            (distance.sqrt(), n.dot(other).abs() as f64)
         })
         .collect()
 }

@@ -315,6 +315,7 @@ fn f32s_of(array: &serde_json::Value) -> Vec<f32> {
 }
 
 #[test]
+#[ignore = "slow tier (CI runs it): cargo test --test suite -- --ignored --skip ::measure"]
 fn the_live_view_in_headless_chromium_draws_the_training_model() {
     let Some(chromium) = find_tool(
         "the_live_view_in_headless_chromium_draws_the_training_model",

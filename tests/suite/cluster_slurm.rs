@@ -114,6 +114,7 @@ fn model_bytes(run: &Path) -> Vec<(String, Vec<u8>)> {
 }
 
 #[test]
+#[ignore = "slow tier (CI runs it): cargo test --test suite -- --ignored --skip ::measure"]
 fn a_sweep_runs_as_slurm_jobs_and_a_requeued_task_resumes_to_the_local_result() {
     let test = "a_sweep_runs_as_slurm_jobs";
     let Some(conf) = cluster(test) else { return };
@@ -215,6 +216,7 @@ fn shell_quoted_words_read_back_unchanged() {
 /// task 1 is requeued while it trains (Slurm's SIGTERM makes it save a checkpoint) and resumes;
 /// both models are bit for bit those of the same benchmark run locally.
 #[test]
+#[ignore = "slow tier (CI runs it): cargo test --test suite -- --ignored --skip ::measure"]
 fn a_benchmark_runs_as_slurm_jobs_and_a_requeued_scene_resumes_to_the_local_result() {
     let test = "a_benchmark_runs_as_slurm_jobs";
     let Some(conf) = cluster(test) else { return };
@@ -284,6 +286,7 @@ fn a_benchmark_runs_as_slurm_jobs_and_a_requeued_scene_resumes_to_the_local_resu
 /// and the benchmark's, tested above; requeueing a task of this chain's dependent array once
 /// left it never started again under the test's load, not understood yet: docs/cluster.md.)
 #[test]
+#[ignore = "slow tier (CI runs it): cargo test --test suite -- --ignored --skip ::measure"]
 fn a_block_chain_runs_as_chained_slurm_jobs_to_the_local_result() {
     let test = "a_block_chain_runs_as_chained_slurm_jobs";
     let Some(conf) = cluster(test) else { return };

@@ -41,6 +41,7 @@ mod init_fibonacci;
 mod init_fps;
 mod init_hull;
 mod init_scene;
+mod kdtree;
 mod layering;
 mod loss_masked;
 mod loss_normal_consistency;
