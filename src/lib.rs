@@ -107,7 +107,7 @@
 //!
 //! Without features (`default-features = false`) the crate is the core above (scene input,
 //! initialisation, model, training, model files, rendering, evaluation), built on glam, rayon,
-//! image, serde, serde_json, thiserror, zip and libc.
+//! image, serde, serde_json, thiserror, miniz_oxide, crc32fast and libc.
 
 #![deny(missing_docs)]
 #![warn(clippy::undocumented_unsafe_blocks, clippy::missing_safety_doc)]
@@ -154,6 +154,7 @@ pub mod sweep;
 #[cfg(feature = "testing")]
 pub mod testing_internals;
 pub mod train;
+pub mod zipfile;
 
 /// The README's Rust examples, compiled by `cargo test` (a doctest each).
 #[cfg(doctest)]

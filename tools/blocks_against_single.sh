@@ -1,7 +1,8 @@
 #!/bin/bash
 # The block chain against one run of the same step time, on the street and on beer_colmap
 # (docs/cluster.md, "Tier 2"): `bbsplat blocks run`, then `bbsplat train --minutes M` with M the
-# chain's summed step time; one line per run in OUT/summary.txt. Needs a release build
+# chain's summed step time; one line per run in OUT/summary.txt, and both models' PSNR in the seam
+# bands (`bbsplat blocks seams`). Needs a release build
 # (`cargo build --release`) and the shared data; takes about 25 minutes on 2 cores.
 # Usage: tools/blocks_against_single.sh [OUT] [DATA]   (defaults /tmp/blocks_against_single, ../shared/data)
 set -u
@@ -23,6 +24,9 @@ measure() { # name scene grid coarse block polish
   $B train $scene -o $name/single --minutes $minutes --quiet > $name/single.log 2>&1
   e=$(date +%s.%N)
   echo "$name single wall $(echo "$e - $s" | bc) s (--minutes $minutes)" >> summary.txt
+  # Both models where the cells meet (the band from the chain's coarse depth).
+  $B blocks seams $name/chain --model $name/single > $name/seams.log 2>&1
+  grep -E '^seam band|PSNR' $name/seams.log | sed "s|^|$name seams: |" >> summary.txt
   python3 - "$name" >> summary.txt <<'PY'
 import json,sys
 n=sys.argv[1]

@@ -95,6 +95,28 @@ impl GroundFrame {
         })
     }
 
+    /// The frame with its ground axes turned by `degrees` about up (counter-clockwise seen from
+    /// above: `along` turns towards `across`), for a grid that the cameras' main spread does not
+    /// align well (`bbsplat blocks split --turn`). Computed in f64; `up` and the origin are kept.
+    ///
+    /// ```
+    /// use bbsplat::blocks::GroundFrame;
+    /// use glam::Vec3;
+    /// let frame = GroundFrame { origin: Vec3::ZERO, up: Vec3::Y, along: Vec3::X, across: Vec3::NEG_Z };
+    /// let turned = frame.turned(90.0);
+    /// assert!((turned.along - Vec3::NEG_Z).length() < 1e-6 && (turned.across - Vec3::NEG_X).length() < 1e-6);
+    /// ```
+    pub fn turned(&self, degrees: f32) -> Self {
+        let (sin, cos) = (degrees as f64).to_radians().sin_cos();
+        let (up, along, across) = (self.up.as_dvec3(), self.along.as_dvec3(), self.across.as_dvec3());
+        let turned = (along * cos + across * sin).normalize();
+        Self {
+            along: turned.as_vec3(),
+            across: up.cross(turned).as_vec3(),
+            ..*self
+        }
+    }
+
     /// Ground coordinates of `p`: its offsets from the origin along `along` and `across`.
     pub fn project(&self, p: Vec3) -> Vec2 {
         let d = p - self.origin;

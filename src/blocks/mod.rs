@@ -13,7 +13,8 @@
 //!    blocks merge`);
 //! 5. a short polish of the merged model on all views (`bbsplat train --init-model`), and eval;
 //! 6. the report (`bbsplat blocks report`): each stage's time and figures, and the chain's wall
-//!    time on `K` machines ([`wall_time`]).
+//!    time on `K` machines ([`wall_time`]); `bbsplat blocks seams` the quality in the bands
+//!    where cells meet ([`mod@seams`]), of the chain's model and of any other model of the scene.
 //!
 //! `bbsplat blocks run` runs the chain stage after stage, or writes it as Slurm jobs.
 //!
@@ -24,12 +25,14 @@
 pub mod ground;
 pub mod merge;
 pub mod partition;
+pub mod seams;
 pub mod visibility;
 pub mod wall_time;
 
 pub use ground::GroundFrame;
 pub use merge::{block_init, merge, own_cell};
 pub use partition::Partition;
+pub use seams::{distance_to_seam, seam_band_mask};
 pub use visibility::{choose_views, impact_shares, overlap_factor};
 
 /// What can go wrong partitioning a scene or merging its blocks.

@@ -147,11 +147,19 @@ impl Partition {
         self.cell_of(self.frame.project(p))
     }
 
+    /// Cell `cell`'s bounds: `((along low, along high), (across low, across high))`, infinite
+    /// on the grid's outer sides.
+    pub fn cell_bounds(&self, cell: usize) -> ((f32, f32), (f32, f32)) {
+        let (column, row) = (cell / self.rows(), cell % self.rows());
+        (
+            interval_bounds(&self.along_cuts, column),
+            interval_bounds(&self.across_cuts[column], row),
+        )
+    }
+
     /// True when ground point `q` lies in cell `cell` widened by the margin on every side.
     pub fn in_cell_or_margin(&self, cell: usize, q: Vec2) -> bool {
-        let (column, row) = (cell / self.rows(), cell % self.rows());
-        let (a0, a1) = interval_bounds(&self.along_cuts, column);
-        let (b0, b1) = interval_bounds(&self.across_cuts[column], row);
+        let ((a0, a1), (b0, b1)) = self.cell_bounds(cell);
         let m = self.margin;
         a0 - m <= q.x && q.x < a1 + m && b0 - m <= q.y && q.y < b1 + m
     }

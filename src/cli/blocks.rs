@@ -35,6 +35,8 @@ pub enum BlocksCommand {
     Run(super::blocks_chain::ChainArgs),
     /// Write a chain's report: each stage's time and figures, and its wall time on K machines.
     Report(super::blocks_report::ReportArgs),
+    /// Measure the test views where the cells meet, for the chain's model and other models.
+    Seams(super::blocks_seams::SeamsArgs),
 }
 
 /// Flags of `bbsplat blocks split`.
@@ -63,6 +65,10 @@ pub struct SplitArgs {
     /// What the cells are balanced by.
     #[arg(long, value_enum, default_value_t = Balance::Cameras)]
     pub balance: Balance,
+    /// Turn the grid by this many degrees about up, from the cameras' main spread towards
+    /// across it (for a capture whose main spread is not the way to cut it).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub turn: f32,
 }
 
 /// Flags of `bbsplat blocks merge`.
@@ -85,6 +91,7 @@ pub fn run(command: BlocksCommand) -> Result<()> {
         BlocksCommand::Merge(args) => merge(&args),
         BlocksCommand::Run(args) => super::blocks_chain::run(&args),
         BlocksCommand::Report(args) => super::blocks_report::run(&args),
+        BlocksCommand::Seams(args) => super::blocks_seams::run(&args),
     }
 }
 
@@ -100,6 +107,12 @@ fn split(args: &SplitArgs) -> Result<()> {
     let (scene, _) = args.scene_args.load_for_training(&args.scene)?;
     let frame = GroundFrame::from_cameras(scene.train.iter().map(|v| &v.camera))
         .with_context(|| format!("{}: the scene has no training view", args.scene.display()))?;
+    anyhow::ensure!(
+        args.turn.is_finite(),
+        "--turn must be a finite angle in degrees (got {})",
+        args.turn
+    );
+    let frame = frame.turned(args.turn);
     let points: Vec<glam::Vec2> = match args.balance {
         Balance::Cameras => scene.train.iter().map(|v| frame.project(v.camera.centre())).collect(),
         Balance::Billboards => coarse.positions.iter().map(|&p| frame.project(p)).collect(),

@@ -32,8 +32,11 @@ use std::process::Command;
 /// Flags of `bbsplat blocks run`.
 #[derive(Args, Clone, Debug)]
 pub struct ChainArgs {
-    /// The dataset (any format `bbsplat train` reads, with its default scene flags).
+    /// The dataset (any format `bbsplat train` reads).
     pub scene: PathBuf,
+    /// How the scene is read: passed to every stage that loads it (the trainings and the split).
+    #[command(flatten)]
+    pub scene_args: super::common::SceneArgs,
     /// The chain's folder (coarse/, blocks/, merged/, polish/, report.json; slurm/ with --slurm).
     #[arg(short, long)]
     pub output: PathBuf,
@@ -46,6 +49,9 @@ pub struct ChainArgs {
     /// `blocks split --min-share`.
     #[arg(long, default_value_t = 0.1)]
     pub min_share: f64,
+    /// `blocks split --turn` (degrees).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub turn: f32,
     /// Steps of the coarse run of the whole scene.
     #[arg(long, default_value_t = 1000)]
     pub coarse_iterations: usize,
@@ -81,8 +87,9 @@ fn text(p: &Path) -> String {
     p.display().to_string()
 }
 
-fn training(scene: &Path, out: PathBuf, iterations: usize, extra: &[String]) -> ArrayTask {
-    let mut args = vec!["train".to_string(), text(scene), "-o".into(), text(&out)];
+fn training(chain: &ChainArgs, out: PathBuf, iterations: usize, extra: &[String]) -> ArrayTask {
+    let mut args = vec!["train".to_string(), text(&chain.scene), "-o".into(), text(&out)];
+    args.extend(chain.scene_args.to_flags());
     args.extend(["--iterations".to_string(), iterations.to_string(), "--quiet".into()]);
     args.extend(extra.iter().cloned());
     ArrayTask { run_dir: out, args }
@@ -91,8 +98,8 @@ fn training(scene: &Path, out: PathBuf, iterations: usize, extra: &[String]) -> 
 fn stages(args: &ChainArgs, cells: usize) -> Stages {
     let dir = &args.output;
     let blocks_dir = dir.join("blocks");
-    let coarse = training(&args.scene, dir.join("coarse"), args.coarse_iterations, &[]);
-    let split = vec![
+    let coarse = training(args, dir.join("coarse"), args.coarse_iterations, &[]);
+    let mut split = vec![
         "blocks".to_string(),
         "split".into(),
         text(&args.scene),
@@ -106,7 +113,10 @@ fn stages(args: &ChainArgs, cells: usize) -> Stages {
         args.margin.to_string(),
         "--min-share".into(),
         args.min_share.to_string(),
+        "--turn".into(),
+        args.turn.to_string(),
     ];
+    split.extend(args.scene_args.to_flags());
     let blocks = (0..cells)
         .map(|k| {
             let block = block_dir(&blocks_dir, k);
@@ -116,7 +126,7 @@ fn stages(args: &ChainArgs, cells: usize) -> Stages {
                 "--views".into(),
                 text(&block.join("views.txt")),
             ];
-            training(&args.scene, block.join("run"), args.block_iterations, &extra)
+            training(args, block.join("run"), args.block_iterations, &extra)
         })
         .collect();
     let merge = vec![
@@ -127,7 +137,7 @@ fn stages(args: &ChainArgs, cells: usize) -> Stages {
         text(&dir.join("merged")),
     ];
     let polish = training(
-        &args.scene,
+        args,
         dir.join("polish"),
         args.polish_iterations,
         &["--init-model".to_string(), text(&dir.join("merged"))],

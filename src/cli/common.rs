@@ -100,6 +100,43 @@ impl From<MaskModeArg> for MaskMode {
 }
 
 impl SceneArgs {
+    /// These flags written back as command-line words, those that differ from their defaults
+    /// only, for the stages of a chain that load the same scene (`bbsplat blocks run`): parsing
+    /// them gives these flags again.
+    pub fn to_flags(&self) -> Vec<String> {
+        let name = |v: Option<clap::builder::PossibleValue>| v.map_or(String::new(), |v| v.get_name().to_string());
+        let mut flags = Vec::new();
+        if let Some(b) = self.background {
+            flags.extend(["--background".to_string(), name(b.to_possible_value())]);
+        }
+        if self.downscale != 1 {
+            flags.extend(["--downscale".to_string(), self.downscale.to_string()]);
+        }
+        if let Some(w) = self.max_width {
+            flags.extend(["--max-width".to_string(), w.to_string()]);
+        }
+        if self.test_every != 8 {
+            flags.extend(["--test-every".to_string(), self.test_every.to_string()]);
+        }
+        if self.allow_damaged_images {
+            flags.push("--allow-damaged-images".into());
+        }
+        if self.keep_folded {
+            flags.push("--keep-folded".into());
+        }
+        if let Some(dir) = &self.masks {
+            flags.extend(["--masks".to_string(), dir.display().to_string()]);
+        }
+        if self.mask_mode != MaskModeArg::Composite {
+            flags.extend(["--mask-mode".to_string(), name(self.mask_mode.to_possible_value())]);
+        }
+        if self.image_memory != 2 << 30 {
+            // Whole KiB: what `byte_size` parses back to the same count.
+            flags.extend(["--image-memory".to_string(), format!("{}K", self.image_memory / 1024)]);
+        }
+        flags
+    }
+
     /// The load options of these flags. Warnings (a folded registration turned back, damaged
     /// images, ...) are always printed to stderr, `--quiet` or not, and recorded in the run's
     /// summary.

@@ -6,6 +6,7 @@ pub mod blocks;
 pub mod blocks_chain;
 pub mod blocks_files;
 pub mod blocks_report;
+pub mod blocks_seams;
 pub mod common;
 pub mod demo;
 pub mod export;

@@ -384,7 +384,7 @@ fn encode(dir: &Path, model: &RawBillboards, meta: &ModelMeta) -> Result<Vec<(&'
         .collect();
     let zip_err = |file: &str| {
         let path = dir.join(file);
-        move |e: zip::result::ZipError| ModelFileError::Npz {
+        move |e: crate::zipfile::ZipError| ModelFileError::Npz {
             path,
             reason: format!("cannot write the archive: {e}"),
         }

@@ -1,12 +1,10 @@
-//! Minimal numpy `.npy` (format 1.0, `uint8`, C order) and `.npz` (deflate zip) support: the
+//! Minimal numpy `.npy` (format 1.0, `uint8`, C order) and `.npz` (deflate zip, [`crate::zipfile`]) support: the
 //! two texture files of a model folder, written as `numpy.savez_compressed` writes them and
 //! read with every size checked before allocating.
 
 use super::ModelFileError;
-use std::io::{Cursor, Read, Write};
+use crate::zipfile::{Method, ZipArchive, ZipError, write_zip};
 use std::path::Path;
-use zip::write::SimpleFileOptions;
-use zip::{CompressionMethod, DateTime, ZipArchive, ZipWriter};
 
 /// Largest `.npy` header we accept (numpy itself writes 118 bytes for our arrays).
 const MAX_HEADER: usize = 4096;
@@ -20,16 +18,9 @@ pub(crate) fn npy_u8(shape: &[usize], data: &[u8]) -> Vec<u8> {
 }
 
 /// A zip archive with one deflated member `name` (e.g. `texture_alpha.npy`) holding `npy`, with
-/// a fixed timestamp (1980-01-01) so that equal arrays give equal bytes.
-pub(crate) fn npz_bytes(name: &str, npy: &[u8]) -> Result<Vec<u8>, zip::result::ZipError> {
-    let mut zip = ZipWriter::new(Cursor::new(Vec::new()));
-    let options = SimpleFileOptions::default()
-        .compression_method(CompressionMethod::Deflated)
-        .last_modified_time(DateTime::default())
-        .unix_permissions(0o644);
-    zip.start_file(name, options)?;
-    zip.write_all(npy)?;
-    Ok(zip.finish()?.into_inner())
+/// a fixed timestamp (1980-01-01) so that equal arrays give equal bytes ([`crate::zipfile`]).
+pub(crate) fn npz_bytes(name: &str, npy: &[u8]) -> Result<Vec<u8>, ZipError> {
+    write_zip(&[(name, npy)], Method::Deflated)
 }
 
 /// Reads member `member` of the npz `bytes` (file `path`, for errors) as a `uint8` array whose
@@ -44,20 +35,33 @@ pub(crate) fn read_npz_u8(
         path: path.to_path_buf(),
         reason,
     };
-    let mut archive = ZipArchive::new(Cursor::new(bytes)).map_err(|e| bad(format!("not a readable zip: {e}")))?;
-    let mut entry = archive.by_name(member).map_err(|e| match e {
-        zip::result::ZipError::FileNotFound => bad(format!("no array {member:?} in the archive")),
-        e => bad(format!("cannot open {member}: {e}")),
-    })?;
+    let archive = ZipArchive::parse(bytes).map_err(|e| bad(e.to_string()))?;
     let data_len: usize = expected.iter().product();
-    // Read at most what a well-formed file can hold, plus one byte to detect excess.
-    let limit = (10 + MAX_HEADER + data_len + 1) as u64;
-    let mut npy = Vec::new();
-    (&mut entry)
-        .take(limit)
-        .read_to_end(&mut npy)
-        .map_err(|e| bad(format!("cannot decompress {member}: {e}")))?;
-    drop(entry);
+    // At most what a well-formed file of this shape can hold.
+    let limit = (10 + MAX_HEADER + data_len) as u64;
+    let npy = archive.read(member, limit).map_err(|e| match e {
+        ZipError::NotFound(_) => bad(format!("no array {member:?} in the archive")),
+        ZipError::TooLarge { size, .. } => {
+            // Too long for this shape: its header says which shape it holds.
+            let shape = archive
+                .read_prefix(member, 10 + MAX_HEADER)
+                .ok()
+                .and_then(|head| parse_npy_header(&head).ok())
+                .map(|(shape, _)| shape);
+            match shape {
+                Some(found) if found != expected => ModelFileError::Shape {
+                    path: path.to_path_buf(),
+                    array: member.to_string(),
+                    found,
+                    expected: expected.to_vec(),
+                },
+                _ => bad(format!(
+                    "{member} holds {size} bytes, more than an array of shape {expected:?} needs"
+                )),
+            }
+        }
+        e => bad(format!("cannot read {member}: {e}")),
+    })?;
     let (shape, offset) = parse_npy_header(&npy).map_err(|r| bad(format!("{member}: {r}")))?;
     if shape != expected {
         return Err(ModelFileError::Shape {

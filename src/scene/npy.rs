@@ -16,8 +16,8 @@
 //! assert!(parse_npy(&bytes[..bytes.len() - 1]).is_err()); // truncated
 //! ```
 
+use crate::zipfile::{Method, ZipArchive, ZipError, write_zip};
 use std::collections::BTreeMap;
-use std::io::{Cursor, Read, Write};
 
 /// The magic string every `.npy` file starts with.
 pub const MAGIC: &[u8; 6] = b"\x93NUMPY";
@@ -300,26 +300,17 @@ impl Npz {
     /// # Errors
     /// [`NpyError::Zip`] for an unreadable archive or member, [`NpyError::TooLarge`].
     pub fn parse(bytes: &[u8]) -> Result<Npz, NpyError> {
-        let mut archive = zip::ZipArchive::new(Cursor::new(bytes)).map_err(|e| NpyError::Zip(e.to_string()))?;
+        let archive = ZipArchive::parse(bytes).map_err(|e| NpyError::Zip(e.to_string()))?;
         let mut members = BTreeMap::new();
         let mut budget = MAX_NPZ_BYTES;
-        for i in 0..archive.len() {
-            let mut entry = archive.by_index(i).map_err(|e| NpyError::Zip(e.to_string()))?;
-            if entry.is_dir() {
-                continue;
-            }
-            let name = entry.name().map_err(|e| NpyError::Zip(e.to_string()))?.to_string();
-            let mut data = Vec::new();
-            (&mut entry)
-                .take(budget + 1)
-                .read_to_end(&mut data)
-                .map_err(|e| NpyError::Zip(format!("member {name:?}: {e}")))?;
-            if data.len() as u64 > budget {
-                return Err(NpyError::TooLarge);
-            }
+        for name in archive.names().filter(|n| !n.ends_with('/')) {
+            let data = archive.read(name, budget).map_err(|e| match e {
+                ZipError::TooLarge { .. } => NpyError::TooLarge,
+                e => NpyError::Zip(e.to_string()),
+            })?;
             budget -= data.len() as u64;
-            let key = name.strip_suffix(".npy").unwrap_or(&name).to_string();
-            members.insert(key, data);
+            let key = name.strip_suffix(".npy").unwrap_or(name).to_string();
+            members.entry(key).or_insert(data);
         }
         Ok(Npz { members })
     }
@@ -376,15 +367,9 @@ pub fn write_npy_raw(descr: &str, shape: &[usize], body: &[u8]) -> Vec<u8> {
 /// (give them `.npy`), as `numpy.savez` writes it. For tests, fuzzing and tools.
 ///
 /// # Errors
-/// The zip writer's error (only on a name the writer refuses).
-pub fn write_npz(members: &[(&str, Vec<u8>)]) -> Result<Vec<u8>, zip::result::ZipError> {
-    let mut zip = zip::ZipWriter::new(Cursor::new(Vec::new()));
-    let options = zip::write::SimpleFileOptions::default()
-        .compression_method(zip::CompressionMethod::Stored)
-        .last_modified_time(zip::DateTime::default());
-    for (name, bytes) in members {
-        zip.start_file(*name, options)?;
-        zip.write_all(bytes)?;
-    }
-    Ok(zip.finish()?.into_inner())
+/// [`ZipError::Unwritable`] for a name or size past the zip format's fields
+/// ([`crate::zipfile::write_zip`]).
+pub fn write_npz(members: &[(&str, Vec<u8>)]) -> Result<Vec<u8>, ZipError> {
+    let refs: Vec<(&str, &[u8])> = members.iter().map(|(n, b)| (*n, b.as_slice())).collect();
+    write_zip(&refs, Method::Stored)
 }

@@ -64,6 +64,7 @@ fn a_street_trained_as_blocks_merges_each_blocks_own_cell() {
         "32",
     ]);
     let out = root.join("one");
+    let out_s = out.to_str().unwrap();
     let printed = chain(&data, &out, "1", &[]);
     for stage in [
         "coarse run:",
@@ -128,6 +129,39 @@ fn a_street_trained_as_blocks_merges_each_blocks_own_cell() {
     // One machine: every stage in turn (the model rounds each block to the microsecond).
     let total = report["total_seconds"].as_f64().unwrap();
     assert!(two < one && (one - total).abs() < 1e-5, "{report}");
+    // The seam band: the polished model and, as another model, the coarse one, on one band.
+    let printed = run_ok(&[
+        "blocks",
+        "seams",
+        out_s,
+        "--model",
+        out.join("coarse").to_str().unwrap(),
+    ]);
+    assert!(printed.contains("seam band: within"), "{printed}");
+    let seams = json(&out.join("seams.json"));
+    let share = seams["band_share"].as_f64().unwrap();
+    assert!(share > 0.0 && share < 1.0, "{seams}");
+    assert!(seams["views_with_band"].as_u64().unwrap() > 0, "{seams}");
+    let models = seams["models"].as_array().unwrap();
+    assert_eq!(models.len(), 2, "{seams}");
+    assert!(
+        models[0]["model"].as_str().unwrap().ends_with("polish/model"),
+        "{seams}"
+    );
+    // The whole-view PSNR is the one the polish's own evaluation found.
+    let whole = models[0]["psnr"].as_f64().unwrap();
+    assert!(
+        (whole - polish["test_psnr"].as_f64().unwrap()).abs() < 1e-6,
+        "{seams} {polish}"
+    );
+    for m in models {
+        assert!(
+            m["band_psnr"].as_f64().unwrap() > 5.0 && m["off_band_psnr"].as_f64().unwrap() > 5.0,
+            "{seams}"
+        );
+    }
+    let (ok, err) = run(&["blocks", "seams", out_s, "--width", "0"]);
+    assert!(!ok && err.contains("give --width"), "{err}");
     // Run again: nothing to do, nothing changed.
     let before = model_files(&out.join("polish/model"));
     let again = chain(&data, &out, "1", &[]);
@@ -152,7 +186,21 @@ fn a_street_trained_as_blocks_merges_each_blocks_own_cell() {
     }
     // --slurm writes the jobs and runs nothing.
     let jobs = root.join("jobs");
-    let printed = chain(&data, &jobs, "1", &["--slurm", "--cpus-per-task", "1"]);
+    // With scene flags, which every stage that loads the scene gets.
+    let printed = chain(
+        &data,
+        &jobs,
+        "1",
+        &[
+            "--slurm",
+            "--cpus-per-task",
+            "1",
+            "--test-every",
+            "4",
+            "--background",
+            "white",
+        ],
+    );
     assert!(printed.contains("submit them with"), "{printed}");
     assert!(!jobs.join("coarse").exists(), "--slurm trained");
     let submit = std::fs::read_to_string(jobs.join("slurm/submit.sh")).unwrap();
@@ -162,9 +210,22 @@ fn a_street_trained_as_blocks_merges_each_blocks_own_cell() {
         blocks.contains("#SBATCH --array=0-1") && blocks.contains("--init-model"),
         "{blocks}"
     );
+    let split = std::fs::read_to_string(jobs.join("slurm/coarse/collect.sbatch")).unwrap();
+    let coarse = std::fs::read_to_string(jobs.join("slurm/coarse/coarse.sbatch")).unwrap();
+    for (what, script) in [("split", &split), ("coarse", &coarse), ("blocks", &blocks)] {
+        assert!(
+            script.contains("--test-every 4 --background white")
+                || script.contains("--background white --test-every 4"),
+            "{what}: {script}"
+        );
+    }
     let merge = std::fs::read_to_string(jobs.join("slurm/blocks/collect.sbatch")).unwrap();
     let exe = env!("CARGO_BIN_EXE_bbsplat");
     assert!(merge.contains(&format!("exec {exe} blocks merge")), "{merge}");
+    // A report of a chain missing a stage's summary names the file.
+    std::fs::remove_file(out.join("polish/summary.json")).unwrap();
+    let (ok, err) = run(&["blocks", "report", out_s]);
+    assert!(!ok && err.contains("polish/summary.json"), "{err}");
     std::fs::remove_dir_all(&root).ok();
 }
 
@@ -278,6 +339,22 @@ fn the_block_stages_refuse_bad_inputs_by_name() {
         !ok && err.contains("--min-share must be a fraction from 0 to 1 (got 2)"),
         "{err}"
     );
+    // An --init-model folder that holds no model names the folder and the file it lacks.
+    let empty = root.join("empty_model");
+    std::fs::create_dir_all(&empty).unwrap();
+    let (ok, err) = run(&[
+        "train",
+        data_s,
+        "-o",
+        root.join("from_empty").to_str().unwrap(),
+        "--init-model",
+        empty.to_str().unwrap(),
+    ]);
+    assert!(
+        !ok && err.contains("--init-model") && err.contains("empty_model"),
+        "{err}"
+    );
+    assert!(!root.join("from_empty").join("summary.json").exists());
     // A report of a folder that holds no chain names the plan it looked for.
     let (ok, err) = run(&["blocks", "report", root.to_str().unwrap()]);
     assert!(!ok && err.contains("blocks.json"), "{err}");

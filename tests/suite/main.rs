@@ -113,3 +113,4 @@ mod train_row_sums;
 mod train_run;
 mod train_texture_step;
 mod train_time_budget;
+mod zipfile;
