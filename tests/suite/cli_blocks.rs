@@ -312,31 +312,31 @@ fn the_block_stages_refuse_bad_inputs_by_name() {
         root.join("m").to_str().unwrap(),
     ]);
     assert!(!ok && err.contains("blocks.json"), "{err}");
-    let (ok, err) = run(&[
-        "blocks",
-        "split",
-        data_s,
-        "--coarse",
-        model.to_str().unwrap(),
-        "-o",
-        root.join("b").to_str().unwrap(),
-        "--grid",
-        "0x1",
-    ]);
+    // `blocks split` with one bad flag.
+    let b = root.join("b");
+    let split_with = |extra: &[&str]| {
+        let mut args = vec![
+            "blocks",
+            "split",
+            data_s,
+            "--coarse",
+            model.to_str().unwrap(),
+            "-o",
+            b.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        run(&args)
+    };
+    let (ok, err) = split_with(&["--grid", "0x1"]);
     assert!(!ok && err.contains("from 1 to 64"), "{err}");
-    let (ok, err) = run(&[
-        "blocks",
-        "split",
-        data_s,
-        "--coarse",
-        model.to_str().unwrap(),
-        "-o",
-        root.join("b").to_str().unwrap(),
-        "--min-share",
-        "2",
-    ]);
+    let (ok, err) = split_with(&["--min-share", "2"]);
     assert!(
         !ok && err.contains("--min-share must be a fraction from 0 to 1 (got 2)"),
+        "{err}"
+    );
+    let (ok, err) = split_with(&["--turn", "NaN"]);
+    assert!(
+        !ok && err.contains("--turn must be a finite angle in degrees (got NaN)"),
         "{err}"
     );
     // An --init-model folder that holds no model names the folder and the file it lacks.
